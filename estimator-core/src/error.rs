@@ -1,0 +1,52 @@
+//! The one error type of the core.
+
+use core::fmt;
+
+/// Why a constructor or a step refused its input.
+///
+/// Every step that returns an error leaves the estimator exactly as it was before the call.
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Error {
+    /// An input (measurement, matrix, parameter) contains NaN or ±∞.
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+    },
+    /// A matrix that must be symmetric positive definite is not (Cholesky failed or the matrix
+    /// is not symmetric).
+    NotPositiveDefinite {
+        /// Which matrix.
+        what: &'static str,
+    },
+    /// A configuration value is outside what the algorithm or the paper allows.
+    InvalidConfig {
+        /// The offending field.
+        field: &'static str,
+        /// Why it is refused.
+        reason: &'static str,
+    },
+    /// A computation lost all numerical meaning (e.g. every mixture weight is zero).
+    Numerical {
+        /// What went wrong.
+        what: &'static str,
+    },
+}
+
+/// Result alias used throughout the crate.
+pub type Result<T> = core::result::Result<T, Error>;
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::NonFinite { what } => write!(f, "non-finite value in {what}"),
+            Error::NotPositiveDefinite { what } => {
+                write!(f, "{what} is not symmetric positive definite")
+            }
+            Error::InvalidConfig { field, reason } => write!(f, "invalid {field}: {reason}"),
+            Error::Numerical { what } => write!(f, "numerical failure: {what}"),
+        }
+    }
+}
+
+impl core::error::Error for Error {}

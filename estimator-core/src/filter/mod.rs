@@ -1,0 +1,8 @@
+//! The estimators. One per file; each keeps its state private and changes it only when a step
+//! succeeds.
+
+pub mod intermittent;
+pub mod kalman;
+
+pub use intermittent::IntermittentKalmanFilter;
+pub use kalman::{CovarianceUpdate, KalmanFilter};

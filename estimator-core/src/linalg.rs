@@ -1,0 +1,161 @@
+//! Small dense linear algebra on fixed-size matrices: Cholesky solves and symmetrisation.
+//!
+//! Every routine returns [`Result`] and none forms an explicit inverse where a solve will do.
+
+use nalgebra::{Cholesky, Const, SMatrix};
+
+use crate::{Error, Real, Result};
+
+/// `true` when every entry is finite.
+#[inline]
+pub fn all_finite<T: Real, const R: usize, const C: usize>(m: &SMatrix<T, R, C>) -> bool {
+    m.iter().all(|v| v.finite())
+}
+
+/// Returns [`Error::NonFinite`] naming `what` unless every entry is finite.
+#[inline]
+pub fn check_finite<T: Real, const R: usize, const C: usize>(
+    m: &SMatrix<T, R, C>,
+    what: &'static str,
+) -> Result<()> {
+    if all_finite(m) {
+        Ok(())
+    } else {
+        Err(Error::NonFinite { what })
+    }
+}
+
+/// `(M + Mᵀ)/2`: removes the asymmetry that rounding leaves in a covariance update.
+#[inline]
+#[must_use]
+pub fn symmetrize<T: Real, const N: usize>(m: &SMatrix<T, N, N>) -> SMatrix<T, N, N> {
+    (m + m.transpose()) * T::lit(0.5)
+}
+
+/// Largest entry of `|M − Mᵀ|` relative to the largest entry of `|M|` (0 for the zero matrix).
+#[must_use]
+pub fn asymmetry<T: Real, const N: usize>(m: &SMatrix<T, N, N>) -> T {
+    let scale = m.amax();
+    if scale == T::zero() {
+        return T::zero();
+    }
+    (m - m.transpose()).amax() / scale
+}
+
+/// Cholesky factor of a symmetric positive-definite matrix.
+///
+/// Refuses non-finite entries, a relative asymmetry above `sqrt(eps)`, and matrices whose
+/// factorisation fails or has a pivot below `eps · max|M|` (numerically singular).
+pub fn cholesky<T: Real, const N: usize>(
+    m: &SMatrix<T, N, N>,
+    what: &'static str,
+) -> Result<Cholesky<T, Const<N>>> {
+    check_finite(m, what)?;
+    if asymmetry(m) > T::EPS.sqrt() {
+        return Err(Error::NotPositiveDefinite { what });
+    }
+    let sym = symmetrize(m);
+    let scale = sym.amax();
+    let chol = sym.cholesky().ok_or(Error::NotPositiveDefinite { what })?;
+    let l = chol.l_dirty();
+    let floor = (T::EPS * scale).sqrt();
+    for i in 0..N {
+        let d = l[(i, i)];
+        if !d.finite() || d <= floor {
+            return Err(Error::NotPositiveDefinite { what });
+        }
+    }
+    Ok(chol)
+}
+
+/// Validates that `m` is symmetric positive definite (see [`cholesky`]).
+pub fn check_spd<T: Real, const N: usize>(m: &SMatrix<T, N, N>, what: &'static str) -> Result<()> {
+    cholesky(m, what).map(|_| ())
+}
+
+/// Solves `A X = B` for symmetric positive-definite `A`.
+pub fn solve_spd<T: Real, const N: usize, const M: usize>(
+    a: &SMatrix<T, N, N>,
+    b: &SMatrix<T, N, M>,
+    what: &'static str,
+) -> Result<SMatrix<T, N, M>> {
+    let chol = cholesky(a, what)?;
+    let x = chol.solve(b);
+    check_finite(&x, what)?;
+    Ok(x)
+}
+
+/// Solves `X A = B` for symmetric positive-definite `A` (so `X = B A⁻¹`), the shape of every
+/// Kalman gain `K = P Cᵀ S⁻¹`.
+pub fn solve_spd_right<T: Real, const N: usize, const M: usize>(
+    b: &SMatrix<T, M, N>,
+    a: &SMatrix<T, N, N>,
+    what: &'static str,
+) -> Result<SMatrix<T, M, N>> {
+    // X A = B  ⇔  A Xᵀ = Bᵀ (A symmetric).
+    Ok(solve_spd(a, &b.transpose(), what)?.transpose())
+}
+
+/// `ln det A` of a symmetric positive-definite matrix, from its Cholesky factor.
+pub fn ln_det_spd<T: Real, const N: usize>(a: &SMatrix<T, N, N>, what: &'static str) -> Result<T> {
+    let chol = cholesky(a, what)?;
+    let l = chol.l_dirty();
+    let mut s = T::zero();
+    for i in 0..N {
+        s += l[(i, i)].ln();
+    }
+    Ok(s + s)
+}
+
+/// Inverse of a symmetric positive-definite matrix, for the few places where a paper's
+/// result *is* an inverse (e.g. information-form fusion). Prefer [`solve_spd`].
+pub fn inverse_spd<T: Real, const N: usize>(
+    a: &SMatrix<T, N, N>,
+    what: &'static str,
+) -> Result<SMatrix<T, N, N>> {
+    let inv = cholesky(a, what)?.inverse();
+    check_finite(&inv, what)?;
+    Ok(symmetrize(&inv))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::matrix;
+
+    #[test]
+    fn solve_matches_known_solution() {
+        let a = matrix![4.0, 1.0; 1.0, 3.0];
+        let x = matrix![1.0, -2.0; 0.5, 3.0];
+        let b = a * x;
+        let got = solve_spd(&a, &b, "a").unwrap();
+        assert!((got - x).amax() < 1e-14);
+        let got_r = solve_spd_right(&(x.transpose() * a), &a, "a").unwrap();
+        assert!((got_r - x.transpose()).amax() < 1e-14);
+    }
+
+    #[test]
+    fn rejects_indefinite_asymmetric_and_nan() {
+        assert_eq!(
+            check_spd(&matrix![1.0, 2.0; 2.0, 1.0], "m"),
+            Err(Error::NotPositiveDefinite { what: "m" })
+        );
+        assert_eq!(
+            check_spd(&matrix![1.0, 0.5; 0.0, 1.0], "m"),
+            Err(Error::NotPositiveDefinite { what: "m" })
+        );
+        assert_eq!(
+            check_spd(&matrix![1.0, f64::NAN; f64::NAN, 1.0], "m"),
+            Err(Error::NonFinite { what: "m" })
+        );
+        assert!(check_spd(&matrix![1.0, 0.0; 0.0, 0.0], "m").is_err());
+    }
+
+    #[test]
+    fn ln_det_and_inverse() {
+        let a = matrix![4.0f64, 1.0; 1.0, 3.0];
+        assert!((ln_det_spd(&a, "a").unwrap() - 11.0f64.ln()).abs() < 1e-14);
+        let inv = inverse_spd(&a, "a").unwrap();
+        assert!((inv * a - SMatrix::<f64, 2, 2>::identity()).amax() < 1e-14);
+    }
+}

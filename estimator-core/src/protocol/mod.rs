@@ -1,0 +1,5 @@
+//! Communication-protocol models that run on a sensor node as well as in simulation: the
+//! token bucket (seed 003 eq. 2; seed 004 eqs. 16-18), the dynamic event trigger (seed 004
+//! eqs. 11-15), Tobit censoring (seed 004 eq. 2) and occlusion regions (seed 001 eqs. 2-3).
+//!
+//! Each lives in its own file, added by the issue that implements it.

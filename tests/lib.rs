@@ -1,0 +1,60 @@
+//! Helpers for the end-to-end tests: a counting global allocator.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Global allocator that counts allocations (and reallocations) made while armed.
+///
+/// Install it in a test binary with `#[global_allocator]`, then measure a closure with
+/// [`CountingAllocator::count`].
+#[derive(Debug)]
+pub struct CountingAllocator {
+    allocations: AtomicUsize,
+}
+
+impl CountingAllocator {
+    /// A fresh counter.
+    pub const fn new() -> Self {
+        Self {
+            allocations: AtomicUsize::new(0),
+        }
+    }
+
+    /// Runs `f` and returns how many allocations happened meanwhile (in any thread: run such
+    /// tests in their own binary, single-threaded).
+    pub fn count<R>(&self, f: impl FnOnce() -> R) -> (usize, R) {
+        let before = self.allocations.load(Ordering::SeqCst);
+        let r = f();
+        (self.allocations.load(Ordering::SeqCst) - before, r)
+    }
+}
+
+impl Default for CountingAllocator {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+// SAFETY: forwards every call unchanged to the system allocator; only counts.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        self.allocations.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as ours.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as ours.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        self.allocations.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as ours.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        self.allocations.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as ours.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
