@@ -1,2 +1,9 @@
 //! Plants, sensors and channel models that turn the papers' numerical examples into sample
 //! streams, plus the wire format shared with `ipc-runner`.
+//!
+//! The data path reads top to bottom: plant → sensor → channel stages → [`sim::Instant`]
+//! (→ shared memory in the pipeline) → estimator.
+
+pub mod sim;
+
+pub use sim::{Instant, Observation, Scenario, Simulation};

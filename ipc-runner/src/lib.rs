@@ -1,0 +1,6 @@
+//! The application layer: estimator dispatch, Monte-Carlo evaluation, the real-time loop over
+//! iceoryx2, metrics and the demo.
+
+pub mod estimator;
+
+pub use estimator::Estimator;
