@@ -14,10 +14,9 @@ use na35::{Const, DimMin, RealField, SMatrix, SVector};
 
 use crate::problems::KfProblem;
 
-fn conv<T: Real, const R: usize, const C: usize>(m: &nalgebra::SMatrix<T, R, C>) -> SMatrix<T, R, C>
-where
-    T: na35::Scalar,
-{
+fn conv<T: Real + na35::Scalar, const R: usize, const C: usize>(
+    m: &nalgebra::SMatrix<T, R, C>,
+) -> SMatrix<T, R, C> {
     SMatrix::from_column_slice(m.as_slice())
 }
 

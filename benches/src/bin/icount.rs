@@ -32,29 +32,46 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
     let t32 = tracking_4x2_f32();
     let a64 = AdsProblem::from_core(&p64);
     let a32 = AdsProblem::from_core(&t32);
+    // Profiling parts of the 3x2 f64 step (not a product API): where the instructions go.
     let pp = p64;
-    let s2 = {
-        let c = pp.model.c;
-        c * pp.prior.covariance() * c.transpose() + nalgebra::SMatrix::<f64, 2, 2>::identity()
-    };
-    let s2 = (s2 + s2.transpose()) * 0.5;
+    let c = pp.model.c;
+    let s = c * pp.prior.covariance() * c.transpose() + nalgebra::SMatrix::<f64, 2, 2>::identity();
+    let s = (s + s.transpose()) * 0.5;
     let m3 = *pp.prior.covariance();
-    fn hand<const R: usize, const K: usize, const C: usize>(a: &nalgebra::SMatrix<f64, R, K>, b: &nalgebra::SMatrix<f64, K, C>) -> nalgebra::SMatrix<f64, R, C> {
-        let mut out = nalgebra::SMatrix::<f64, R, C>::zeros();
-        for j in 0..C { for k in 0..K { let bkj = b[(k, j)]; for i in 0..R { out[(i, j)] += a[(i, k)] * bkj; } } }
-        out
-    }
     vec![
-        ("parts/mul33", repeat(move || Ok::<_, ()>(black_box(&m3) * black_box(&m3)))),
-        ("parts/hand33", repeat(move || Ok::<_, ()>(hand(black_box(&m3), black_box(&m3))))),
-        ("parts/mul_aqat", repeat(move || Ok::<_, ()>(black_box(&m3) * black_box(&m3) * black_box(&m3).transpose()))),
-        ("parts/chol2", repeat(move || estimator_core::linalg::cholesky(black_box(&s2), "s").map(|c| c.l_dirty()[(0,0)]))),
-        ("parts/naked_chol2", repeat(move || black_box(s2).cholesky().ok_or(()).map(|c| c.l_dirty()[(0,0)]))),
-        ("parts/check_finite3", repeat(move || estimator_core::linalg::check_finite(black_box(&m3), "s"))),
-        ("parts/asym3", repeat(move || Ok::<f64, ()>(estimator_core::linalg::asymmetry(black_box(&m3))))),
-        ("parts/sym3", repeat(move || Ok::<_, ()>(estimator_core::linalg::symmetrize(black_box(&m3))))),
-        ("parts/predict", repeat(move || { let mut f = black_box(&pp).prior; f.predict(&pp.model, 1).map(|_| f) })),
-        ("parts/update", repeat(move || { let mut f = black_box(&pp).prior; f.update(&pp.model, 1, &pp.y).map(|_| f) })),
+        (
+            "parts/validated_cholesky_2x2",
+            repeat(move || {
+                estimator_core::linalg::cholesky(black_box(&s), "S").map(|c| c.l_dirty()[(0, 0)])
+            }),
+        ),
+        (
+            "parts/nalgebra_cholesky_2x2",
+            repeat(move || {
+                black_box(s)
+                    .cholesky()
+                    .ok_or(())
+                    .map(|c| c.l_dirty()[(0, 0)])
+            }),
+        ),
+        (
+            "parts/asymmetry_3x3",
+            repeat(move || Ok::<f64, ()>(estimator_core::linalg::asymmetry(black_box(&m3)))),
+        ),
+        (
+            "parts/predict",
+            repeat(move || {
+                let mut f = black_box(&pp).prior;
+                f.predict(&pp.model, 1).map(|_| f)
+            }),
+        ),
+        (
+            "parts/update",
+            repeat(move || {
+                let mut f = black_box(&pp).prior;
+                f.update(&pp.model, 1, &pp.y).map(|_| f)
+            }),
+        ),
         ("kf/3x2_f64", repeat(move || black_box(&p64).kf_step())),
         ("adskalman/3x2_f64", repeat(move || black_box(&a64).step())),
         ("kf/4x2_f32", repeat(move || black_box(&t32).kf_step())),
