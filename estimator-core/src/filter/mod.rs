@@ -6,3 +6,6 @@ pub mod kalman;
 
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::{CovarianceUpdate, KalmanFilter};
+
+pub mod cce;
+pub use cce::CrossCoupledEstimator;
