@@ -6,3 +6,12 @@ pub mod kalman;
 
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::{CovarianceUpdate, KalmanFilter};
+
+pub mod cce;
+pub use cce::CrossCoupledEstimator;
+
+pub mod adf;
+pub use adf::AssumedDensityFilter;
+
+pub mod kf_io;
+pub use kf_io::KfIo;
