@@ -41,6 +41,8 @@ pub mod error;
 pub mod filter;
 pub mod gauss;
 pub mod linalg;
+pub mod linalg_eig;
+pub mod linalg_kron;
 pub mod model;
 pub mod protocol;
 pub mod real;
