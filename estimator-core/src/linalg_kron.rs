@@ -6,11 +6,12 @@
 //!   the `NM × NM` system. The product dimension is its own const parameter `P`, checked equal to
 //!   `N·M` at compile time.
 //! * [`solve_two_sided_spd`]: simultaneous diagonalisation, `O(N³ + M³)` without forming the
-//!   Kronecker matrix: with `Θ₁ = W Wᵀ`, `Θ₃ = W Λ Wᵀ` and `Θ₂ = Z Zᵀ`, `Θ₄ = Z Σ Zᵀ`, the
-//!   substitution `Y = Wᵀ L Z` decouples the equation into `Y_ij (1 + λ_i σ_j) = (W⁻¹ Φ Z⁻ᵀ)_ij`.
+//!   Kronecker matrix: with `Θ₁ = W Wᵀ`, `Θ₃ = W Λ Wᵀ` and `Θ₂ = Z Σ Zᵀ`, `Θ₄ = Z (I − Σ) Zᵀ`,
+//!   the substitution `Y = Wᵀ L Z` decouples the equation into
+//!   `Y_ij (σ_j + λ_i (1 − σ_j)) = (W⁻¹ Φ Z⁻ᵀ)_ij`.
 //!
-//! Both require `Θ₁, Θ₂` symmetric positive definite and `Θ₃, Θ₄` symmetric positive
-//! semi-definite, which is the case in Theorem 2 (and makes `Θ̄` positive definite).
+//! Both require `Θ₁` symmetric positive definite, `Θ₂, Θ₃, Θ₄` symmetric positive
+//! semi-definite and `Θ̄` positive definite (in Theorem 2: `Θ₃ ≻ 0` and `Θ₂ + Θ₄ ≻ 0`).
 
 use nalgebra::SMatrix;
 
@@ -99,7 +100,8 @@ pub fn solve_kron_spd<T: Real, const N: usize, const M: usize, const P: usize>(
 }
 
 /// Solves `Θ₁ L Θ₂ + Θ₃ L Θ₄ = Φ` by simultaneous diagonalisation (see the module docs), an
-/// independent method that never forms the `NM × NM` Kronecker matrix.
+/// independent method that never forms the `NM × NM` Kronecker matrix. Needs `Θ₁ ≻ 0`,
+/// `Θ₂ + Θ₄ ≻ 0` (either may be singular alone).
 pub fn solve_two_sided_spd<T: Real, const N: usize, const M: usize>(
     t1: &SMatrix<T, N, N>,
     t2: &SMatrix<T, M, M>,
@@ -127,34 +129,37 @@ pub fn solve_two_sided_spd<T: Real, const N: usize, const M: usize>(
         })?;
         (u.transpose() * r_inv_phi, lam, u, l)
     };
-    let z = cholesky(t2, "Θ₂")?;
-    let s = z.l();
-    let st4 = s.solve_lower_triangular(t4).ok_or(Error::Numerical {
-        what: "Θ₂ factor"
+    // Θ₂ may be singular (C_k of the seed 003 example has rank 1 at k = 0) while Θ₂ + Θ₄ is
+    // not: factor G = Θ₂ + Θ₄ = S Sᵀ, S⁻¹ Θ₂ S⁻ᵀ = V Σ Vᵀ, so with Z = S V: Θ₂ = Z Σ Zᵀ and
+    // Θ₄ = Z (I − Σ) Zᵀ, σ_j ∈ [0, 1].
+    let g = cholesky(&(t2 + t4), "Θ₂ + Θ₄")?;
+    let s = g.l();
+    let st2 = s.solve_lower_triangular(t2).ok_or(Error::Numerical {
+        what: "Θ₂ + Θ₄ factor",
     })?;
     let n = symmetrize(
-        &s.solve_lower_triangular(&st4.transpose())
+        &s.solve_lower_triangular(&st2.transpose())
             .ok_or(Error::Numerical {
-                what: "Θ₂ factor"
+                what: "Θ₂ + Θ₄ factor",
             })?,
     );
-    let (sigma, v) = symmetric_eigen(&n, "S⁻¹ Θ₄ S⁻ᵀ")?;
+    let (sigma, v) = symmetric_eigen(&n, "S⁻¹ Θ₂ S⁻ᵀ")?;
     // F = W⁻¹ Φ Z⁻ᵀ with Z = S V: (W⁻¹Φ) S⁻ᵀ V = ((S⁻¹ (W⁻¹Φ)ᵀ)ᵀ) V.
     let s_inv_ft = s
         .solve_lower_triangular(&w_inv_phi_rows.transpose())
         .ok_or(Error::Numerical {
-            what: "Θ₂ factor"
+            what: "Θ₂ + Θ₄ factor",
         })?;
     let f = s_inv_ft.transpose() * v;
     let mut y = f;
     for i in 0..N {
         for j in 0..M {
-            // λ, σ ≥ 0 up to rounding (Θ₃, Θ₄ PSD), so 1 + λσ ≥ 1 unless they are badly
-            // indefinite: refuse that instead of dividing by ~0.
-            let d = T::one() + lam[i] * sigma[j];
-            if !(d > T::lit(0.5)) {
+            // Y_ij (σ_j + λ_i (1 − σ_j)) = F_ij: these are the eigenvalues of Θ̄ in the new
+            // basis, positive iff Θ̄ is positive definite.
+            let d = sigma[j] + lam[i] * (T::one() - sigma[j]);
+            if !(d > T::EPS.sqrt()) {
                 return Err(Error::NotPositiveDefinite {
-                    what: "Θ₃ or Θ₄ (must be positive semi-definite)",
+                    what: "Θ̄ = Θ₂ᵀ⊗Θ₁ + Θ₄ᵀ⊗Θ₃ (two-sided solve)",
                 });
             }
             y[(i, j)] = f[(i, j)] / d;
@@ -250,6 +255,19 @@ mod tests {
         )
         .unwrap();
         assert!((l32.map(|v| v as f64) - lk).amax() < 1e-5);
+    }
+
+    #[test]
+    fn singular_theta2_is_fine_when_theta_bar_is_definite() {
+        // Seed 003 at k = 0: C₀ has two equal rows, so Θ₂ = C P Cᵀ has rank 1; D₀ = [0.95, 0]ᵀ
+        // makes Θ₄ = D Dᵀ cover the other direction.
+        let (t1, _, t3, _, phi) = example();
+        let t2 = matrix![3.0, 3.0; 3.0, 3.0];
+        let t4 = matrix![0.9025, 0.0; 0.0, 0.0];
+        let lk = solve_kron_spd::<f64, 3, 2, 6>(&t1, &t2, &t3, &t4, &phi).unwrap();
+        let ld = solve_two_sided_spd(&t1, &t2, &t3, &t4, &phi).unwrap();
+        assert!((t1 * lk * t2 + t3 * lk * t4 - phi).amax() < 1e-12);
+        assert!((lk - ld).amax() < 1e-12);
     }
 
     #[test]

@@ -6,3 +6,5 @@ pub mod kalman;
 
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::{CovarianceUpdate, KalmanFilter};
+pub mod nn_bound;
+pub mod nn_system;
