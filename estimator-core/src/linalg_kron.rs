@@ -157,7 +157,7 @@ pub fn solve_two_sided_spd<T: Real, const N: usize, const M: usize>(
             // Y_ij (σ_j + λ_i (1 − σ_j)) = F_ij: these are the eigenvalues of Θ̄ in the new
             // basis, positive iff Θ̄ is positive definite.
             let d = sigma[j] + lam[i] * (T::one() - sigma[j]);
-            if !(d > T::EPS.sqrt()) {
+            if !d.finite() || d <= T::EPS.sqrt() {
                 return Err(Error::NotPositiveDefinite {
                     what: "Θ̄ = Θ₂ᵀ⊗Θ₁ + Θ₄ᵀ⊗Θ₃ (two-sided solve)",
                 });
@@ -216,13 +216,15 @@ mod tests {
         assert_eq!(unvec::<f64, 3, 2, 6>(&vec::<f64, 3, 2, 6>(&x)), x);
     }
 
-    fn example() -> (
+    type Example = (
         SMatrix<f64, 3, 3>,
         SMatrix<f64, 2, 2>,
         SMatrix<f64, 3, 3>,
         SMatrix<f64, 2, 2>,
         SMatrix<f64, 3, 2>,
-    ) {
+    );
+
+    fn example() -> Example {
         // Θ₄ rank 1 (D Dᵀ with D 2×1), as in the seed 003 example.
         let d = matrix![0.95; 0.4];
         (
