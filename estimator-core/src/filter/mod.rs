@@ -6,6 +6,7 @@ pub mod kalman;
 
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::{CovarianceUpdate, KalmanFilter};
+pub mod coupled_kf;
 pub mod nn_assumptions;
 pub mod nn_bound;
 pub mod nn_system;
