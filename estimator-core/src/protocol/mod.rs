@@ -5,3 +5,4 @@
 //! Each lives in its own file, added by the issue that implements it.
 
 pub mod occlusion;
+pub mod token_bucket;
