@@ -6,3 +6,9 @@ pub mod kalman;
 
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::{CovarianceUpdate, KalmanFilter};
+
+pub mod fusion;
+pub mod tobit;
+
+pub use fusion::TobitFusion;
+pub use tobit::TobitFilter;
