@@ -20,3 +20,8 @@ pub mod nn_assumptions;
 pub mod nn_bound;
 pub mod nn_system;
 pub mod nn_tbcp;
+pub mod fusion;
+pub mod tobit;
+
+pub use fusion::TobitFusion;
+pub use tobit::TobitFilter;

@@ -6,3 +6,6 @@
 
 pub mod occlusion;
 pub mod token_bucket;
+pub mod event_trigger;
+pub mod shared_token_bucket;
+pub mod tobit;
