@@ -46,9 +46,7 @@ fn generate() -> Vec<u8> {
 
     let mut out = Vec::new();
     out.extend_from_slice(b"EFV1");
-    for w in [1u32] {
-        out.extend_from_slice(&w.to_le_bytes());
-    }
+    out.extend_from_slice(&1u32.to_le_bytes()); // format version
     out.extend_from_slice(&SEED.to_le_bytes());
     for w in [T, 3, 2, 32] {
         out.extend_from_slice(&w.to_le_bytes());
