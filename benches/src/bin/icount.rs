@@ -38,7 +38,7 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
     let s = c * pp.prior.covariance() * c.transpose() + nalgebra::SMatrix::<f64, 2, 2>::identity();
     let s = (s + s.transpose()) * 0.5;
     let m3 = *pp.prior.covariance();
-    vec![
+    let mut out: Vec<(&'static str, Kernel)> = Vec::from([
         (
             "parts/validated_cholesky_2x2",
             repeat(move || {
@@ -94,7 +94,19 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
             "ikf_dropout/4x2_f32",
             repeat(move || black_box(&t32).ikf_dropout_step()),
         ),
-    ]
+    ]);
+    // The papers' estimators (setups as in their criterion benches).
+    let mut est = benches::estimators::occlusion_kernels::<f64>("f64");
+    est.extend(benches::estimators::occlusion_kernels::<f32>("f32"));
+    est.extend(benches::estimators::nn_kernels::<f64>("f64"));
+    est.extend(benches::estimators::nn_kernels::<f32>("f32"));
+    est.push(benches::estimators::coupled_ekf_kernel());
+    est.push(benches::estimators::tobit_kernel::<f64>("f64"));
+    est.push(benches::estimators::tobit_kernel::<f32>("f32"));
+    for (name, f) in est {
+        out.push((Box::leak(name.into_boxed_str()), repeat(f)));
+    }
+    out
 }
 
 fn main() -> ExitCode {

@@ -1,0 +1,764 @@
+//! Regenerates `BENCHMARKS.md`: runs every benchmark of the product on this machine and writes
+//! the tables. Run through `benches/run.sh` (which builds what it needs first).
+//!
+//! Parts, in order (each can be skipped with `--skip PART,…`):
+//!
+//! - `criterion`: `cargo bench -p benches` (every criterion bench file), medians with their
+//!   95 % confidence intervals, our KF against `adskalman` as ratios of the same run;
+//! - `icount`: host instructions per step under valgrind/callgrind, `(I(2N) − I(N)) / N`, each
+//!   2N run done twice to show the count is deterministic;
+//! - `firmware`: Cortex-M4 instructions per step from `.ci/firmware` (QEMU TCG plugin);
+//! - `ipc`: `ipc_latency` (raw iceoryx2 and Unix socket ping-pong);
+//! - `pipeline`: `ipc-runner demo` end to end (slot sent → estimates published), spin and
+//!   blocking, and a sustained 100 000 slots/s run;
+//! - `eval`: Monte-Carlo throughput of `ipc-runner eval` per scenario preset.
+//!
+//! `--quick` shortens every part (for trying the script; the committed file uses the full run).
+
+use anyhow::{anyhow, bail, Context, Result};
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Instant, SystemTime};
+
+struct Opts {
+    quick: bool,
+    skip: Vec<String>,
+    out: PathBuf,
+    root: PathBuf,
+    target: PathBuf,
+}
+
+impl Opts {
+    fn runs(&self, part: &str) -> bool {
+        !self.skip.iter().any(|s| s == part)
+    }
+}
+
+fn sh(cmd: &str, args: &[&str]) -> Option<String> {
+    let o = Command::new(cmd).args(args).output().ok()?;
+    o.status
+        .success()
+        .then(|| String::from_utf8_lossy(&o.stdout).trim().to_string())
+}
+
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// A note printed to stderr as the run goes.
+fn say(msg: &str) {
+    eprintln!("report: {msg}");
+}
+
+// ---------------------------------------------------------------------------- criterion
+
+#[derive(Clone, Debug)]
+struct Crit {
+    median_ns: f64,
+    lo_ns: f64,
+    hi_ns: f64,
+}
+
+fn criterion(o: &Opts, md: &mut String) -> Result<BTreeMap<String, Crit>> {
+    let started = SystemTime::now();
+    let mut args = vec!["bench", "-p", "benches", "--benches", "--"];
+    if o.quick {
+        args.extend(["--warm-up-time", "0.3", "--measurement-time", "0.7"]);
+    }
+    say(&format!("cargo {}", args.join(" ")));
+    let st = Command::new("cargo")
+        .args(&args)
+        .current_dir(&o.root)
+        .stdout(Stdio::null())
+        .status()
+        .context("cargo bench")?;
+    if !st.success() {
+        bail!("cargo bench failed ({st})");
+    }
+    let mut res = BTreeMap::new();
+    let dir = o.target.join("criterion");
+    let mut stack = vec![dir.clone()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).with_context(|| format!("{d:?}"))? {
+            let p = e?.path();
+            if p.is_dir() {
+                if p.file_name().is_some_and(|n| n == "new") {
+                    let est = p.join("estimates.json");
+                    let bm = p.join("benchmark.json");
+                    let fresh = std::fs::metadata(&est)
+                        .and_then(|m| m.modified())
+                        .is_ok_and(|t| t >= started);
+                    if !fresh {
+                        continue;
+                    }
+                    let e: Value = serde_json::from_str(&std::fs::read_to_string(&est)?)?;
+                    let b: Value = serde_json::from_str(&std::fs::read_to_string(&bm)?)?;
+                    let id = b["full_id"].as_str().unwrap_or("?").to_string();
+                    let m = &e["median"];
+                    res.insert(
+                        id,
+                        Crit {
+                            median_ns: m["point_estimate"].as_f64().unwrap_or(f64::NAN),
+                            lo_ns: m["confidence_interval"]["lower_bound"]
+                                .as_f64()
+                                .unwrap_or(f64::NAN),
+                            hi_ns: m["confidence_interval"]["upper_bound"]
+                                .as_f64()
+                                .unwrap_or(f64::NAN),
+                        },
+                    );
+                } else {
+                    stack.push(p);
+                }
+            }
+        }
+    }
+    let get = |id: &str| res.get(id).cloned();
+    md.push_str("## Kalman step: ours against `adskalman` (criterion, same run)\n\n");
+    md.push_str(
+        "One predict + Joseph-form update from the same converged prior, same model and \
+         measurement, matrices converted to `adskalman`'s nalgebra 0.35 once at setup \
+         (`benches/src/problems.rs`, `benches/src/ads.rs`; agreement of the two posteriors is \
+         tested in `benches/tests/agreement.rs`). Target: ours ≤ 0.8× `adskalman`.\n\n",
+    );
+    md.push_str("| problem | ours median (95 % CI) | adskalman median (95 % CI) | ratio ours/adskalman | target ≤ 0.8 |\n|---|---:|---:|---:|---|\n");
+    for prob in ["3x2_f64", "4x2_f32"] {
+        if let (Some(a), Some(b)) = (
+            get(&format!("kf_vs_adskalman/ours/{prob}")),
+            get(&format!("kf_vs_adskalman/adskalman/{prob}")),
+        ) {
+            let r = a.median_ns / b.median_ns;
+            let _ = writeln!(
+                md,
+                "| {prob} | {} | {} | {r:.2} | {} |",
+                fmt_ci(&a),
+                fmt_ci(&b),
+                if r <= 0.8 { "met" } else { "**missed**" }
+            );
+        }
+    }
+    md.push_str("\n## Every criterion benchmark (medians)\n\n");
+    md.push_str("| benchmark | median | 95 % CI of the median |\n|---|---:|---:|\n");
+    for (id, c) in &res {
+        let _ = writeln!(
+            md,
+            "| `{id}` | {} | {} – {} |",
+            fmt_ns(c.median_ns),
+            fmt_ns(c.lo_ns),
+            fmt_ns(c.hi_ns)
+        );
+    }
+    md.push('\n');
+    // f32 against f64 of the same step, in the same run.
+    let mut pairs = String::new();
+    for (id, c) in &res {
+        if let Some(base) = id.strip_suffix("f32") {
+            if let Some(d) = res.get(&format!("{base}f64")) {
+                let _ = writeln!(
+                    pairs,
+                    "| `{base}…` | {} | {} | {:.2} |",
+                    fmt_ns(c.median_ns),
+                    fmt_ns(d.median_ns),
+                    c.median_ns / d.median_ns
+                );
+            }
+        }
+    }
+    if !pairs.is_empty() {
+        md.push_str("### f32 against f64 (same step, same run)\n\n| step | f32 | f64 | f32/f64 |\n|---|---:|---:|---:|\n");
+        md.push_str(&pairs);
+        md.push('\n');
+    }
+    Ok(res)
+}
+
+fn fmt_ns(ns: f64) -> String {
+    if ns >= 1e6 {
+        format!("{:.2} ms", ns / 1e6)
+    } else if ns >= 1e3 {
+        format!("{:.2} µs", ns / 1e3)
+    } else {
+        format!("{ns:.0} ns")
+    }
+}
+
+fn fmt_ci(c: &Crit) -> String {
+    format!(
+        "{} ({}–{})",
+        fmt_ns(c.median_ns),
+        fmt_ns(c.lo_ns),
+        fmt_ns(c.hi_ns)
+    )
+}
+
+// ------------------------------------------------------------------------------- icount
+
+fn callgrind_ir(bin: &Path, kernel: &str, n: u64) -> Result<u64> {
+    let out = Command::new("valgrind")
+        .args(["--tool=callgrind", "--callgrind-out-file=/dev/null"])
+        .arg(bin)
+        .args([kernel, &n.to_string()])
+        .output()
+        .context("valgrind (apt-get install valgrind)")?;
+    if !out.status.success() {
+        bail!(
+            "icount {kernel} {n} failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let err = String::from_utf8_lossy(&out.stderr);
+    let line = err
+        .lines()
+        .find(|l| l.contains("refs:"))
+        .ok_or_else(|| anyhow!("no 'I refs' in callgrind output"))?;
+    let digits: String = line
+        .rsplit(':')
+        .next()
+        .unwrap_or("")
+        .chars()
+        .filter(char::is_ascii_digit)
+        .collect();
+    digits.parse().context("I refs")
+}
+
+fn icount(o: &Opts, md: &mut String) -> Result<BTreeMap<String, u64>> {
+    let bin = o.target.join("release/icount");
+    let list = sh(bin.to_str().unwrap_or("icount"), &["list"]).ok_or_else(|| {
+        anyhow!("{bin:?} list failed (build it: cargo build --release -p benches)")
+    })?;
+    let n: u64 = if o.quick { 200 } else { 1000 };
+    md.push_str("## Instructions per step on the host (valgrind/callgrind, deterministic)\n\n");
+    let _ = writeln!(
+        md,
+        "`icount KERNEL N` builds the problem, then runs N steps from a fixed state; \
+         instructions per step = (I(2N) − I(N)) / N with N = {n}, which cancels process \
+         start-up and setup exactly. The 2N run is made twice: the two counts must be equal \
+         (\"same count twice\"). The binary is `target/release/icount` (x86-64, release \
+         profile); counts are of that binary and change when inlining changes.\n"
+    );
+    md.push_str("| kernel | I(N) | I(2N) | I(2N) again | same twice | instructions / step |\n|---|---:|---:|---:|---|---:|\n");
+    let mut res = BTreeMap::new();
+    for k in list.lines().filter(|l| !l.starts_with("parts/")) {
+        say(&format!("callgrind {k}"));
+        let a = callgrind_ir(&bin, k, n)?;
+        let b = callgrind_ir(&bin, k, 2 * n)?;
+        let b2 = callgrind_ir(&bin, k, 2 * n)?;
+        let per = (b - a) as f64 / n as f64;
+        res.insert(k.to_string(), (b - a) / n);
+        let _ = writeln!(
+            md,
+            "| `{k}` | {a} | {b} | {b2} | {} | {per:.1} |",
+            if b == b2 { "yes" } else { "**no**" }
+        );
+    }
+    md.push('\n');
+    for prob in ["3x2_f64", "4x2_f32"] {
+        if let (Some(a), Some(b)) = (
+            res.get(&format!("kf/{prob}")),
+            res.get(&format!("adskalman/{prob}")),
+        ) {
+            let _ = writeln!(
+                md,
+                "- KF {prob}: ours {a} vs adskalman {b} instructions per step, ratio {:.2}.",
+                *a as f64 / *b as f64
+            );
+        }
+    }
+    md.push('\n');
+    Ok(res)
+}
+
+// ----------------------------------------------------------------------------- firmware
+
+fn firmware(o: &Opts, md: &mut String) -> Result<()> {
+    let script = o.root.join(".ci/firmware");
+    let csv = o
+        .root
+        .join("estimator-core/firmware/target/qemu/insn_counts.csv");
+    if !script.exists() {
+        bail!(".ci/firmware not present");
+    }
+    say("running .ci/firmware (QEMU instruction counts)");
+    let out = Command::new(&script)
+        .current_dir(&o.root)
+        .output()
+        .context(".ci/firmware")?;
+    if !out.status.success() {
+        bail!(
+            ".ci/firmware failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        );
+    }
+    let text = std::fs::read_to_string(&csv).with_context(|| format!("{csv:?}"))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    md.push_str("## Instructions per step on the emulated Cortex-M4F (QEMU TCG plugin)\n\n");
+    md.push_str(
+        "From `.ci/firmware` (helper firmware's QEMU 7.2 `mps2-an386` run with an \
+         instruction-counting TCG plugin, f32, `opt-level = \"s\"`): the same binary gives \
+         the same count twice (the script fails otherwise).\n\n",
+    );
+    let _ = writeln!(md, "| {} |", header.join(" | "));
+    let _ = writeln!(md, "|{}|", vec!["---"; header.len()].join("|"));
+    for l in lines {
+        let _ = writeln!(md, "| {} |", l.split(',').collect::<Vec<_>>().join(" | "));
+    }
+    md.push('\n');
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------- ipc
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Pct {
+    count: u64,
+    p50: f64,
+    p90: f64,
+    p99: f64,
+    p999: f64,
+    max: f64,
+}
+
+impl Pct {
+    fn from_json(v: &Value) -> Self {
+        let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        Self {
+            count: v["count"].as_u64().unwrap_or(0),
+            p50: f("p50_us"),
+            p90: f("p90_us"),
+            p99: f("p99_us"),
+            p999: f("p999_us"),
+            max: f("max_us"),
+        }
+    }
+    fn row(&self, name: &str) -> String {
+        format!(
+            "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.1} | {:.1} |",
+            self.count, self.p50, self.p90, self.p99, self.p999, self.max
+        )
+    }
+}
+
+const PCT_HEAD: &str =
+    "| path | samples | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs |\n|---|---:|---:|---:|---:|---:|---:|\n";
+
+fn ipc(o: &Opts, md: &mut String) -> Result<BTreeMap<String, (Pct, Pct)>> {
+    let bin = o.target.join("release/ipc_latency");
+    let json = std::env::temp_dir().join(format!("benches-report-ipc-{}.json", std::process::id()));
+    let samples = if o.quick { "20000" } else { "200000" };
+    say(&format!("ipc_latency --samples {samples}"));
+    let st = Command::new(&bin)
+        .args(["--samples", samples, "--warmup", "5000", "--json"])
+        .arg(&json)
+        .stdout(Stdio::null())
+        .status()
+        .context("ipc_latency")?;
+    if !st.success() {
+        bail!("ipc_latency failed ({st})");
+    }
+    let v: Value = serde_json::from_str(&std::fs::read_to_string(&json)?)?;
+    let _ = std::fs::remove_file(&json);
+    let mut res = BTreeMap::new();
+    md.push_str("## IPC latency: raw transports (ping-pong between two processes)\n\n");
+    md.push_str(
+        "`ipc_latency` spawns itself as the peer. Each round sends a 128-byte message carrying \
+         its `CLOCK_MONOTONIC` send time; the peer stamps the receive time and answers. \
+         **One-way** = ping sent → ping received by the peer (the quantity the pipeline's \
+         \"slot sent → estimate published\" is compared with); round trip = ping sent → pong \
+         back. Spin = busy-poll on both sides; block = iceoryx2 pub/sub + event service with \
+         the receiver asleep in a `WaitSet`, or a blocking `read` on the socket.\n\n",
+    );
+    md.push_str("### One-way\n\n");
+    md.push_str(PCT_HEAD);
+    if let Some(obj) = v.as_object() {
+        for (mode, m) in obj {
+            let ow = Pct::from_json(&m["one_way"]);
+            let rt = Pct::from_json(&m["round_trip"]);
+            let _ = writeln!(md, "{}", ow.row(mode));
+            res.insert(mode.clone(), (ow, rt));
+        }
+        md.push_str("\n### Round trip\n\n");
+        md.push_str(PCT_HEAD);
+        for (mode, (_, rt)) in &res {
+            let _ = writeln!(md, "{}", rt.row(mode));
+        }
+    }
+    md.push('\n');
+    Ok(res)
+}
+
+// ----------------------------------------------------------------------------- pipeline
+
+/// The scenario of the pipeline runs: the paper's occlusion example when it is a preset.
+fn demo_scenario() -> &'static str {
+    let names = channel_sim::scenario::preset_names();
+    if names.contains(&"occlusion") {
+        "occlusion"
+    } else {
+        "linear"
+    }
+}
+
+/// Runs `ipc-runner demo` and returns its report JSON and the process's wall time.
+fn demo(o: &Opts, wait: &str, rate: f64, steps: u32) -> Result<(Value, f64)> {
+    let bin = o.target.join("release/ipc-runner");
+    let out = std::env::temp_dir().join(format!(
+        "benches-report-demo-{}-{wait}-{rate}",
+        std::process::id()
+    ));
+    say(&format!(
+        "ipc-runner demo --wait {wait} --rate {rate} --steps {steps}"
+    ));
+    let t = Instant::now();
+    let res = Command::new(&bin)
+        .args([
+            "demo",
+            "--quiet",
+            "--wait",
+            wait,
+            "--scenario",
+            demo_scenario(),
+        ])
+        .args(["--rate", &rate.to_string(), "--steps", &steps.to_string()])
+        .args([
+            "--prefix",
+            &format!("benches-report-{}-{wait}", std::process::id()),
+        ])
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .context("ipc-runner demo");
+    let secs = t.elapsed().as_secs_f64();
+    let read = || -> Result<Value> {
+        let st = res?;
+        if !st.success() {
+            bail!("ipc-runner demo --wait {wait} --rate {rate} failed ({st})");
+        }
+        Ok(serde_json::from_str(&std::fs::read_to_string(
+            out.join("report.json"),
+        )?)?)
+    };
+    let v = read();
+    let _ = std::fs::remove_dir_all(&out);
+    Ok((v?, secs))
+}
+
+fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Result<()> {
+    let steps: u32 = if o.quick { 20_000 } else { 200_000 };
+    md.push_str("## IPC latency: the full pipeline end to end\n\n");
+    md.push_str(
+        "`ipc-runner demo` (scenario given below): `channel-sim` publishes slots from its \
+         own process, `ipc-runner` receives them, runs every estimator that applies and \
+         publishes the estimates. **End to end** = slot's send time (stamped just before \
+         `send()`) → all estimates of that instant published; transport = send → received by \
+         the runner. Both from the runner's own histograms (`report.json`).\n\n",
+    );
+    let _ = writeln!(
+        md,
+        "Scenario `{}`, {steps} instants per wait mode.\n",
+        demo_scenario()
+    );
+    md.push_str(PCT_HEAD);
+    let mut e2e_spin = None;
+    for (wait, rate) in [("spin", 10_000.0), ("block", 10_000.0)] {
+        let (v, _) = demo(o, wait, rate, steps)?;
+        let lat = &v["latency"];
+        let e2e = Pct::from_json(&lat["end_to_end"]);
+        let tr = Pct::from_json(&lat["transport"]);
+        let _ = writeln!(
+            md,
+            "{}",
+            e2e.row(&format!("pipeline {wait}, {rate} Hz: end to end"))
+        );
+        let _ = writeln!(
+            md,
+            "{}",
+            tr.row(&format!("pipeline {wait}, {rate} Hz: transport"))
+        );
+        if wait == "spin" {
+            e2e_spin = Some(e2e);
+        }
+    }
+    md.push('\n');
+    if let (Some(p), Some((iox, _)), Some((uds, _))) =
+        (e2e_spin, raw.get("iox-spin"), raw.get("uds-spin"))
+    {
+        let r_iox = p.p99 / iox.p99;
+        let r_uds = uds.p99 / p.p99;
+        let _ = writeln!(
+            md,
+            "Spin mode, p99: pipeline end to end {:.2} µs = {r_iox:.2}× raw iceoryx2 one-way \
+             ({:.2} µs; target ≤ 1.5×: {}), and the Unix socket's one-way p99 ({:.2} µs) is \
+             {r_uds:.2}× the pipeline's (target ≥ 10×: {}).\n",
+            p.p99,
+            iox.p99,
+            if r_iox <= 1.5 { "met" } else { "**missed**" },
+            uds.p99,
+            if r_uds >= 10.0 { "met" } else { "**missed**" },
+        );
+    }
+    // Sustained rate: 100 000 slots/s for a few seconds, zero loss required.
+    let steps: u32 = if o.quick { 100_000 } else { 1_000_000 };
+    let (v, secs) = demo(o, "spin", 100_000.0, steps)?;
+    let c = &v["counts"];
+    let lost = c["lost_in_ipc"].as_u64().unwrap_or(u64::MAX);
+    let received = c["received"].as_u64().unwrap_or(0);
+    let _ = writeln!(
+        md,
+        "Sustained: channel-sim asked for {steps} slots at 100 000 slots/s, runner in spin \
+         mode: {received} received, {lost} lost in the IPC ({}); {:.0} slots/s averaged over \
+         the whole demo process ({secs:.2} s wall time including start-up, so a lower bound \
+         on the rate achieved).\n",
+        if lost == 0 && received == steps as u64 {
+            "zero loss: met"
+        } else {
+            "**loss**"
+        },
+        received as f64 / secs,
+    );
+    Ok(())
+}
+
+// --------------------------------------------------------------------------------- eval
+
+fn eval(o: &Opts, md: &mut String) -> Result<()> {
+    let bin = o.target.join("release/ipc-runner");
+    let (runs, horizon) = if o.quick { (50u64, 100u32) } else { (500, 100) };
+    md.push_str("## Monte-Carlo evaluation throughput (`ipc-runner eval`)\n\n");
+    let _ = writeln!(
+        md,
+        "Each scenario preset with {runs} runs × horizon {horizon}, seed 1, wall time of the \
+         whole process (start-up and report writing included), with one worker thread and \
+         with the default (one per core). A step here is one instant of one run, processed \
+         by every estimator that applies to the scenario.\n"
+    );
+    md.push_str("| scenario | estimators | threads | wall s | runs × steps / s |\n|---|---|---:|---:|---:|\n");
+    for sc in channel_sim::scenario::preset_names() {
+        for threads in [Some(1u32), None] {
+            let json = std::env::temp_dir().join(format!(
+                "benches-report-eval-{}-{sc}.json",
+                std::process::id()
+            ));
+            let mut cmd = Command::new(&bin);
+            cmd.args(["eval", "--scenario", sc, "--quiet", "--seed", "1"])
+                .args([
+                    "--runs",
+                    &runs.to_string(),
+                    "--horizon",
+                    &horizon.to_string(),
+                ])
+                .arg("--json")
+                .arg(&json)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null());
+            if let Some(t) = threads {
+                cmd.args(["--threads", &t.to_string()]);
+            }
+            say(&format!("eval {sc} threads {threads:?}"));
+            let t = Instant::now();
+            let st = cmd.status().context("ipc-runner eval")?;
+            let secs = t.elapsed().as_secs_f64();
+            if !st.success() {
+                let _ = writeln!(md, "| {sc} | (eval failed: {st}) | | | |");
+                continue;
+            }
+            let names = std::fs::read_to_string(&json)
+                .ok()
+                .and_then(|s| serde_json::from_str::<Value>(&s).ok())
+                .and_then(|v| {
+                    v["estimators"].as_array().map(|a| {
+                        a.iter()
+                            .filter_map(|e| e[0].as_str().map(str::to_string))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    })
+                })
+                .unwrap_or_default();
+            let _ = std::fs::remove_file(&json);
+            let _ = writeln!(
+                md,
+                "| {sc} | {names} | {} | {secs:.2} | {:.0} |",
+                threads.map_or_else(
+                    || std::thread::available_parallelism()
+                        .map_or(0, |n| n.get())
+                        .to_string(),
+                    |t| t.to_string()
+                ),
+                (runs * horizon as u64) as f64 / secs
+            );
+        }
+    }
+    md.push('\n');
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------- main
+
+fn run() -> Result<()> {
+    let mut args = std::env::args().skip(1);
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .ok_or_else(|| anyhow!("no workspace root"))?
+        .to_path_buf();
+    let mut o = Opts {
+        quick: false,
+        skip: Vec::new(),
+        out: root.join("BENCHMARKS.md"),
+        target: std::env::var_os("CARGO_TARGET_DIR")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| root.join("target")),
+        root,
+    };
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--quick" => o.quick = true,
+            "--skip" => {
+                o.skip = args
+                    .next()
+                    .ok_or_else(|| anyhow!("--skip needs a list"))?
+                    .split(',')
+                    .map(str::to_string)
+                    .collect()
+            }
+            "--out" => o.out = PathBuf::from(args.next().ok_or_else(|| anyhow!("--out FILE"))?),
+            "-h" | "--help" => {
+                println!(
+                    "report [--quick] [--skip criterion,icount,firmware,ipc,pipeline,eval] [--out FILE]"
+                );
+                return Ok(());
+            }
+            x => bail!("unknown argument {x:?}"),
+        }
+    }
+    let t0 = Instant::now();
+    let load0 = loadavg();
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "?".into());
+    let nproc = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let rustc = sh("rustc", &["-V"]).unwrap_or_else(|| "?".into());
+    let date = sh("date", &["-u", "+%Y-%m-%d %H:%M UTC"]).unwrap_or_else(|| "?".into());
+    let commit = sh(
+        "git",
+        &[
+            "-C",
+            o.root.to_str().unwrap_or("."),
+            "rev-parse",
+            "--short",
+            "HEAD",
+        ],
+    )
+    .unwrap_or_else(|| "?".into());
+    let valgrind = sh("valgrind", &["--version"]).unwrap_or_else(|| "not installed".into());
+
+    let mut body = String::new();
+    let mut failures = Vec::new();
+    let mut raw = BTreeMap::new();
+    type Part<'a> = (
+        &'a str,
+        Box<dyn FnMut(&Opts, &mut String) -> Result<()> + 'a>,
+    );
+    let parts: Vec<Part<'_>> = vec![
+        ("criterion", Box::new(|o, md| criterion(o, md).map(|_| ()))),
+        ("icount", Box::new(|o, md| icount(o, md).map(|_| ()))),
+        ("firmware", Box::new(firmware)),
+        (
+            "ipc",
+            Box::new(|o, md| {
+                raw = ipc(o, md)?;
+                Ok(())
+            }),
+        ),
+    ];
+    for (name, mut f) in parts {
+        if o.runs(name) {
+            if let Err(e) = f(&o, &mut body) {
+                say(&format!("{name}: {e:#}"));
+                failures.push(format!("{name}: {e:#}"));
+            }
+        }
+    }
+    if o.runs("pipeline") {
+        if let Err(e) = pipeline(&o, &mut body, &raw) {
+            say(&format!("pipeline: {e:#}"));
+            failures.push(format!("pipeline: {e:#}"));
+        }
+    }
+    if o.runs("eval") {
+        if let Err(e) = eval(&o, &mut body) {
+            say(&format!("eval: {e:#}"));
+            failures.push(format!("eval: {e:#}"));
+        }
+    }
+    let load1 = loadavg();
+
+    let mut md = String::new();
+    md.push_str("# Benchmarks\n\n");
+    md.push_str(
+        "Generated by `benches/run.sh` (one command: builds, runs every part below, rewrites \
+         this file). Do not edit by hand.\n\n",
+    );
+    let _ = writeln!(md, "| | |\n|---|---|");
+    let _ = writeln!(md, "| date | {date} |");
+    let _ = writeln!(md, "| commit | {commit} |");
+    let _ = writeln!(md, "| CPU | {cpu} |");
+    let _ = writeln!(md, "| nproc | {nproc} |");
+    let _ = writeln!(md, "| rustc | {rustc} |");
+    let _ = writeln!(md, "| valgrind | {valgrind} |");
+    let _ = writeln!(
+        md,
+        "| load average (1/5/15 min) at start / end | {load0} / {load1} |"
+    );
+    let _ = writeln!(
+        md,
+        "| mode | {} |",
+        if o.quick {
+            "`--quick` (short runs: indicative only)"
+        } else {
+            "full"
+        }
+    );
+    let _ = writeln!(md, "| duration | {:.0} s |\n", t0.elapsed().as_secs_f64());
+    md.push_str(
+        "**Noise.** This machine is shared: while these figures were taken, other engineers \
+         were building and testing on the same 2 cores (see the load average above). \
+         Absolute times are therefore noisy, tails (p99.9, max) of the latency tables mostly \
+         measure preemption by other processes, and spin modes suffer most (a spinning \
+         process needs a core of its own). Read the **ratios measured in the same run** and \
+         the **instruction counts** (deterministic) rather than single absolute times.\n\n",
+    );
+    md.push_str(&body);
+    if !failures.is_empty() {
+        md.push_str("## Parts that did not run\n\n");
+        for f in &failures {
+            let _ = writeln!(md, "- {f}");
+        }
+        md.push('\n');
+    }
+    std::fs::write(&o.out, md).with_context(|| format!("write {:?}", o.out))?;
+    say(&format!("wrote {:?}", o.out));
+    Ok(())
+}
+
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("report: {e:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,229 @@
+//! Instruction-count kernels of the papers' estimators: one step each, from a fixed state,
+//! with the same setups as the estimator helpers' criterion benches (`benches/benches/cce.rs`,
+//! `nn.rs`, `tobit.rs`), so the host instruction counts and the criterion medians describe the
+//! same work.
+
+use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation};
+use estimator_core::filter::nn_bound::{GainSolver, NnBoundConfig};
+use estimator_core::filter::nn_system::{Seed003Example, Tanh};
+use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
+use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
+use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, TobitFusion};
+use estimator_core::gsum::GaussSum;
+use estimator_core::model::LinearModel;
+use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
+use estimator_core::{Real, Result};
+use nalgebra::{matrix, vector, SMatrix, SVector};
+use std::hint::black_box;
+
+/// A step kernel: runs one step from the fixed state; `Ok` iff the step succeeded.
+pub type StepFn = Box<dyn Fn() -> Result<()>>;
+
+/// Seed 001's example model and occlusion regions (as in `benches/benches/cce.rs`).
+fn occlusion_paper<T: Real>() -> (LinearModel<T, 3, 3, 2, 2>, Occlusion<T, 3, 1, 4>) {
+    let l = T::lit;
+    let m = LinearModel::<f64, 3, 3, 2, 2>::new(
+        matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
+        SMatrix::identity(),
+        matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
+        SMatrix::identity(),
+        SMatrix::identity() * 0.3,
+        SMatrix::identity() * 0.2,
+    )
+    .expect("valid model")
+    .cast::<T>()
+    .expect("valid model");
+    let occ = Occlusion::new(
+        matrix![T::one(), T::zero(), T::zero()],
+        matrix![l(0.1)],
+        OcclusionRegions::new(
+            [
+                vector![l(20.0)],
+                vector![l(40.0)],
+                vector![l(60.0)],
+                vector![l(80.0)],
+            ],
+            [l(5.0); 4],
+        )
+        .expect("valid regions"),
+    )
+    .expect("valid occlusion");
+    (m, occ)
+}
+
+/// Seed 001 kernels: CCE dropout step (S = 4, N = 15), ADF dropout/arrival, KF-IO dropout.
+pub fn occlusion_kernels<T: Real>(tag: &str) -> Vec<(String, StepFn)> {
+    let (m, occ) = occlusion_paper::<T>();
+    // A state whose prediction sits on the edge of region 2, the typical dropout.
+    let x0: SVector<T, 3> = vector![T::lit(35.0), T::lit(1.0), T::lit(0.5)];
+    let p0 = SMatrix::<T, 3, 3>::identity() * T::lit(0.5);
+    let cce = CrossCoupledEstimator::<T, 3, 1, 4, 15>::new(
+        x0,
+        p0,
+        occ,
+        &GaussSum::uniform().expect("table"),
+    )
+    .expect("valid");
+    let adf = AssumedDensityFilter::new(x0, p0, occ).expect("valid");
+    let kfio = KfIo::new(x0, p0, occ).expect("valid");
+    let y: SVector<T, 2> = vector![T::lit(100.0), T::lit(35.0)];
+    vec![
+        (
+            format!("cce_dropout/s4_n15_nx3_{tag}"),
+            Box::new(move || {
+                let mut f = black_box(cce);
+                f.step::<2, _>(black_box(&m), 1, None)?;
+                black_box(f);
+                Ok(())
+            }) as StepFn,
+        ),
+        (
+            format!("adf_dropout/s4_nx3_{tag}"),
+            Box::new(move || {
+                let mut f = black_box(adf);
+                f.step::<2, _>(black_box(&m), 1, None)?;
+                black_box(f);
+                Ok(())
+            }),
+        ),
+        (
+            format!("adf_arrival/s4_nx3_{tag}"),
+            Box::new(move || {
+                let mut f = black_box(adf);
+                f.step(black_box(&m), 1, Some(black_box(&y)))?;
+                black_box(f);
+                Ok(())
+            }),
+        ),
+        (
+            format!("kfio_dropout/s4_nx3_{tag}"),
+            Box::new(move || {
+                let mut f = black_box(kfio);
+                f.step::<2, _>(black_box(&m), 1, None)?;
+                black_box(f);
+                Ok(())
+            }),
+        ),
+    ]
+}
+
+fn nn_estimator<T: Real>(solver: GainSolver) -> Seed003Nn<T> {
+    let cfg = NnBoundConfig::new(
+        [T::lit(0.5); 4],
+        [T::lit(0.5); 12],
+        [T::lit(0.05), T::lit(10.0)],
+        T::lit(8.0),
+        T::lit(1.8),
+        T::lit(0.1),
+        T::lit(0.1),
+    )
+    .expect("valid config");
+    NnTbcpEstimator::new(
+        cfg,
+        Tanh,
+        Seed003Example::xhat0(),
+        Seed003Example::h0(),
+        Seed003Example::p0(),
+        Seed003Example::p0(),
+    )
+    .expect("valid")
+    .with_initial_measurement(SVector::<T, 2>::new(T::lit(0.3), T::lit(-0.2)))
+    .expect("finite")
+    .with_gain_solver(solver)
+}
+
+/// Seed 003 kernels: the NN estimator's transmitted-measurement step (gain solve included)
+/// with both gain solvers, and the correlated-noise EKF baseline (f64 only).
+pub fn nn_kernels<T: Real>(tag: &str) -> Vec<(String, StepFn)> {
+    let mut out: Vec<(String, StepFn)> = Vec::new();
+    for (name, solver) in [
+        ("kron", GainSolver::Kronecker),
+        ("two_sided", GainSolver::TwoSided),
+    ] {
+        let e = nn_estimator::<T>(solver);
+        let y = SVector::<T, 2>::new(T::lit(0.3), T::lit(-0.2));
+        out.push((
+            format!("nn_step_{name}/3x2_{tag}"),
+            Box::new(move || {
+                let mut f = black_box(e);
+                f.step(black_box(&Seed003Example), Some(black_box(&y)))?;
+                black_box(f);
+                Ok(())
+            }),
+        ));
+    }
+    out
+}
+
+/// The correlated-noise EKF of seed 003's comparison, f64.
+pub fn coupled_ekf_kernel() -> (String, StepFn) {
+    let kf = CoupledNoiseKf::<f64, 3, 1, 2>::new(
+        Seed003Example::xhat0(),
+        Seed003Example::p0(),
+        matrix![0.1],
+        Linearisation::PaperJacobian,
+    )
+    .expect("valid")
+    .with_initial_measurement(vector![0.3, -0.2])
+    .expect("finite");
+    let y = vector![0.3, -0.2];
+    (
+        "coupled_ekf_step/3x2_f64".into(),
+        Box::new(move || {
+            let mut e = black_box(kf);
+            e.step(
+                black_box(&Seed003Example),
+                &Seed003Example,
+                Some(black_box(&y)),
+            )?;
+            black_box(e);
+            Ok(())
+        }),
+    )
+}
+
+/// Seed 004 kernel: one federated Tobit fusion step (l = 3 local filters, n_x = n_y = 2),
+/// node 2 silent, from a fixed state.
+pub fn tobit_kernel<T: Real>(tag: &str) -> (String, StepFn) {
+    let w = 0.052 * core::f64::consts::PI;
+    let a = matrix![w.cos(), w.sin(); -w.sin(), w.cos()];
+    let b = vector![0.16, 0.18];
+    let bqb = b * b.transpose() * 0.05;
+    let cm = [SMatrix::<f64, 2, 2>::identity(); 3];
+    let r = [vector![0.5, 0.5]; 3];
+    let tau = vector![0.0, 0.0];
+    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)].map(|(s, l)| {
+        estimator_core::protocol::event_trigger::EventTriggerConfig::new_allowing_paper_violation(
+            s, 5.0, l, 1.5,
+        )
+        .expect("valid")
+    });
+    let cfgs = trig.map(|t| {
+        TobitFilterConfig::new(tau, BoundScalars::paper_example(), t, 1.5, 2.0)
+            .expect("valid")
+            .cast::<T>()
+            .expect("valid")
+    });
+    let fusion =
+        TobitFusion::<T, 2, 2, 3>::new(cfgs, vector![T::lit(5.0), T::zero()], SMatrix::identity())
+            .expect("valid");
+    let (a, bqb) = (a.map(T::lit), bqb.map(T::lit));
+    let cm = cm.map(|m| m.map(T::lit));
+    let r = r.map(|v| v.map(T::lit));
+    let y = [vector![4.8, 0.2], vector![5.1, 0.0], vector![4.9, 0.3]].map(|v| v.map(T::lit));
+    (
+        format!("tobit_fusion_step/l3_2x2_{tag}"),
+        Box::new(move || {
+            let mut f = black_box(fusion);
+            f.step(
+                black_box(&a),
+                black_box(&bqb),
+                black_box(&cm),
+                black_box(&r),
+                [Some(&y[0]), None, Some(&y[2])],
+            )?;
+            black_box(f);
+            Ok(())
+        }),
+    )
+}
