@@ -567,9 +567,8 @@ fn run() -> Result<()> {
 }
 
 fn main() {
-    if std::env::var_os("IOX2_LOG_LEVEL").is_none() {
-        set_log_level(LogLevel::Error);
-    }
+    // Only errors: the "no config file" warning would otherwise print once per process.
+    set_log_level(LogLevel::Error);
     if let Err(e) = run() {
         eprintln!("ipc_latency: {e:#}");
         std::process::exit(1);
