@@ -42,6 +42,8 @@ pub mod filter;
 pub mod gauss;
 pub mod gsum;
 pub mod linalg;
+pub mod linalg_eig;
+pub mod linalg_kron;
 pub mod model;
 pub mod protocol;
 pub mod real;
