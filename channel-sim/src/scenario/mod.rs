@@ -9,6 +9,7 @@
 
 pub mod config;
 pub mod linear;
+pub mod occlusion;
 
 use std::any::Any;
 use std::fmt;
@@ -24,7 +25,8 @@ use crate::stage::{Stage, StageSpec};
 pub type PresetFn = fn() -> Result<Box<dyn Scenario>, ScenarioError>;
 
 /// The preset registry: name → constructor. Paper presets add one line each.
-pub const PRESETS: &[(&str, PresetFn)] = &[("linear", linear::preset)];
+pub const PRESETS: &[(&str, PresetFn)] =
+    &[("linear", linear::preset), ("occlusion", occlusion::preset)];
 
 /// The preset named `name`.
 pub fn preset(name: &str) -> Result<Box<dyn Scenario>, ScenarioError> {
