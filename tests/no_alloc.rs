@@ -39,8 +39,61 @@ fn estimator_steps_do_not_allocate() {
     });
     assert!(ok);
     assert_eq!(n, 0, "{n} heap allocations in 10 000 KF/IKF steps");
-
+    occlusion_section();
     nn_tbcp_section();
+    tobit_fusion_section();
+}
+
+/// Seed 001 (issue 4): CCE, ADF and KF-IO steps on the paper's example, arrivals, dropouts
+/// and error paths.
+fn occlusion_section() {
+    use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
+    use estimator_core::gsum::GaussSum;
+    use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
+    let m = LinearModel::<f64, 3, 3, 2, 2>::new(
+        matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
+        SMatrix::identity(),
+        matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
+        SMatrix::identity(),
+        SMatrix::identity() * 0.3,
+        SMatrix::identity() * 0.2,
+    )
+    .unwrap();
+    let occ = Occlusion::new(
+        matrix![1.0, 0.0, 0.0],
+        matrix![0.1],
+        OcclusionRegions::new(
+            [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
+            [5.0; 4],
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let g = GaussSum::<f64, 1, 15>::uniform().unwrap();
+    let x0 = vector![5.0, 5.0, 5.0];
+    let p0 = SMatrix::<f64, 3, 3>::identity() * 4.0;
+    let (n, ok) = ALLOC.count(|| {
+        let mut ok = true;
+        // Restart every 50 steps: the example's A is unstable.
+        for block in 0..200usize {
+            let mut cce = CrossCoupledEstimator::new(x0, p0, occ, &g).unwrap();
+            let mut adf = AssumedDensityFilter::new(x0, p0, occ).unwrap();
+            let mut kfio = KfIo::new(x0, p0, occ).unwrap();
+            for k in 1..=50usize {
+                let t = (block * 50 + k) as f64;
+                let y = vector![30.0 + (t * 0.1).sin(), 10.0 + (t * 0.3).cos()];
+                let y_opt = if k % 3 == 0 { None } else { Some(&y) };
+                ok &= cce.step(&m, k, y_opt).is_ok();
+                ok &= adf.step(&m, k, y_opt).is_ok();
+                ok &= kfio.step(&m, k, y_opt).is_ok();
+                ok &= cce.step(&m, k, Some(&vector![f64::NAN, 0.0])).is_err();
+                ok &= adf.step(&m, k, Some(&vector![f64::NAN, 0.0])).is_err();
+            }
+        }
+        ok
+    });
+    assert!(ok);
+    assert_eq!(n, 0, "{n} heap allocations in 10 000 CCE/ADF/KF-IO steps");
 }
 
 /// Seed 003: the NN estimator (Kronecker and two-sided gain), the correlated-noise KF/EKF
@@ -103,4 +156,62 @@ fn nn_tbcp_section() {
     });
     assert!(ok);
     assert_eq!(n, 0, "{n} heap allocations in 10 000 seed 003 steps");
+}
+
+/// Seed 004: the sensor-side protocol (triggers + shared bucket) and the estimator-side
+/// federated Tobit fusion step (3 local filters, fusion, reset), including error paths.
+fn tobit_fusion_section() {
+    use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
+    use estimator_core::filter::TobitFusion;
+    use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
+    use estimator_core::protocol::shared_token_bucket::{
+        SharedTokenBucket, TriggeredBucketScheduler,
+    };
+
+    let w = 0.052 * core::f64::consts::PI;
+    let a = matrix![w.cos(), w.sin(); -w.sin(), w.cos()];
+    let b = vector![0.16, 0.18];
+    let bqb = b * b.transpose() * 0.05;
+    let c = [SMatrix::<f64, 2, 2>::identity(); 3];
+    let r = [vector![0.5, 0.5]; 3];
+    let tau = vector![0.0, 0.0];
+    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)]
+        .map(|(s, l)| EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5).unwrap());
+    let cfgs = trig
+        .map(|t| TobitFilterConfig::new(tau, BoundScalars::paper_example(), t, 1.5, 2.0).unwrap());
+    let mut fusion =
+        TobitFusion::<f64, 2, 2, 3>::new(cfgs, vector![5.0, 0.0], SMatrix::identity()).unwrap();
+    let nodes = trig.map(|t| EventTrigger::new(t, tau).unwrap());
+    let mut sched = TriggeredBucketScheduler::new(
+        nodes,
+        SharedTokenBucket::<3>::new(10, 5, 30, [3, 3, 3]).unwrap(),
+    );
+    let (n, ok) = ALLOC.count(|| {
+        let mut ok = true;
+        let mut x = vector![5.0, 0.0];
+        for k in 1..=10_000usize {
+            x = a * x;
+            let s = k as f64;
+            let ys = [0.3, 0.7, 1.1].map(|p| {
+                vector![
+                    (x[0] + (p * s).sin() * 0.3).max(0.0),
+                    (x[1] + (p * s).cos() * 0.3).max(0.0)
+                ]
+            });
+            let d = match sched.step(&ys) {
+                Ok(d) => d,
+                Err(_) => return false,
+            };
+            let rec = [0, 1, 2].map(|m| d[m].sent.then_some(&ys[m]));
+            ok &= fusion.step(&a, &bqb, &c, &r, rec).is_ok();
+            // Error path: a NaN measurement is refused without allocating.
+            let bad = vector![f64::NAN, 0.0];
+            ok &= fusion
+                .step(&a, &bqb, &c, &r, [Some(&bad), None, None])
+                .is_err();
+        }
+        ok
+    });
+    assert!(ok);
+    assert_eq!(n, 0, "{n} heap allocations in 10 000 Tobit fusion steps");
 }

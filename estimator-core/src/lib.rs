@@ -40,6 +40,7 @@ extern crate std;
 pub mod error;
 pub mod filter;
 pub mod gauss;
+pub mod gsum;
 pub mod linalg;
 pub mod linalg_eig;
 pub mod linalg_kron;
