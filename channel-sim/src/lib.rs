@@ -9,6 +9,8 @@ pub mod sim;
 pub use sim::{Instant, Observation, Scenario, Simulation};
 pub mod loss;
 pub mod occlusion;
+pub mod nn_plant;
 pub mod plant;
 pub mod scenario;
 pub mod stage;
+pub mod token_bucket;

@@ -10,6 +10,7 @@
 pub mod config;
 pub mod linear;
 pub mod occlusion;
+pub mod nn_token_bucket;
 
 use std::any::Any;
 use std::fmt;
@@ -25,8 +26,11 @@ use crate::stage::{Stage, StageSpec};
 pub type PresetFn = fn() -> Result<Box<dyn Scenario>, ScenarioError>;
 
 /// The preset registry: name → constructor. Paper presets add one line each.
-pub const PRESETS: &[(&str, PresetFn)] =
-    &[("linear", linear::preset), ("occlusion", occlusion::preset)];
+pub const PRESETS: &[(&str, PresetFn)] = &[
+    ("linear", linear::preset),
+    ("occlusion", occlusion::preset),
+    ("nn-token-bucket", nn_token_bucket::preset),
+];
 
 /// The preset named `name`.
 pub fn preset(name: &str) -> Result<Box<dyn Scenario>, ScenarioError> {

@@ -7,6 +7,7 @@ pub mod ikf;
 pub mod kf;
 pub mod occlusion;
 pub mod pf;
+pub mod nn;
 
 use channel_sim::Scenario;
 
@@ -47,7 +48,13 @@ pub type Factory = fn(
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>>;
 
 /// Every estimator family, in the order they appear in tables, JSON and plots.
-pub const FACTORIES: &[Factory] = &[kf::build, ikf::build, occlusion::build, pf::build];
+pub const FACTORIES: &[Factory] = &[
+    kf::build,
+    ikf::build,
+    occlusion::build,
+    pf::build,
+    nn::build,
+];
 
 /// All estimators that apply to `scenario`, from `factories` in order.
 pub fn build_all(

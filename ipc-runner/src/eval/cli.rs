@@ -96,7 +96,9 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         threads: args.threads.map(|t| t as usize),
         progress: !args.quiet,
     };
-    let result = evaluate(&*scenario, &options, FACTORIES, &run_config)
+    let mut result = evaluate(&*scenario, &options, FACTORIES, &run_config)
+        .map_err(|e| CommandError::failure(format!("{e:#}")))?;
+    crate::estimators::nn::after_eval(&mut result, &*scenario, args.plot.as_deref())
         .map_err(|e| CommandError::failure(format!("{e:#}")))?;
     print!("{}", result.summary());
     if let Some(path) = &args.json {
