@@ -11,3 +11,4 @@ pub mod loss;
 pub mod plant;
 pub mod scenario;
 pub mod stage;
+pub mod tobit_channel;

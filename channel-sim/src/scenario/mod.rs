@@ -9,6 +9,7 @@
 
 pub mod config;
 pub mod linear;
+pub mod tobit_fusion;
 
 use std::any::Any;
 use std::fmt;
@@ -24,7 +25,10 @@ use crate::stage::{Stage, StageSpec};
 pub type PresetFn = fn() -> Result<Box<dyn Scenario>, ScenarioError>;
 
 /// The preset registry: name → constructor. Paper presets add one line each.
-pub const PRESETS: &[(&str, PresetFn)] = &[("linear", linear::preset)];
+pub const PRESETS: &[(&str, PresetFn)] = &[
+    ("linear", linear::preset),
+    ("tobit-fusion", tobit_fusion::preset),
+];
 
 /// The preset named `name`.
 pub fn preset(name: &str) -> Result<Box<dyn Scenario>, ScenarioError> {
