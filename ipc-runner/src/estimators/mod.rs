@@ -5,6 +5,7 @@
 
 pub mod ikf;
 pub mod kf;
+pub mod tobit;
 
 use channel_sim::Scenario;
 
@@ -42,7 +43,7 @@ pub type Factory = fn(
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>>;
 
 /// Every estimator family, in the order they appear in tables, JSON and plots.
-pub const FACTORIES: &[Factory] = &[kf::build, ikf::build];
+pub const FACTORIES: &[Factory] = &[kf::build, ikf::build, tobit::build];
 
 /// All estimators that apply to `scenario`, from `factories` in order.
 pub fn build_all(
