@@ -348,6 +348,9 @@ impl StageSpec for TriggeredTokenBucket {
     fn name(&self) -> &'static str {
         "event-trigger-token-bucket"
     }
+    fn warnings(&self) -> Vec<String> {
+        TriggeredTokenBucket::warnings(self)
+    }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
         Box::new(self.build_stage())
     }

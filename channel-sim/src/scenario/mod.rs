@@ -216,6 +216,18 @@ impl ComposedScenario {
         &self.stages
     }
 
+    /// Every stage's [`StageSpec::warnings`], prefixed with the stage name.
+    pub fn warnings(&self) -> Vec<String> {
+        self.stages
+            .iter()
+            .flat_map(|s| {
+                s.warnings()
+                    .into_iter()
+                    .map(|w| format!("{}: {w}", s.name()))
+            })
+            .collect()
+    }
+
     /// The first stage spec of concrete type `T`, if any.
     pub fn stage<T: 'static>(&self) -> Option<&T> {
         self.stages.iter().find_map(|s| s.as_any().downcast_ref())

@@ -14,7 +14,10 @@
 //! C(Υ∘Ω₁)Cᵀ as written, α_m = 1/l (DESIGN.md "Seed 004").
 //!
 //! Diagnostics: `trace_p` — tr P^g for `fused`, tr P̄_{m,k|k} for `tobit-m`; `fused` also
-//! reports `p11`, `p12`, `p22` (the entries of P^g, for consistency checks).
+//! reports `p11`, `p12`, `p22` (the entries of P^g). Against the truth (evaluation only):
+//! `nees` = eᵀP⁻¹e with the view's own P (P^g or P̄_m) and `inside_95` = 1 when
+//! `nees ≤ χ²_{n_x}(0.95)`, so its mean over runs is the fraction of runs whose error lies
+//! inside the 95 % ellipse of the bound (Theorem 5 claims E{eeᵀ} ≤ P^g).
 
 use std::sync::{Arc, Mutex};
 
@@ -37,6 +40,12 @@ pub const LOCAL_NAMES: [&str; 8] = [
 ];
 /// The name of the fused view.
 pub const FUSED_NAME: &str = "fused";
+/// χ²_n(0.95) for n = 1, 2, 3 degrees of freedom.
+pub const CHI2_95: [f64; 3] = [
+    3.841_458_820_694_124,
+    5.991_464_547_107_979,
+    7.814_727_903_251_178,
+];
 /// `d_t` of Ξ in the example.
 pub const XI_D: f64 = 1.5;
 /// `e_t` of Ξ in the example.
@@ -245,6 +254,23 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         match x {
             Some(x) => out[..NX].copy_from_slice(x.as_slice()),
             None => out[..NX].fill(f64::NAN),
+        }
+    }
+
+    fn diagnostics_vs_truth(&self, truth: &[f64], sink: &mut dyn FnMut(&'static str, f64)) {
+        let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        let (x, p) = match self.node {
+            Some(m) => match (s.fusion.local_state(m), s.fusion.local_bound(m)) {
+                (Some(x), Some(p)) => (*x, *p),
+                _ => return,
+            },
+            None => (*s.fusion.state(), *s.fusion.covariance()),
+        };
+        let e = SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
+        if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "bound") {
+            let nees = e.dot(&pe);
+            sink("nees", nees);
+            sink("inside_95", f64::from(u8::from(nees <= CHI2_95[NX - 1])));
         }
     }
 
