@@ -14,3 +14,4 @@ pub mod plant;
 pub mod scenario;
 pub mod stage;
 pub mod token_bucket;
+pub mod tobit_channel;

@@ -8,6 +8,7 @@ pub mod kf;
 pub mod occlusion;
 pub mod pf;
 pub mod nn;
+pub mod tobit;
 
 use channel_sim::Scenario;
 
@@ -54,6 +55,7 @@ pub const FACTORIES: &[Factory] = &[
     occlusion::build,
     pf::build,
     nn::build,
+    tobit::build,
 ];
 
 /// All estimators that apply to `scenario`, from `factories` in order.
