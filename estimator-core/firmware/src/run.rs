@@ -203,7 +203,7 @@ impl<'a> Stream<'a> {
 
 /// Seed 001 Section IV in `f32`: A, C as printed, B = I₃, D = I₂ (DESIGN.md), Q = 0.3 I₃,
 /// R = 0.2 I₂.
-pub fn model() -> Result<LinearModel<f32, NX, NX, NY, NY>, estimator_core::Error> {
+pub fn model() -> Result<Model, estimator_core::Error> {
     LinearModel::new(
         Matrix3::new(1.01, 0.1, 0.0, 0.0, 1.01, 0.1, 0.0, 0.0, -1.02),
         Matrix3::identity(),
@@ -276,6 +276,108 @@ impl fmt::Display for Summary {
     }
 }
 
+/// The model type of the occlusion stream.
+pub type Model = LinearModel<f32, NX, NX, NY, NY>;
+
+/// An estimator of the occlusion stream as the driver sees it: one instant `k` with the
+/// measurement or `None` on a dropout; returns the region-label estimate (0 for estimators
+/// that have none). On error the estimator must keep its state (the core's contract).
+pub trait OcclusionEstimator {
+    /// One instant.
+    fn step(
+        &mut self,
+        m: &Model,
+        k: usize,
+        y: Option<&Vector2<f32>>,
+    ) -> Result<usize, estimator_core::Error>;
+    /// Current x̂_k.
+    fn state(&self) -> &Vector3<f32>;
+    /// Current P_k.
+    fn covariance(&self) -> &Matrix3<f32>;
+}
+
+impl OcclusionEstimator for KalmanFilter<f32, NX> {
+    fn step(
+        &mut self,
+        m: &Model,
+        k: usize,
+        y: Option<&Vector2<f32>>,
+    ) -> Result<usize, estimator_core::Error> {
+        match y {
+            Some(y) => KalmanFilter::step(self, m, k, y),
+            None => self.predict(m, k.saturating_sub(1)),
+        }
+        .map(|()| 0)
+    }
+    fn state(&self) -> &Vector3<f32> {
+        KalmanFilter::state(self)
+    }
+    fn covariance(&self) -> &Matrix3<f32> {
+        KalmanFilter::covariance(self)
+    }
+}
+
+impl OcclusionEstimator for IntermittentKalmanFilter<f32, NX> {
+    fn step(
+        &mut self,
+        m: &Model,
+        k: usize,
+        y: Option<&Vector2<f32>>,
+    ) -> Result<usize, estimator_core::Error> {
+        IntermittentKalmanFilter::step(self, m, k, y).map(|()| 0)
+    }
+    fn state(&self) -> &Vector3<f32> {
+        IntermittentKalmanFilter::state(self)
+    }
+    fn covariance(&self) -> &Matrix3<f32> {
+        IntermittentKalmanFilter::covariance(self)
+    }
+}
+
+/// Whether the estimator sees the channel's dropouts or every sensor measurement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Link {
+    /// Every instant's sensor measurement (the lossless reference).
+    Lossless,
+    /// Only what the channel delivered.
+    Channel,
+}
+
+/// Runs the estimator `build` makes over the first `steps` instants of the stream (all of
+/// them if `steps` exceeds it) and digests every estimate: the label byte, then x̂_k and P_k.
+pub fn drive<E: OcclusionEstimator>(
+    name: &'static str,
+    stream: &Stream<'_>,
+    steps: usize,
+    link: Link,
+    build: fn() -> Result<(Model, E), estimator_core::Error>,
+) -> Summary {
+    let mut s = Summary::new(name);
+    let mut h = Fnv1a64::default();
+    let Ok((m, mut est)) = build() else {
+        s.errors = 1;
+        return finish(s, h, &prior().0);
+    };
+    for r in stream.records().take(steps) {
+        s.steps += 1;
+        let y = Vector2::from(r.y);
+        let y = if r.delivered || link == Link::Lossless {
+            s.arrivals += 1;
+            Some(&y)
+        } else {
+            s.dropouts += 1;
+            None
+        };
+        let label = est.step(&m, r.k as usize, y).unwrap_or_else(|_| {
+            s.errors += 1;
+            usize::MAX
+        });
+        h.bytes(&[label.min(255) as u8]);
+        h.estimate(est.state(), est.covariance());
+    }
+    finish(s, h, est.state())
+}
+
 fn finish(mut s: Summary, h: Fnv1a64, x: &Vector3<f32>) -> Summary {
     s.digest = h.0;
     s.x_bits = [x[0].to_bits(), x[1].to_bits(), x[2].to_bits()];
@@ -284,49 +386,21 @@ fn finish(mut s: Summary, h: Fnv1a64, x: &Vector3<f32>) -> Summary {
 
 /// The Kalman filter on a lossless link: every instant's sensor measurement is used,
 /// dropped or not (the reference the other estimators are compared with).
-/// Runs the first `steps` instants (all if `steps` exceeds the stream).
 pub fn run_kf(stream: &Stream<'_>, steps: usize) -> Summary {
-    let mut s = Summary::new("kf");
-    let mut h = Fnv1a64::default();
+    drive("kf", stream, steps, Link::Lossless, build_kf)
+}
+
+fn build_kf() -> Result<(Model, KalmanFilter<f32, NX>), estimator_core::Error> {
     let (x0, p0) = prior();
-    let (Ok(m), Ok(mut kf)) = (model(), KalmanFilter::new(x0, p0)) else {
-        s.errors = 1;
-        return finish(s, h, &x0);
-    };
-    for r in stream.records().take(steps) {
-        s.steps += 1;
-        s.arrivals += 1;
-        if kf.step(&m, r.k as usize, &Vector2::from(r.y)).is_err() {
-            s.errors += 1;
-        }
-        h.estimate(kf.state(), kf.covariance());
-    }
-    finish(s, h, kf.state())
+    Ok((model()?, KalmanFilter::new(x0, p0)?))
 }
 
 /// The intermittent Kalman filter: updates on delivered instants, predicts through dropouts.
 pub fn run_ikf(stream: &Stream<'_>, steps: usize) -> Summary {
-    let mut s = Summary::new("ikf");
-    let mut h = Fnv1a64::default();
+    drive("ikf", stream, steps, Link::Channel, build_ikf)
+}
+
+fn build_ikf() -> Result<(Model, IntermittentKalmanFilter<f32, NX>), estimator_core::Error> {
     let (x0, p0) = prior();
-    let (Ok(m), Ok(mut ikf)) = (model(), IntermittentKalmanFilter::new(x0, p0)) else {
-        s.errors = 1;
-        return finish(s, h, &x0);
-    };
-    for r in stream.records().take(steps) {
-        s.steps += 1;
-        let y = Vector2::from(r.y);
-        let res = if r.delivered {
-            s.arrivals += 1;
-            ikf.step(&m, r.k as usize, Some(&y))
-        } else {
-            s.dropouts += 1;
-            ikf.step::<NY, _>(&m, r.k as usize, None)
-        };
-        if res.is_err() {
-            s.errors += 1;
-        }
-        h.estimate(ikf.state(), ikf.covariance());
-    }
-    finish(s, h, ikf.state())
+    Ok((model()?, IntermittentKalmanFilter::new(x0, p0)?))
 }
