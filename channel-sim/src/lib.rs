@@ -7,3 +7,7 @@
 pub mod sim;
 
 pub use sim::{Instant, Observation, Scenario, Simulation};
+pub mod loss;
+pub mod plant;
+pub mod scenario;
+pub mod stage;

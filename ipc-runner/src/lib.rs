@@ -4,3 +4,6 @@
 pub mod estimator;
 
 pub use estimator::Estimator;
+pub mod estimators;
+pub mod eval;
+pub mod plot;
