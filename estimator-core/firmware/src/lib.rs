@@ -50,8 +50,8 @@ pub fn exit(code: u32) -> ! {
     }
 }
 
-/// Reads `steps=N` from the semihosting command line (QEMU's `-append`, after the kernel's
-/// path); `None` when absent or when the line does not fit the buffer.
+/// Reads `steps=N` from the semihosting command line (QEMU's `-semihosting-config arg=steps=N`,
+/// or `-append` after the kernel's path); `None` when absent or when the line does not fit.
 // Not inlined, so its buffer is not part of `main_with`'s frame (and of the measured stack).
 #[inline(never)]
 pub fn cmdline_steps() -> Option<usize> {
