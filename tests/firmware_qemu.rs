@@ -1,9 +1,10 @@
 //! The core on a microcontroller: the firmware in `estimator-core/firmware` runs each estimator
-//! in `f32` over the embedded occlusion stream on QEMU's emulated Cortex-M4F (`mps2-an386`);
+//! in `f32` over an embedded measurement stream on QEMU's emulated Cortex-M4F (`mps2-an386`);
 //! this test runs the same driver source on the host over the same bytes and requires the two
 //! result lines to be identical (a 64-bit FNV-1a digest over the bit patterns of every
 //! estimate x̂_k and P_k, and the bits of the final x̂). It also reports flash and peak stack per
-//! estimator and holds them to their budgets.
+//! estimator and holds them to their budgets, and checks the `f32` runs against `f64` runs of
+//! the same estimators set up independently here.
 //!
 //! Needs `qemu-system-arm` and the `thumbv7em-none-eabihf` target; without them the QEMU test
 //! is skipped with a message, unless `REQUIRE_QEMU=1` (set by CI), which makes it fail.
@@ -32,8 +33,7 @@ use run::{Stream, Summary, Vectors};
 /// The firmware binaries, their host-side drivers and budgets (flash bytes, stack bytes).
 /// The budget (≤ 32 KiB flash, ≤ 4 KiB stack) is stated for the cross-coupled
 /// estimator; the others have no stated budget and are held to 32 KiB / 8 KiB only as a guard
-/// against regressions.
-/// The NN estimator (seed 003) needs more flash than that (its Kronecker gain solve and bound
+/// against regressions. The NN estimator (seed 003) needs more flash than that (its Kronecker gain solve and bound
 /// recursions); it is held to 48 KiB / 8 KiB, again only as a regression guard.
 type Driver = fn(&Stream<'_>, usize) -> Summary;
 const BINS: &[(&str, Vectors, Driver, usize, usize)] = &[
