@@ -4,6 +4,8 @@
 //! The data path reads top to bottom: plant → sensor → channel stages → [`sim::Instant`]
 //! (→ shared memory in the pipeline) → estimator.
 
+pub mod publisher;
 pub mod sim;
+pub mod wire;
 
 pub use sim::{Instant, Observation, Scenario, Simulation};

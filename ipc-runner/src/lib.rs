@@ -4,3 +4,8 @@
 pub mod estimator;
 
 pub use estimator::Estimator;
+pub mod demo;
+pub mod latency;
+pub mod replay;
+pub mod run;
+pub mod transport;
