@@ -202,6 +202,7 @@ pub fn run(args: &PublisherArgs, resolve: ScenarioResolver) -> Result<PublisherR
         .send()?;
 
     let t0 = wire::monotonic_ns();
+    let stream_start_ns = t0;
     let mut last_check = t0;
     let mut delivered_count = 0u64;
     let mut k_done = 0u32;
@@ -244,7 +245,14 @@ pub fn run(args: &PublisherArgs, resolve: ScenarioResolver) -> Result<PublisherR
             .write_payload(Truth::new(inst.k, sid, nx, &inst.truth))
             .send()?;
         for obs in &inst.obs {
-            let mut slot = Slot::data(obs, nodes, sid, wire::monotonic_ns(), period_ns);
+            let mut slot = Slot::data(
+                obs,
+                nodes,
+                sid,
+                wire::monotonic_ns(),
+                period_ns,
+                stream_start_ns,
+            );
             slot.version = wire_version;
             if obs.delivered {
                 delivered_count += 1;

@@ -76,6 +76,10 @@ pub struct Slot {
     pub send_ns: u64,
     /// The publisher's sampling period in ns (0 = as fast as possible).
     pub period_ns: u64,
+    /// `CLOCK_MONOTONIC` when the stream started (after a subscriber had connected): a
+    /// subscriber older than this saw the whole stream, so any slot it misses before its
+    /// first one was lost in the IPC rather than sent before it joined.
+    pub stream_start_ns: u64,
     /// The measurement (entries ≥ `ny` are 0; meaningful iff `delivered == 1`).
     pub y: [f64; MAX_NY],
 }
@@ -168,6 +172,7 @@ impl Slot {
         stream_id: u64,
         send_ns: u64,
         period_ns: u64,
+        stream_start_ns: u64,
     ) -> Self {
         Self {
             version: WIRE_VERSION,
@@ -183,6 +188,7 @@ impl Slot {
             reserved: 0,
             send_ns,
             period_ns,
+            stream_start_ns,
             y: obs.y,
         }
     }
@@ -203,6 +209,7 @@ impl Slot {
             reserved: 0,
             send_ns: now,
             period_ns: 0,
+            stream_start_ns: 0,
             y: [0.0; MAX_NY],
         }
     }
@@ -429,7 +436,7 @@ mod tests {
     #[test]
     fn layouts_are_fixed_and_pointer_free() {
         // Sizes are part of the format: a change must bump WIRE_VERSION.
-        assert_eq!(size_of::<Slot>(), 56 + 8 * MAX_NY);
+        assert_eq!(size_of::<Slot>(), 64 + 8 * MAX_NY);
         assert_eq!(size_of::<Truth>(), 24 + 8 * MAX_NX);
         assert_eq!(size_of::<Estimate>(), 56 + 8 * MAX_NX + 24);
         assert_eq!(core::mem::offset_of!(Slot, version), 0);
@@ -453,7 +460,7 @@ mod tests {
     fn observation_round_trips() {
         for (k, node, delivered) in [(1, 0, true), (7, 2, false), (300, 1, true)] {
             let o = obs(k, node, delivered);
-            let s = Slot::data(&o, 3, 42, 10, 20);
+            let s = Slot::data(&o, 3, 42, 10, 20, 5);
             assert_eq!(s.seq, u64::from(k - 1) * 3 + u64::from(node));
             assert_eq!(Slot::position_of(s.seq, 3), (k, node));
             assert_eq!(s.observation().unwrap(), o);
@@ -464,20 +471,20 @@ mod tests {
     fn non_finite_values_pass_through_to_the_estimator() {
         let mut o = obs(3, 0, true);
         o.y[1] = f64::NAN;
-        let back = Slot::data(&o, 1, 1, 0, 0).observation().unwrap();
+        let back = Slot::data(&o, 1, 1, 0, 0, 0).observation().unwrap();
         assert!(back.y[1].is_nan());
     }
 
     #[test]
     fn wrong_version_and_bad_fields_are_refused() {
-        let mut s = Slot::data(&obs(2, 1, true), 2, 1, 0, 0);
+        let mut s = Slot::data(&obs(2, 1, true), 2, 1, 0, 0, 0);
         s.version = 99;
         let e = s.observation().unwrap_err();
         assert_eq!(e, WireError::Version { found: 99 });
         assert!(e.to_string().contains("version 99"));
         assert!(e.to_string().contains(&format!("version {WIRE_VERSION}")));
 
-        let good = Slot::data(&obs(2, 1, true), 2, 1, 0, 0);
+        let good = Slot::data(&obs(2, 1, true), 2, 1, 0, 0, 0);
         let mut s = good;
         s.node = 2;
         assert!(s.validate().is_err());

@@ -168,10 +168,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         },
         args.seed,
         args.run,
-        match args.wait {
-            WaitMode::Spin => "spin",
-            WaitMode::Block => "block",
-        }
+        args.wait.as_str()
     );
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()

@@ -27,6 +27,8 @@ pub struct Transport {
     pub estimate_pub: Publisher<ipc::Service, Estimate, ()>,
     /// Listener of `slots-ready` (only in blocking mode).
     pub listener: Option<Listener<ipc::Service>>,
+    /// `CLOCK_MONOTONIC` just before the slot subscriber was created.
+    pub subscribed_ns: u64,
 }
 
 impl Transport {
@@ -66,6 +68,7 @@ impl Transport {
         } else {
             None
         };
+        let subscribed_ns = wire::monotonic_ns();
         let slot_sub = slots
             .subscriber_builder()
             .buffer_size(buffer)
@@ -78,6 +81,7 @@ impl Transport {
             truth_sub,
             estimate_pub,
             listener,
+            subscribed_ns,
         })
     }
 

@@ -53,6 +53,7 @@ pub struct Assembler {
     ny: u8,
     stream: Option<u64>,
     joined_at: u64,
+    subscribed_ns: u64,
     next_seq: u64,
     obs: [Observation; MAX_NODES],
     /// Running counts (over all streams).
@@ -67,10 +68,18 @@ impl Assembler {
             ny,
             stream: None,
             joined_at: 0,
+            subscribed_ns: 0,
             next_seq: 0,
             obs: [Observation::dropped(0, 0, ny, 0); MAX_NODES],
             counts: Counts::default(),
         }
+    }
+
+    /// When the runner's subscriber was created (`CLOCK_MONOTONIC`): slots missing before the
+    /// first one seen of a stream that started later were lost in the IPC; of a stream that
+    /// started earlier, they were sent before this runner joined.
+    pub fn set_subscribed_ns(&mut self, ns: u64) {
+        self.subscribed_ns = ns;
     }
 
     /// The stream currently followed.
@@ -119,8 +128,11 @@ impl Assembler {
             None => {
                 self.stream = Some(slot.stream_id);
                 self.next_seq = 0;
-                // Everything before the first instant we see was sent before we existed.
-                self.joined_at = if slot.kind == SLOT_DATA {
+                // A stream that started before we subscribed was joined in the middle: what
+                // precedes the first instant we see was sent before we existed.
+                self.joined_at = if slot.stream_start_ns >= self.subscribed_ns {
+                    0
+                } else if slot.kind == SLOT_DATA {
                     Slot::seq_of(slot.k, 0, slot.nodes)
                 } else {
                     slot.seq
@@ -181,7 +193,7 @@ mod tests {
             y: if node != 1 { y } else { [0.0; MAX_NY] },
             flags: 0,
         };
-        Slot::data(&o, nodes, stream, 0, 0)
+        Slot::data(&o, nodes, stream, 0, 0, 100)
     }
 
     fn collect(a: &mut Assembler, slots: &[Slot]) -> Vec<(u32, Vec<Observation>)> {
@@ -246,6 +258,8 @@ mod tests {
     #[test]
     fn joining_mid_stream_and_restarts() {
         let mut a = Assembler::new(1, 1);
+        // Subscribed after the stream started (at 100): a join.
+        a.set_subscribed_ns(200);
         let out = collect(&mut a, &[slot(3, 0, 1, 9), slot(4, 0, 1, 9)]);
         assert_eq!(out.iter().map(|o| o.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
         assert_eq!(a.counts.missed_before_join, 2);
@@ -264,6 +278,16 @@ mod tests {
             Pushed::Data
         );
         assert_eq!(n, 1);
+    }
+
+    #[test]
+    fn losses_before_the_first_slot_of_a_stream_we_saw_start_are_ipc_losses() {
+        let mut a = Assembler::new(1, 1);
+        a.set_subscribed_ns(50); // before the stream started at 100
+        let out = collect(&mut a, &[slot(3, 0, 1, 9)]);
+        assert_eq!(out.len(), 3);
+        assert_eq!(a.counts.lost_in_ipc, 2);
+        assert_eq!(a.counts.missed_before_join, 0);
     }
 
     #[test]

@@ -44,8 +44,24 @@ pub const EXIT_PUBLISHER_LOST: i32 = 3;
 pub enum WaitMode {
     /// Busy-poll `receive()` (lowest latency, one core at 100 %).
     Spin,
-    /// Sleep on the `slots-ready` event in a WaitSet.
+    /// Sleep on the `slots-ready` event in a WaitSet (iceoryx2's event multiplexer; it
+    /// allocates a little per wake-up inside iceoryx2).
     Block,
+    /// Sleep on the `slots-ready` listener directly (one file descriptor, no WaitSet): the
+    /// same kernel wake-up as `block` without its per-wake-up allocations. Termination
+    /// requests are checked after each wake-up (at least every 50 ms).
+    Listener,
+}
+
+impl WaitMode {
+    /// Lower-case name as on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Spin => "spin",
+            Self::Block => "block",
+            Self::Listener => "listener",
+        }
+    }
 }
 
 /// Options of `ipc-runner run` (shared with `demo`).
@@ -96,6 +112,10 @@ pub struct RunArgs {
     /// Write the run report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Do not publish estimates on `<prefix>/estimates` (iceoryx2 0.10 allocates a small
+    /// reference count per loaned sample; without publishing the loop allocates nothing).
+    #[arg(long)]
+    pub no_publish_estimates: bool,
     /// Test hook: sleep this many µs after each slot (a deliberately slow consumer).
     #[arg(long, hide = true)]
     pub debug_slow_us: Option<u64>,
@@ -123,11 +143,15 @@ impl RunArgs {
             estimates_csv: None,
             slots_csv: None,
             json: None,
+            no_publish_estimates: false,
             debug_slow_us: None,
             quiet: false,
         }
     }
 }
+
+/// Progress callback: latest instant and the counts so far.
+pub type Progress<'a> = dyn FnMut(u32, &Counts) + 'a;
 
 /// Optional instrumentation of the loop.
 #[derive(Default)]
@@ -138,7 +162,7 @@ pub struct Hooks<'a> {
     /// Instants before the allocation count starts (default 20).
     pub warmup: u64,
     /// Called at most every 100 ms with the latest instant and the counts.
-    pub progress: Option<&'a mut dyn FnMut(u32, &Counts)>,
+    pub progress: Option<&'a mut Progress<'a>>,
 }
 
 impl std::fmt::Debug for Hooks<'_> {
@@ -199,6 +223,9 @@ pub struct RunReport {
     pub allocations_after_warmup: Option<usize>,
     /// Slots received after warm-up (denominator of the above).
     pub slots_after_warmup: u64,
+    /// Estimates published after warm-up (iceoryx2 0.10's `loan_uninit` allocates one
+    /// reference count per sample, inside the library).
+    pub published_after_warmup: u64,
     /// Outcome of `--cpu` / `--mlock` (`None` if not requested).
     pub cpu_pinning: Option<String>,
     /// Outcome of `--mlock`.
@@ -244,6 +271,9 @@ struct State {
     traj: Trajectories,
     record_slots: bool,
     record_cap: usize,
+    publish: bool,
+    /// Estimates published (after warm-up, for the allocation accounting).
+    published: u64,
     // set per slot by the receive path
     last_send_ns: u64,
     last_recv_ns: u64,
@@ -318,6 +348,10 @@ impl State {
                 step_done_ns: t1,
             };
             self.est_seq += 1;
+            if !self.publish {
+                continue;
+            }
+            self.published += 1;
             let sent = t
                 .estimate_pub
                 .loan_uninit()
@@ -373,7 +407,7 @@ pub fn run_loop(
         say(m);
     }
 
-    let t = Transport::open(&args.prefix, args.buffer, args.wait == WaitMode::Block)?;
+    let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
     let estimators = make()?;
     let n_est = estimators.len();
     let record_cap = args.record_capacity as usize;
@@ -409,6 +443,8 @@ pub fn run_loop(
         session: 1,
         record_slots: args.slots_csv.is_some(),
         record_cap,
+        publish: !args.no_publish_estimates,
+        published: 0,
         last_send_ns: 0,
         last_recv_ns: 0,
         last_k: 0,
@@ -416,12 +452,14 @@ pub fn run_loop(
         err: None,
     };
     let mut asm = Assembler::new(nodes, ny);
+    asm.set_subscribed_ns(t.subscribed_ns);
     let deadline_ns = (args.deadline_ms * 1e6) as u64;
     let connect_ns = (args.connect_timeout * 1e9) as u64;
     let warmup = if hooks.warmup == 0 { 20 } else { hooks.warmup };
     let mut allocs_at_warmup: Option<usize> = None;
     let mut allocs_at_end: Option<usize> = None;
     let mut slots_at_warmup = 0u64;
+    let mut published_at_warmup = 0u64;
     let mut publisher_losses = 0u32;
     let mut period_ns = 0u64;
     let mut last_progress = 0u64;
@@ -432,20 +470,17 @@ pub fn run_loop(
     say(&format!(
         "waiting for channel-sim on prefix {:?} ({} wait)",
         args.prefix,
-        match args.wait {
-            WaitMode::Spin => "spin",
-            WaitMode::Block => "block",
-        }
+        args.wait.as_str()
     ));
 
     // The wait primitive: spin or WaitSet on the event listener.
     let waitset = match &t.listener {
-        Some(_) => Some(
+        Some(_) if args.wait == WaitMode::Block => Some(
             WaitSetBuilder::new()
                 .create::<ipc::Service>()
                 .map_err(|e| anyhow!("cannot create WaitSet: {e:?}"))?,
         ),
-        None => None,
+        _ => None,
     };
     let guard = match (&waitset, &t.listener) {
         (Some(ws), Some(l)) => Some(
@@ -476,6 +511,18 @@ pub fn run_loop(
                     }
                     _ => Woke::Ready,
                 })
+            }
+            (None, None, Some(l)) => {
+                l.timed_wait(|_| {}, Duration::from_nanos(timeout_ns.max(1000)))
+                    .map_err(|e| anyhow!("listener wait failed: {e:?}"))?;
+                let now = wire::monotonic_ns();
+                if now - last_signal_check > 1_000_000 {
+                    last_signal_check = now;
+                    if t.node.wait(Duration::ZERO).is_err() {
+                        return Ok(Woke::Signal);
+                    }
+                }
+                Ok(Woke::Ready)
             }
             _ => {
                 for _ in 0..32 {
@@ -518,6 +565,7 @@ pub fn run_loop(
                 st.last_send_ns = slot.send_ns;
                 st.last_recv_ns = recv_ns;
             }
+            st.stream_id = slot.stream_id;
             let mut pushed = asm.push(slot, &mut |k, obs: &[Observation]| {
                 st.on_instant(&t, k, obs);
             });
@@ -534,7 +582,6 @@ pub fn run_loop(
                     st.on_instant(&t, k, obs);
                 });
             }
-            st.stream_id = slot.stream_id;
             let pushed = pushed.with_context(|| "refusing slot from channel-sim")?;
             if st.record_slots
                 && pushed == Pushed::Data
@@ -555,6 +602,7 @@ pub fn run_loop(
                 if allocs_at_warmup.is_none() && asm.counts.instants >= warmup {
                     allocs_at_warmup = Some(probe());
                     slots_at_warmup = asm.counts.received;
+                    published_at_warmup = st.published;
                 }
             }
             match pushed {
@@ -645,6 +693,7 @@ pub fn run_loop(
             _ => None,
         },
         slots_after_warmup: asm.counts.received - slots_at_warmup,
+        published_after_warmup: st.published - published_at_warmup,
         cpu_pinning,
         memory_lock,
         ending,
@@ -661,10 +710,7 @@ impl RunReport {
              slots: {} received ({} delivered, {} dropped by the channel), {} lost in IPC, {} missed before join\n",
             self.scenario,
             c.instants,
-            match self.wait {
-                WaitMode::Spin => "spin",
-                WaitMode::Block => "block",
-            },
+            self.wait.as_str(),
             self.ending,
             c.received,
             c.delivered,
@@ -688,8 +734,8 @@ impl RunReport {
         s.push_str(&self.latency.table());
         if let Some(a) = self.allocations_after_warmup {
             s.push_str(&format!(
-                "allocations after warm-up: {a} over {} slots\n",
-                self.slots_after_warmup
+                "allocations after warm-up: {a} over {} slots ({} estimates published)\n",
+                self.slots_after_warmup, self.published_after_warmup
             ));
         }
         s
