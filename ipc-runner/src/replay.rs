@@ -18,7 +18,7 @@
 //! instant: the estimators always see every k from 1 to the last one in the file. Values
 //! `nan`/`inf` are passed to the estimators, which reject them and keep their state (counted).
 //! `ipc-runner run --slots-csv FILE` and `ipc-runner demo` write this format; see
-//! `docs/replay.md` and `examples/occlusion-slots.csv`.
+//! `docs/replay.md` and the example log `docs/examples/selftest-slots.csv`.
 
 use crate::run::select;
 use crate::Estimator;
