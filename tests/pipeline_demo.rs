@@ -1,63 +1,41 @@
-//! The demo over real processes and shared memory reproduces the in-process computation
-//! exactly: every estimate bit for bit, hence the MSE. The IPC must not change a single
-//! number. The recorded slot log replays to the same estimates.
+//! The demo over real processes and shared memory reproduces the in-process `eval` of the
+//! same scenario, seed and run exactly: every estimate bit for bit, and the MSE. The IPC must
+//! not change a single number. The slot log the demo records replays to the same estimates.
 
 #[path = "pipeline_common.rs"]
 mod common;
 
 use common::{csv, report, scratch, Proc};
-use ipc_runner::run::select;
+use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::eval::{evaluate, RunConfig};
 
-const SCENARIO: &str = channel_sim::publisher::selftest::NAME;
 const SEED: u64 = 7;
-const RUN: u64 = 3;
 const STEPS: u32 = 150;
 
-/// The same computation without processes: scenario → estimators, in order.
-fn in_process(nx: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<f64>) {
-    let (scenario, _) = select::scenario(SCENARIO, None).unwrap();
-    let make = select::estimators(scenario.as_ref(), &[]).unwrap();
-    let mut ests = make().unwrap();
-    let mut sim = scenario.start(SEED, RUN);
-    let (mut truth, mut est) = (Vec::new(), Vec::new());
-    let mut sq = vec![0.0; ests.len()];
-    for _ in 0..STEPS {
-        let inst = sim.next_instant();
-        truth.push(inst.truth[..nx].to_vec());
-        let mut row = Vec::new();
-        for (e, es) in ests.iter_mut().enumerate() {
-            let _ = es.step(inst.k, &inst.obs);
-            let mut x = vec![0.0; nx];
-            es.estimate(&mut x);
-            sq[e] += (0..nx).map(|j| (inst.truth[j] - x[j]).powi(2)).sum::<f64>();
-            row.extend(x);
-        }
-        est.push(row);
-    }
-    let mse = sq.iter().map(|s| s / f64::from(STEPS)).collect();
-    (truth, est, mse)
+/// Two sensor nodes, bursty + i.i.d. loss: exercises multi-node instants.
+fn config() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel-sim/scenarios/example.toml")
 }
 
 #[test]
-fn demo_matches_the_in_process_computation_exactly_and_replays() {
+fn demo_matches_in_process_eval_exactly_and_replays() {
     let dir = scratch("demo");
     let prefix = common::prefix("demo");
     let out = dir.join("out");
+    let cfg = config();
     let mut demo = Proc::start(
         &dir,
         "demo",
         &[
             "demo",
-            "--scenario",
-            SCENARIO,
+            "--config",
+            cfg.to_str().unwrap(),
             "--steps",
             &STEPS.to_string(),
             "--rate",
             "1000",
             "--seed",
             &SEED.to_string(),
-            "--run",
-            &RUN.to_string(),
             "--wait",
             "block",
             "--out",
@@ -73,42 +51,62 @@ fn demo_matches_the_in_process_computation_exactly_and_replays() {
     for needle in ["MSE vs truth", "lost in IPC", "p99.9", "end to end"] {
         assert!(text.contains(needle), "summary lacks {needle:?}:\n{text}");
     }
-
     let r = report(&out.join("report.json"));
     assert_eq!(r["ending"], "completed");
     assert_eq!(r["counts"]["instants"], u64::from(STEPS));
-    assert_eq!(r["counts"]["lost_in_ipc"], 0, "{r}");
+    assert_eq!(
+        r["counts"]["lost_in_ipc"], 0,
+        "precondition: no IPC loss {r}"
+    );
     assert_eq!(r["truth_missing"], 0);
 
-    let (scenario, _) = select::scenario(SCENARIO, None).unwrap();
-    let nx = scenario.nx();
-    let (truth, est, mse) = in_process(nx);
+    // The same experiment in-process, by `eval` (run 0 of seed SEED, one run).
+    let scenario = channel_sim::scenario::config::load(&cfg).unwrap();
+    let nx = channel_sim::Scenario::nx(&scenario);
+    #[allow(clippy::needless_update)]
+    let options = EvalOptions {
+        runs: 1,
+        horizon: STEPS,
+        seed: SEED,
+        ..EvalOptions::default()
+    };
+    let config = RunConfig {
+        threads: Some(1),
+        progress: false,
+    };
+    let ev = evaluate(&scenario, &options, FACTORIES, &config).unwrap();
+    let traj = &ev.trajectory;
+
     let (head, rows) = csv(&out.join("estimates.csv"));
     assert_eq!(rows.len(), STEPS as usize);
-    assert_eq!(head.len(), 2 + nx + est[0].len());
-    for (i, row) in rows.iter().enumerate() {
-        assert_eq!(row[1], (i + 1) as f64);
-        for j in 0..nx {
-            assert_eq!(
-                row[2 + j].to_bits(),
-                truth[i][j].to_bits(),
-                "truth k={}",
-                i + 1
-            );
-        }
-        for (c, v) in est[i].iter().enumerate() {
-            assert_eq!(
-                row[2 + nx + c].to_bits(),
-                v.to_bits(),
-                "estimate k={} col {c}",
-                i + 1
-            );
-        }
-    }
     let reported = r["estimators"].as_array().unwrap();
-    assert_eq!(reported.len(), mse.len());
-    for (e, m) in mse.iter().enumerate() {
-        assert_eq!(reported[e]["mse"].as_f64().unwrap().to_bits(), m.to_bits());
+    assert!(!reported.is_empty());
+    for (e, rep) in reported.iter().enumerate() {
+        let name = rep["name"].as_str().unwrap();
+        let j_eval = traj.names.iter().position(|n| *n == name).unwrap();
+        let col = head.iter().position(|h| *h == format!("{name}_0")).unwrap();
+        for (i, row) in rows.iter().enumerate() {
+            let k = i + 1;
+            assert_eq!(row[1], k as f64);
+            for j in 0..nx {
+                assert_eq!(
+                    row[2 + j].to_bits(),
+                    traj.truth[k * nx + j].to_bits(),
+                    "truth k={k}"
+                );
+                let ours = row[col + j];
+                let theirs = traj.estimates[j_eval][k * nx + j];
+                assert_eq!(ours.to_bits(), theirs.to_bits(), "{name} k={k} x[{j}]");
+            }
+        }
+        let (_, res) = ev.estimators.iter().find(|(n, _)| n == name).unwrap();
+        let ours = rep["mse"].as_f64().unwrap();
+        assert_eq!(
+            ours.to_bits(),
+            res.avg_mse.to_bits(),
+            "{name} (#{e}): demo MSE {ours:e}, eval {:e}",
+            res.avg_mse
+        );
     }
 
     // The slot log the demo wrote replays to the same estimates.
@@ -120,21 +118,24 @@ fn demo_matches_the_in_process_computation_exactly_and_replays() {
             "replay",
             "--input",
             out.join("slots.csv").to_str().unwrap(),
-            "--scenario",
-            SCENARIO,
+            "--config",
+            cfg.to_str().unwrap(),
+            "--seed",
+            &SEED.to_string(),
             "--output",
             replayed.to_str().unwrap(),
         ],
     );
     assert!(rp.wait(60).success(), "{}", rp.err());
-    let (_, rrows) = csv(&replayed);
+    let (rhead, rrows) = csv(&replayed);
     assert_eq!(rrows.len(), STEPS as usize);
-    for (i, row) in rrows.iter().enumerate() {
-        for (c, v) in est[i].iter().enumerate() {
+    for (c, h) in rhead.iter().enumerate().skip(1) {
+        let col = head.iter().position(|x| x == h).unwrap();
+        for (i, row) in rrows.iter().enumerate() {
             assert_eq!(
-                row[1 + c].to_bits(),
-                v.to_bits(),
-                "replay k={} col {c}",
+                row[c].to_bits(),
+                rows[i][col].to_bits(),
+                "replay {h} k={}",
                 i + 1
             );
         }

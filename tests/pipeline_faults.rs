@@ -8,7 +8,7 @@ mod common;
 use common::{prefix, report, scratch, Proc};
 use std::time::Duration;
 
-const S: &str = channel_sim::publisher::selftest::NAME;
+const S: &str = "linear";
 
 fn runner(dir: &std::path::Path, name: &str, prefix: &str, extra: &[&str]) -> Proc {
     let json = dir.join(format!("{name}.json"));
@@ -65,7 +65,9 @@ fn publisher_sigkill_is_detected_at_the_deadline_and_a_restart_resumes() {
     // against a missed detection (scheduling on a shared machine can add delay).
     assert!(silent >= 105.0, "fired early: {silent} ms\n{err}");
     assert!(silent < 2000.0, "detected late: {silent} ms\n{err}");
-    assert!(err.contains("cleaned up 1 dead node"), "{err}");
+    // The dead publisher is gone after the cleanup (ours or that of any other process: the
+    // cleanup is machine-wide, so the count of nodes *we* removed may be 0).
+    assert!(err.contains("0 publisher(s) remain"), "{err}");
 
     let mut pub2 = publisher(&dir, "pub2", &p, &["--rate", "0", "--steps", "120"]);
     assert!(pub2.wait(60).success(), "{}", pub2.err());
@@ -156,7 +158,7 @@ fn slow_consumer_counts_gaps_instead_of_crashing() {
         lost > 0,
         "no gap with a 4-slot queue and a slow consumer? {r}"
     );
-    assert_eq!(c["received"].as_u64().unwrap() + lost, 600);
+    assert_eq!(c["received"].as_u64().unwrap() + lost, 300);
     assert_eq!(
         c["missed_before_join"], 0,
         "subscribed before the stream started: {r}"
@@ -214,7 +216,8 @@ fn non_finite_measurements_are_rejected_and_counted() {
     );
     let delivered = r["counts"]["delivered"].as_u64().unwrap();
     let e = &r["estimators"][0];
-    // Every 5th delivered measurement is NaN; each poisons exactly one instant's step.
+    // Every 5th delivered measurement is NaN; each poisons exactly one instant's step (one
+    // sensor node in `linear`).
     assert_eq!(e["rejected"].as_u64().unwrap(), delivered / 5, "{r}");
     assert!(e["mse"].as_f64().unwrap().is_finite());
     let _ = std::fs::remove_dir_all(&dir);

@@ -1,26 +1,64 @@
-//! One Kalman step at the papers' dimensions.
+//! One Kalman step at the papers' dimensions: our `KalmanFilter` side by side with
+//! `adskalman` on identical problems (same model, prior and measurement, converted once at
+//! setup), and the KF/IKF steps in f32 and f64.
+//!
+//! Every iteration computes one step from the same converged prior (see `benches::problems`).
+//! `benches/run.sh` turns the medians into the ratios of `BENCHMARKS.md`.
 
-use criterion::{criterion_group, criterion_main, Criterion};
-use estimator_core::{filter::KalmanFilter, model::LinearModel};
-use nalgebra::{matrix, vector, SMatrix};
+use benches::ads::AdsProblem;
+use benches::problems::{
+    occlusion_3x2_f32, occlusion_3x2_f64, tracking_4x2_f32, tracking_4x2_f64, KfProblem,
+};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use estimator_core::Real;
 use std::hint::black_box;
+use std::time::Duration;
 
-fn kf_step(c: &mut Criterion) {
-    let m = LinearModel::<f64, 3, 3, 2, 2>::new(
-        matrix![1.0, 0.1, 0.0; 0.0, 1.0, 0.1; 0.0, 0.0, 0.95],
-        SMatrix::identity(),
-        matrix![1.0, 0.0, 0.0; 0.0, 0.0, 1.0],
-        SMatrix::identity(),
-        SMatrix::identity() * 0.01,
-        SMatrix::identity() * 0.5,
-    )
-    .expect("valid model");
-    let mut kf = KalmanFilter::new(vector![0.0, 0.0, 0.0], SMatrix::identity()).expect("valid");
-    let y = vector![0.3, -0.2];
-    c.bench_function("kf_step_3x2_f64", |b| {
-        b.iter(|| kf.step(black_box(&m), 1, black_box(&y)).expect("step"))
+fn versus_adskalman(c: &mut Criterion) {
+    let mut g = c.benchmark_group("kf_vs_adskalman");
+    g.warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(3));
+    let p = occlusion_3x2_f64();
+    let a = AdsProblem::from_core(&p);
+    g.bench_function(BenchmarkId::new("ours", p.name), |b| {
+        b.iter(|| black_box(black_box(&p).kf_step()))
     });
+    g.bench_function(BenchmarkId::new("adskalman", p.name), |b| {
+        b.iter(|| black_box(black_box(&a).step()))
+    });
+    let p = tracking_4x2_f32();
+    let a = AdsProblem::from_core(&p);
+    g.bench_function(BenchmarkId::new("ours", p.name), |b| {
+        b.iter(|| black_box(black_box(&p).kf_step()))
+    });
+    g.bench_function(BenchmarkId::new("adskalman", p.name), |b| {
+        b.iter(|| black_box(black_box(&a).step()))
+    });
+    g.finish();
 }
 
-criterion_group!(benches, kf_step);
+fn steps<T: Real, const NX: usize, const NY: usize>(c: &mut Criterion, p: &KfProblem<T, NX, NY>) {
+    let mut g = c.benchmark_group("kalman");
+    g.warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(2));
+    g.bench_function(BenchmarkId::new("kf", p.name), |b| {
+        b.iter(|| black_box(black_box(p).kf_step()))
+    });
+    g.bench_function(BenchmarkId::new("ikf_arrival", p.name), |b| {
+        b.iter(|| black_box(black_box(p).ikf_arrival_step()))
+    });
+    g.bench_function(BenchmarkId::new("ikf_dropout", p.name), |b| {
+        b.iter(|| black_box(black_box(p).ikf_dropout_step()))
+    });
+    g.finish();
+}
+
+fn kf_ikf(c: &mut Criterion) {
+    steps(c, &occlusion_3x2_f64());
+    steps(c, &occlusion_3x2_f32());
+    steps(c, &tracking_4x2_f64());
+    steps(c, &tracking_4x2_f32());
+}
+
+criterion_group!(benches, versus_adskalman, kf_ikf);
 criterion_main!(benches);

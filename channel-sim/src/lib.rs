@@ -9,3 +9,7 @@ pub mod sim;
 pub mod wire;
 
 pub use sim::{Instant, Observation, Scenario, Simulation};
+pub mod loss;
+pub mod plant;
+pub mod scenario;
+pub mod stage;

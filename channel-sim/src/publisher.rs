@@ -27,13 +27,13 @@ pub struct PublisherArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
-    /// Experiment seed.
-    #[arg(long, default_value_t = 1)]
+    /// Experiment seed (same meaning and default as `ipc-runner eval --seed`).
+    #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Run index within the seed (runs are independent streams).
     #[arg(long, default_value_t = 0)]
     pub run: u64,
-    /// Number of sampling instants to publish (default: the scenario's horizon).
+    /// Number of sampling instants to publish (default: 100, as `ipc-runner eval --horizon`).
     #[arg(long)]
     pub steps: Option<u32>,
     /// Sampling rate in Hz; 0 publishes as fast as possible.
@@ -313,138 +313,16 @@ pub fn run(args: &PublisherArgs, resolve: ScenarioResolver) -> Result<PublisherR
     Ok(report)
 }
 
-/// Resolves `--scenario`/`--config` for the binaries.
-///
-/// Until the preset registry is on main this knows only [`selftest::NAME`].
+/// Instants published when `--steps` is not given: the same default horizon as
+/// `ipc-runner eval`, so the two compute the same experiment by default.
+pub const DEFAULT_STEPS: u32 = 100;
+
+/// Resolves `--scenario`/`--config` through the preset registry
+/// ([`crate::scenario::preset`]) or the TOML loader ([`crate::scenario::config::load`]).
 pub fn resolve_scenario(args: &PublisherArgs) -> Result<(Box<dyn Scenario>, u32)> {
-    if args.config.is_some() {
-        bail!("--config needs the scenario registry (not built into this binary yet)");
-    }
-    if args.scenario == selftest::NAME {
-        return Ok((Box::new(selftest::SelfTest), selftest::STEPS));
-    }
-    bail!(
-        "unknown scenario {:?}; known: {}",
-        args.scenario,
-        selftest::NAME
-    )
-}
-
-pub mod selftest {
-    //! `pipeline-selftest`: a scalar random walk x_{k+1} = x_k + w_k, w ~ N(0, Q), seen by two
-    //! nodes y = x + v, v ~ N(0, R), each packet lost independently with probability
-    //! [`LOSS`]. Cheap and with a closed-form (intermittent) Kalman filter, it exercises the
-    //! transport (multi-node instants, drops) independently of the papers' scenarios.
-
-    use crate::sim::{
-        Instant, Observation, Scenario, Simulation, FLAG_RANDOM_LOSS, MAX_NODES, MAX_NX, MAX_NY,
+    let scenario: Box<dyn Scenario> = match &args.config {
+        Some(path) => Box::new(crate::scenario::config::load(path)?),
+        None => crate::scenario::preset(&args.scenario)?,
     };
-
-    /// Preset name.
-    pub const NAME: &str = "pipeline-selftest";
-    /// Default horizon.
-    pub const STEPS: u32 = 200;
-    /// Process noise variance.
-    pub const Q: f64 = 0.1;
-    /// Measurement noise variance.
-    pub const R: f64 = 0.5;
-    /// Packet loss probability per node.
-    pub const LOSS: f64 = 0.3;
-    /// Nodes.
-    pub const NODES: usize = 2;
-    /// Prior mean and variance of x_0.
-    pub const X0: (f64, f64) = (0.0, 1.0);
-
-    /// The scenario.
-    #[derive(Clone, Copy, Debug)]
-    pub struct SelfTest;
-
-    struct Sim {
-        s: u64,
-        k: u32,
-        x: f64,
-        x0: f64,
-    }
-
-    impl Sim {
-        fn next_u64(&mut self) -> u64 {
-            // splitmix64
-            self.s = self.s.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.s;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        fn uniform(&mut self) -> f64 {
-            ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        }
-        fn normal(&mut self) -> f64 {
-            let (u1, u2) = (self.uniform(), self.uniform());
-            (-2.0 * u1.ln()).sqrt() * (2.0 * core::f64::consts::PI * u2).cos()
-        }
-    }
-
-    impl Simulation for Sim {
-        fn initial_truth(&self) -> [f64; MAX_NX] {
-            let mut t = [0.0; MAX_NX];
-            t[0] = self.x0;
-            t
-        }
-        fn next_instant(&mut self) -> Instant {
-            self.k += 1;
-            self.x += Q.sqrt() * self.normal();
-            let mut obs = heapless::Vec::<Observation, MAX_NODES>::new();
-            for node in 0..NODES as u8 {
-                let v = R.sqrt() * self.normal();
-                let o = if self.uniform() < LOSS {
-                    Observation::dropped(self.k, node, 1, FLAG_RANDOM_LOSS)
-                } else {
-                    let mut y = [0.0; MAX_NY];
-                    y[0] = self.x + v;
-                    Observation {
-                        k: self.k,
-                        node,
-                        delivered: true,
-                        ny: 1,
-                        y,
-                        flags: 0,
-                    }
-                };
-                let _ = obs.push(o);
-            }
-            let mut truth = [0.0; MAX_NX];
-            truth[0] = self.x;
-            Instant {
-                k: self.k,
-                truth,
-                obs,
-            }
-        }
-    }
-
-    impl Scenario for SelfTest {
-        fn name(&self) -> &str {
-            NAME
-        }
-        fn nx(&self) -> usize {
-            1
-        }
-        fn ny(&self) -> usize {
-            1
-        }
-        fn nodes(&self) -> usize {
-            NODES
-        }
-        fn start(&self, seed: u64, run: u64) -> Box<dyn Simulation> {
-            let mut sim = Sim {
-                s: seed ^ run.wrapping_mul(0xD1B5_4A32_D192_ED03),
-                k: 0,
-                x: 0.0,
-                x0: 0.0,
-            };
-            sim.x0 = X0.0 + X0.1.sqrt() * sim.normal();
-            sim.x = sim.x0;
-            Box::new(sim)
-        }
-    }
+    Ok((scenario, DEFAULT_STEPS))
 }

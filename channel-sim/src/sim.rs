@@ -83,6 +83,12 @@ pub trait Simulation: Send {
     fn initial_truth(&self) -> [f64; MAX_NX];
     /// Advances to the next instant.
     fn next_instant(&mut self) -> Instant;
+    /// The observations of the last instant as the sensors produced them, before any channel
+    /// stage acted (every one delivered, nothing censored). For oracle baselines in offline
+    /// evaluation only (the full-information `kf`); `None` where unavailable (e.g. a replay).
+    fn raw_observations(&self) -> Option<&[Observation]> {
+        None
+    }
 }
 
 /// A fully parameterised experiment: plant, sensors and channel.
@@ -98,4 +104,6 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     /// Starts run `run` of the experiment seeded by `seed`. Runs are independent streams:
     /// the same `(seed, run)` gives the same instants on every machine and thread count.
     fn start(&self, seed: u64, run: u64) -> Box<dyn Simulation>;
+    /// For downcasting to the concrete scenario (estimator factories read its parameters).
+    fn as_any(&self) -> &dyn std::any::Any;
 }

@@ -18,6 +18,8 @@ use std::process::{Child, Command, Stdio};
 
 /// Default scenario of the demo.
 pub const DEFAULT_SCENARIO: &str = "occlusion";
+/// Used when [`DEFAULT_SCENARIO`] is not in the preset registry of this build.
+pub const FALLBACK_SCENARIO: &str = "linear";
 
 /// Options of `ipc-runner demo`.
 #[derive(Clone, Debug, clap::Args)]
@@ -34,8 +36,8 @@ pub struct DemoArgs {
     /// Sampling rate in Hz (0 = as fast as possible).
     #[arg(long, default_value_t = 200.0)]
     pub rate: f64,
-    /// Experiment seed (same meaning as in `eval`).
-    #[arg(long, default_value_t = 1)]
+    /// Experiment seed (same meaning and default as `eval --seed`).
+    #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Run index within the seed.
     #[arg(long, default_value_t = 0)]
@@ -109,7 +111,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         (None, None) => match select::scenario(DEFAULT_SCENARIO, None) {
             Ok(s) => (DEFAULT_SCENARIO.to_string(), s),
             Err(e) => {
-                let fallback = channel_sim::publisher::selftest::NAME;
+                let fallback = FALLBACK_SCENARIO;
                 eprintln!(
                     "demo: the default scenario {DEFAULT_SCENARIO:?} is not available in this \
                      build ({e:#}); running {fallback:?} instead"
@@ -119,7 +121,16 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         },
     };
     let steps = args.steps.unwrap_or(horizon);
-    let make = select::estimators(scenario.as_ref(), &args.estimators)?;
+    let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
+    let make = select::estimators(
+        scenario.clone(),
+        &args.estimators,
+        select::Experiment {
+            seed: args.seed,
+            run: args.run,
+            horizon: steps,
+        },
+    )?;
     let prefix = args
         .prefix
         .clone()
@@ -152,7 +163,9 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.cpu = args.cpu;
     rargs.quiet = true;
     rargs.connect_timeout = 30.0;
-    rargs.record_capacity = steps;
+    rargs.steps = steps;
+    rargs.seed = args.seed;
+    rargs.run = args.run;
     rargs.buffer = 1024;
     rargs.estimates_csv = Some(args.out.join("estimates.csv"));
     rargs.slots_csv = Some(args.out.join("slots.csv"));
@@ -220,9 +233,22 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     Ok(run::exit_code(&report))
 }
 
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // The embedded font is valid; a failure would only lose the plot's text.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            plotters::style::FontStyle::Normal,
+            include_bytes!("../assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
 /// One panel per state component: truth and each estimator over k (first session).
 pub fn plot_trajectories(traj: &run::Trajectories, path: &Path, title: &str) -> Result<()> {
     use plotters::prelude::*;
+    register_font();
     let nx = traj.nx.max(1);
     let n = traj
         .keys

@@ -13,4 +13,16 @@ pub trait Estimator: Send {
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), estimator_core::Error>;
     /// Writes the current estimate x̂_k into `out[..nx]`.
     fn estimate(&self, out: &mut [f64]);
+    /// Reports named per-step diagnostics of the current step (e.g. `"trace_p"`, the nn
+    /// estimator's `"bound_trace"`) by calling `sink(name, value)`; called at k = 0 and after
+    /// every successful step. `eval` averages each name over runs per k and writes it as an
+    /// array into the estimator's JSON entry. Default: none.
+    fn diagnostics(&self, _sink: &mut dyn FnMut(&'static str, f64)) {}
+    /// True for oracle baselines that must be fed the observations *before* the channel
+    /// (`Simulation::raw_observations`, every packet delivered) instead of what the channel
+    /// delivered, such as the full-information `kf`. Only offline evaluation can do that; a
+    /// real-time loop must not offer such an estimator. Default: false.
+    fn full_information(&self) -> bool {
+        false
+    }
 }

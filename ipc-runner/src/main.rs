@@ -1,53 +1,83 @@
 //! `ipc-runner`: the real-time estimation loop, Monte-Carlo evaluation and the demo.
+//!
+//! One subcommand per module; bad flags or input print one line and exit with code 2.
 
 use clap::{Parser, Subcommand};
+use ipc_runner::eval::cli::{CommandError, EvalArgs};
 
-/// Estimation over zero-copy shared memory.
 #[derive(Debug, Parser)]
-#[command(name = "ipc-runner", version)]
+#[command(
+    name = "ipc-runner",
+    version,
+    about = "Estimation over lossy, rationed channels: evaluation, real-time loop, demo"
+)]
 struct Cli {
     #[command(subcommand)]
-    command: Option<Cmd>,
+    command: Command,
 }
 
 #[derive(Debug, Subcommand)]
-enum Cmd {
-    /// Run the whole pipeline (publisher child process + real-time loop) and summarise.
+enum Command {
+    /// Monte-Carlo evaluation of every estimator that applies to a scenario.
+    Eval(EvalArgs),
+    /// One-command demo of the shared-memory pipeline: starts the publisher as a child
+    /// process, runs the real-time loop, prints the summary and writes a plot.
     Demo(ipc_runner::demo::DemoArgs),
-    /// Run the real-time loop against a running channel-sim.
+    /// The real-time loop against a running channel-sim (same --prefix).
     Run(ipc_runner::run::RunArgs),
-    /// Run the estimators over a recorded slot log (CSV).
+    /// Run the estimators over a recorded slot log (CSV, see docs/replay.md).
     Replay(ipc_runner::replay::ReplayArgs),
-    /// The channel-sim publisher, built into this executable (what `demo` starts).
+    /// The channel-sim publisher built into this executable (what `demo` starts).
     #[command(hide = true)]
     ChannelSim(channel_sim::publisher::PublisherArgs),
 }
 
+/// Runs a pipeline subcommand: its exit code, or code 1 with the error chain.
+fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
+    match r {
+        Ok(0) => Ok(()),
+        Ok(code) => std::process::exit(code),
+        Err(e) => Err(CommandError {
+            code: 1,
+            message: format!("{e:#}"),
+        }),
+    }
+}
+
 fn main() {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-    let cli = Cli::parse();
-    let result = match cli.command {
-        Some(Cmd::Demo(a)) => ipc_runner::demo::main(&a),
-        None => ipc_runner::demo::main(
-            &<ipc_runner::demo::DemoArgs as clap::FromArgMatches>::from_arg_matches(
-                &<ipc_runner::demo::DemoArgs as clap::Args>::augment_args(clap::Command::new(
-                    "demo",
-                ))
-                .get_matches_from(["demo"]),
-            )
-            .expect("defaults parse"),
-        ),
-        Some(Cmd::Run(a)) => ipc_runner::run::main(&a),
-        Some(Cmd::Replay(a)) => ipc_runner::replay::main(&a),
-        Some(Cmd::ChannelSim(a)) => {
-            channel_sim::publisher::run(&a, channel_sim::publisher::resolve_scenario).map(|_| 0)
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            // clap's message is several lines (usage, tips); keep the first, which names the
+            // problem.
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or("invalid arguments");
+            let first = first.strip_prefix("error: ").unwrap_or(first);
+            eprintln!("ipc-runner: error: {first} (see --help)");
+            std::process::exit(2);
         }
     };
-    match result {
-        Ok(code) => std::process::exit(code),
-        Err(e) => {
-            eprintln!("ipc-runner: error: {e:#}");
-            std::process::exit(1);
-        }
+    let result = match cli.command {
+        Command::Eval(args) => ipc_runner::eval::cli::run(args),
+        Command::Demo(a) => pipeline(ipc_runner::demo::main(&a)),
+        Command::Run(a) => pipeline(ipc_runner::run::main(&a)),
+        Command::Replay(a) => pipeline(ipc_runner::replay::main(&a)),
+        Command::ChannelSim(a) => pipeline(
+            channel_sim::publisher::run(&a, channel_sim::publisher::resolve_scenario).map(|_| 0),
+        ),
+    };
+    if let Err(CommandError { code, message }) = result {
+        eprintln!("ipc-runner: error: {message}");
+        std::process::exit(code);
     }
 }

@@ -18,7 +18,7 @@
 //! instant: the estimators always see every k from 1 to the last one in the file. Values
 //! `nan`/`inf` are passed to the estimators, which reject them and keep their state (counted).
 //! `ipc-runner run --slots-csv FILE` and `ipc-runner demo` write this format; see
-//! `docs/replay.md` and the example log `docs/examples/selftest-slots.csv`.
+//! `docs/replay.md` and the example log `docs/examples/example-slots.csv`.
 
 use crate::run::select;
 use crate::Estimator;
@@ -43,6 +43,12 @@ pub struct ReplayArgs {
     /// Estimators to run, comma-separated (default: all that apply to the scenario).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
+    /// Experiment seed the estimators are built for (as `eval --seed`).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Run index the estimators are built for.
+    #[arg(long, default_value_t = 0)]
+    pub run: u64,
     /// Write `k,<est>_0..` rows here (default: print the last estimates only).
     #[arg(long)]
     pub output: Option<PathBuf>,
@@ -203,9 +209,17 @@ pub fn run_estimators(
 pub fn main(args: &ReplayArgs) -> Result<i32> {
     let (scenario, _) = select::scenario(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
-    let make = select::estimators(scenario.as_ref(), &args.estimators)?;
-    let mut estimators = make()?;
     let instants = read_slots(&args.input, nodes, ny)?;
+    let make = select::estimators(
+        scenario.into(),
+        &args.estimators,
+        select::Experiment {
+            seed: args.seed,
+            run: args.run,
+            horizon: u32::try_from(instants.len()).unwrap_or(u32::MAX),
+        },
+    )?;
+    let mut estimators = make()?;
     let (est, rejected) = run_estimators(&mut estimators, &instants, nx);
     let delivered: usize = instants
         .iter()

@@ -3,7 +3,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
+use crate::linalg::{check_finite, check_spd, cholesky, symmetrize};
 use crate::model::LinearSystem;
 use crate::{Error, Real, Result};
 
@@ -87,10 +87,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
 
     /// Time update with explicit matrices `A` and effective process covariance `Q`.
     pub fn predict_with(&mut self, a: &SMatrix<T, NX, NX>, q: &SMatrix<T, NX, NX>) -> Result<()> {
-        let x = a * self.x;
-        let p = symmetrize(&(a * self.p * a.transpose() + q));
-        check_finite(&x, "predicted state")?;
-        check_finite(&p, "predicted covariance")?;
+        let (x, p) = predict_raw(&self.x, &self.p, a, q);
+        check_predicted(&x, &p)?;
         self.x = x;
         self.p = p;
         Ok(())
@@ -130,10 +128,47 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         y: &SVector<T, NY>,
     ) -> Result<()> {
         check_finite(y, "measurement")?;
-        let saved = *self;
-        self.predict(model, k.saturating_sub(1))?;
-        self.update(model, k, y).inspect_err(|_| *self = saved)
+        // Fast path: predict and update into locals and commit once (no saved copy, no
+        // rollback). Same arithmetic as `predict` then `update`, so bit-identical results.
+        // The prediction's finiteness is checked only if the update fails: a non-finite
+        // prediction always makes the update fail (NaN and ∞ reach S or x⁺ through every
+        // product, 0·∞ included), and the error is then the one `predict` would have given.
+        let j = k.saturating_sub(1);
+        let (x_pred, p_pred) = predict_raw(&self.x, &self.p, &model.a(j), &model.process_cov(j));
+        let (x, p, nis) = kalman_update(
+            &x_pred,
+            &p_pred,
+            &model.c(k),
+            &model.measurement_cov(k),
+            y,
+            self.form,
+        )
+        .map_err(|e| check_predicted(&x_pred, &p_pred).err().unwrap_or(e))?;
+        self.x = x;
+        self.p = p;
+        self.nis = nis;
+        Ok(())
     }
+}
+
+/// The time update on explicit arguments: `(A x, sym(A P Aᵀ + Q))`, unchecked.
+#[inline]
+fn predict_raw<T: Real, const NX: usize>(
+    x: &SVector<T, NX>,
+    p: &SMatrix<T, NX, NX>,
+    a: &SMatrix<T, NX, NX>,
+    q: &SMatrix<T, NX, NX>,
+) -> (SVector<T, NX>, SMatrix<T, NX, NX>) {
+    (a * x, symmetrize(&(a * p * a.transpose() + q)))
+}
+
+/// The errors of a non-finite prediction.
+fn check_predicted<T: Real, const NX: usize>(
+    x: &SVector<T, NX>,
+    p: &SMatrix<T, NX, NX>,
+) -> Result<()> {
+    check_finite(x, "predicted state")?;
+    check_finite(p, "predicted covariance")
 }
 
 /// The update equations on explicit arguments; returns `(x⁺, P⁺, NIS)`.
@@ -149,8 +184,10 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
 ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
     let pct = p * c.transpose();
     let s = symmetrize(&(c * pct + r));
-    // K = P Cᵀ S⁻¹ by a Cholesky solve; S not PD means R or P is broken.
-    let k = solve_spd_right(&pct, &s, "innovation covariance")?;
+    // K = P Cᵀ S⁻¹ by a Cholesky solve; S not PD means R or P is broken. The factor is
+    // computed once and reused for the NIS below (one factorisation per update).
+    let chol = cholesky(&s, "innovation covariance")?;
+    let k = chol.solve(&pct.transpose()).transpose();
     let nu = y - c * x;
     let x_new = x + k * nu;
     let i_kc = SMatrix::<T, NX, NX>::identity() - k * c;
@@ -161,9 +198,10 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
     let p_new = symmetrize(&p_new);
     check_finite(&x_new, "updated state")?;
     check_finite(&p_new, "updated covariance")?;
-    // NIS = νᵀ S⁻¹ ν; S⁻¹ν from the same kind of solve.
-    let s_inv_nu = crate::linalg::solve_spd(&s, &nu, "innovation covariance")?;
-    let nis = nu.dot(&s_inv_nu);
+    // NIS = νᵀ S⁻¹ ν with the same factor. A validated factor has pivots above the
+    // singularity floor, so a non-finite K or NIS can only come from non-finite inputs and is
+    // caught by the checks on x⁺ and the NIS.
+    let nis = nu.dot(&chol.solve(&nu));
     if !nis.finite() {
         return Err(Error::NonFinite { what: "innovation" });
     }
@@ -267,6 +305,55 @@ mod tests {
                 assert!((a.covariance()[(i, j)] - b.covariance()[(i, j)] as f64).abs() < 1e-5);
             }
         }
+    }
+
+    #[test]
+    fn fused_step_is_bit_identical_to_predict_then_update() {
+        let m = LinearModel::<f64, 3, 3, 2, 2>::new(
+            matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
+            SMatrix::identity(),
+            matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
+            SMatrix::identity(),
+            SMatrix::identity() * 0.3,
+            SMatrix::identity() * 0.2,
+        )
+        .unwrap();
+        let mut fused =
+            KalmanFilter::new(vector![5.0, 5.0, 5.0], SMatrix::identity() * 4.0).unwrap();
+        let mut split = fused;
+        for k in 1..100 {
+            let y = vector![(k as f64 * 0.7).sin() * 10.0, (k as f64 * 0.3).cos() * 5.0];
+            fused.step(&m, k, &y).unwrap();
+            split.predict(&m, k - 1).unwrap();
+            split.update(&m, k, &y).unwrap();
+            assert_eq!(fused, split, "k = {k}");
+        }
+    }
+
+    #[test]
+    fn fused_step_reports_a_non_finite_prediction_like_predict() {
+        // A = 1e200 is finite, but A P Aᵀ overflows to ∞: the step must fail with the
+        // prediction's error (not the innovation's) and keep its state.
+        let m = scalar_model(1e200, 0.5, 2.0);
+        let mut kf = KalmanFilter::new(vector![0.0], matrix![1.0]).unwrap();
+        let before = kf;
+        let want = Err(Error::NonFinite {
+            what: "predicted covariance",
+        });
+        assert_eq!(kf.step(&m, 1, &vector![1.0]), want);
+        assert_eq!(kf, before);
+        assert_eq!(kf.predict(&m, 0), want);
+        assert_eq!(kf, before);
+        let m = scalar_model(1e200, 1e-300, 2.0);
+        let mut kf = KalmanFilter::new(vector![1e200], matrix![1e-300]).unwrap();
+        let before = kf;
+        assert_eq!(
+            kf.step(&m, 1, &vector![1.0]),
+            Err(Error::NonFinite {
+                what: "predicted state"
+            })
+        );
+        assert_eq!(kf, before);
     }
 
     #[test]

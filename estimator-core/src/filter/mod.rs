@@ -6,3 +6,22 @@ pub mod kalman;
 
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::{CovarianceUpdate, KalmanFilter};
+
+pub mod cce;
+pub use cce::CrossCoupledEstimator;
+
+pub mod adf;
+pub use adf::AssumedDensityFilter;
+
+pub mod kf_io;
+pub use kf_io::KfIo;
+pub mod coupled_kf;
+pub mod fusion;
+pub mod nn_assumptions;
+pub mod nn_bound;
+pub mod nn_system;
+pub mod nn_tbcp;
+pub mod tobit;
+
+pub use fusion::TobitFusion;
+pub use tobit::TobitFilter;

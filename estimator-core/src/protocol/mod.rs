@@ -3,3 +3,9 @@
 //! eqs. 11-15), Tobit censoring (seed 004 eq. 2) and occlusion regions (seed 001 eqs. 2-3).
 //!
 //! Each lives in its own file, added by the issue that implements it.
+
+pub mod event_trigger;
+pub mod occlusion;
+pub mod shared_token_bucket;
+pub mod tobit;
+pub mod token_bucket;

@@ -18,7 +18,6 @@
 
 pub mod assemble;
 pub mod select;
-pub mod selftest;
 pub mod system;
 
 use crate::latency::{Latency, LatencySummary};
@@ -100,9 +99,17 @@ pub struct RunArgs {
     /// Lock memory with mlockall (best effort).
     #[arg(long)]
     pub mlock: bool,
-    /// Expected number of instants (sizes the trajectory recording; no effect on the loop).
-    #[arg(long, default_value_t = 10_000)]
-    pub record_capacity: u32,
+    /// Experiment seed the estimators are built for (as `eval --seed`; channel-sim's).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Run index the estimators are built for (channel-sim's `--run`).
+    #[arg(long, default_value_t = 0)]
+    pub run: u64,
+    /// Instants channel-sim publishes: the horizon the estimators are built for, and the
+    /// size of the preallocated trajectory recording (later instants are processed but not
+    /// recorded).
+    #[arg(long, default_value_t = channel_sim::publisher::DEFAULT_STEPS)]
+    pub steps: u32,
     /// Write estimates and truth per instant to this CSV file at the end.
     #[arg(long)]
     pub estimates_csv: Option<PathBuf>,
@@ -139,7 +146,9 @@ impl RunArgs {
             buffer: 256,
             cpu: None,
             mlock: false,
-            record_capacity: 10_000,
+            seed: 0,
+            run: 0,
+            steps: channel_sim::publisher::DEFAULT_STEPS,
             estimates_csv: None,
             slots_csv: None,
             json: None,
@@ -410,7 +419,7 @@ pub fn run_loop(
     let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
     let estimators = make()?;
     let n_est = estimators.len();
-    let record_cap = args.record_capacity as usize;
+    let record_cap = args.steps as usize;
     let mut st = State {
         names: estimators
             .iter()
@@ -783,7 +792,16 @@ impl Trajectories {
 /// Returns the process exit code.
 pub fn main(args: &RunArgs) -> Result<i32> {
     let (scenario, _) = select::scenario(&args.scenario, args.config.as_deref())?;
-    let make = select::estimators(scenario.as_ref(), &args.estimators)?;
+    let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
+    let make = select::estimators(
+        scenario.clone(),
+        &args.estimators,
+        select::Experiment {
+            seed: args.seed,
+            run: args.run,
+            horizon: args.steps,
+        },
+    )?;
     let (report, traj) = run_loop(
         args,
         scenario.nx(),

@@ -1,0 +1,134 @@
+//! Runs one benchmark kernel `n` times, for instruction counting under callgrind.
+//!
+//! `icount KERNEL N` does the setup (building the problem, converging the prior), then calls
+//! the kernel `N` times. Running it with `N` and `2N` under `valgrind --tool=callgrind` and
+//! taking `(I(2N) − I(N)) / N` cancels the setup and process start-up exactly, leaving the
+//! instructions of one step. `icount list` prints the kernel names.
+
+use benches::ads::AdsProblem;
+use benches::problems::{occlusion_3x2_f32, occlusion_3x2_f64, tracking_4x2_f32, tracking_4x2_f64};
+use std::hint::black_box;
+use std::process::ExitCode;
+
+type Kernel = Box<dyn Fn(u64) -> u64>;
+
+/// Repeats `f` `n` times; counts the successful steps so nothing is optimised away.
+fn repeat<R, E>(f: impl Fn() -> Result<R, E> + 'static) -> Kernel {
+    Box::new(move |n| {
+        let mut ok = 0;
+        for _ in 0..n {
+            if black_box(f()).is_ok() {
+                ok += 1;
+            }
+        }
+        ok
+    })
+}
+
+fn kernels() -> Vec<(&'static str, Kernel)> {
+    let p64 = occlusion_3x2_f64();
+    let p32 = occlusion_3x2_f32();
+    let t64 = tracking_4x2_f64();
+    let t32 = tracking_4x2_f32();
+    let a64 = AdsProblem::from_core(&p64);
+    let a32 = AdsProblem::from_core(&t32);
+    // Profiling parts of the 3x2 f64 step (not a product API): where the instructions go.
+    let pp = p64;
+    let c = pp.model.c;
+    let s = c * pp.prior.covariance() * c.transpose() + nalgebra::SMatrix::<f64, 2, 2>::identity();
+    let s = (s + s.transpose()) * 0.5;
+    let m3 = *pp.prior.covariance();
+    vec![
+        (
+            "parts/validated_cholesky_2x2",
+            repeat(move || {
+                estimator_core::linalg::cholesky(black_box(&s), "S").map(|c| c.l_dirty()[(0, 0)])
+            }),
+        ),
+        (
+            "parts/nalgebra_cholesky_2x2",
+            repeat(move || {
+                black_box(s)
+                    .cholesky()
+                    .ok_or(())
+                    .map(|c| c.l_dirty()[(0, 0)])
+            }),
+        ),
+        (
+            "parts/asymmetry_3x3",
+            repeat(move || Ok::<f64, ()>(estimator_core::linalg::asymmetry(black_box(&m3)))),
+        ),
+        (
+            "parts/predict",
+            repeat(move || {
+                let mut f = black_box(&pp).prior;
+                f.predict(&pp.model, 1).map(|_| f)
+            }),
+        ),
+        (
+            "parts/update",
+            repeat(move || {
+                let mut f = black_box(&pp).prior;
+                f.update(&pp.model, 1, &pp.y).map(|_| f)
+            }),
+        ),
+        ("kf/3x2_f64", repeat(move || black_box(&p64).kf_step())),
+        ("adskalman/3x2_f64", repeat(move || black_box(&a64).step())),
+        ("kf/4x2_f32", repeat(move || black_box(&t32).kf_step())),
+        ("adskalman/4x2_f32", repeat(move || black_box(&a32).step())),
+        ("kf/3x2_f32", repeat(move || black_box(&p32).kf_step())),
+        ("kf/4x2_f64", repeat(move || black_box(&t64).kf_step())),
+        (
+            "ikf_arrival/3x2_f64",
+            repeat(move || black_box(&p64).ikf_arrival_step()),
+        ),
+        (
+            "ikf_dropout/3x2_f64",
+            repeat(move || black_box(&p64).ikf_dropout_step()),
+        ),
+        (
+            "ikf_arrival/4x2_f32",
+            repeat(move || black_box(&t32).ikf_arrival_step()),
+        ),
+        (
+            "ikf_dropout/4x2_f32",
+            repeat(move || black_box(&t32).ikf_dropout_step()),
+        ),
+    ]
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().collect();
+    let ks = kernels();
+    match args.get(1).map(String::as_str) {
+        Some("list") => {
+            for (name, _) in &ks {
+                println!("{name}");
+            }
+            ExitCode::SUCCESS
+        }
+        Some(name) => {
+            let Some((_, k)) = ks.iter().find(|(n, _)| *n == name) else {
+                eprintln!("icount: unknown kernel {name:?}; `icount list` names them");
+                return ExitCode::from(2);
+            };
+            let n: u64 = match args.get(2).map(|s| s.parse()) {
+                Some(Ok(n)) => n,
+                _ => {
+                    eprintln!("usage: icount KERNEL N");
+                    return ExitCode::from(2);
+                }
+            };
+            let ok = k(n);
+            if ok != n {
+                eprintln!("icount: {name}: {} of {n} steps failed", n - ok);
+                return ExitCode::FAILURE;
+            }
+            ExitCode::SUCCESS
+        }
+        None => {
+            eprintln!("usage: icount KERNEL N | icount list");
+            ExitCode::from(2)
+        }
+    }
+}

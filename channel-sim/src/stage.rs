@@ -1,0 +1,42 @@
+//! Channel stages: what happens to the sensors' measurements between the plant and the
+//! estimator.
+//!
+//! A scenario holds a list of [`StageSpec`]s (configuration). Each run builds a fresh,
+//! stateful [`Stage`] from every spec and applies them in list order to all nodes'
+//! observations of an instant at once, so that resources shared by nodes (a token bucket
+//! shared by sensors, seed 004 eqs. 16-18) fit the same interface as per-node effects.
+//!
+//! Before the first stage every observation holds the raw measurement z_{m,k} and
+//! `delivered == true`. A stage may censor `y`, drop the packet ([`drop_packet`]) and set
+//! `FLAG_*` bits; it never resurrects a dropped packet. Stages should draw the same random
+//! numbers whatever happened upstream, so that runs stay comparable across channel settings.
+
+use std::any::Any;
+use std::fmt::Debug;
+
+use crate::plant::SimRng;
+use crate::sim::{Observation, MAX_NY};
+
+/// Configuration of one channel stage; builds the per-run state.
+pub trait StageSpec: Send + Sync + Debug {
+    /// Short stable name (`bernoulli`, `gilbert-elliott`, `occlusion`, …).
+    fn name(&self) -> &'static str;
+    /// A fresh stage for one run over `nodes` sensor nodes.
+    fn build(&self, nodes: usize) -> Box<dyn Stage>;
+    /// For downcasting to the concrete spec (estimators read channel parameters this way).
+    fn as_any(&self) -> &dyn Any;
+}
+
+/// A channel stage's state within one run.
+pub trait Stage: Send {
+    /// Acts on every node's observation of instant `k`; `truth` is x_k (state-dependent
+    /// channels such as occlusion need it).
+    fn apply(&mut self, k: u32, truth: &[f64], obs: &mut [Observation], rng: &mut SimRng);
+}
+
+/// Marks `obs` as not delivered (measurement cleared) and adds `flag`.
+pub fn drop_packet(obs: &mut Observation, flag: u32) {
+    obs.delivered = false;
+    obs.y = [0.0; MAX_NY];
+    obs.flags |= flag;
+}

@@ -1,0 +1,507 @@
+//! The cross-coupled estimator (CCE) for state-dependent packet dropouts (seed 001,
+//! Section III, Algorithms 1 and 2).
+//!
+//! Each instant `k` predicts with eq. (11), then
+//!
+//! * **arrival** (`y_k = z_k`): label `ĥ_k = 0` (eq. 17) and the Kalman update (18);
+//! * **dropout** (`y_k = φ`): the region-label MAP estimate (eq. 17, argmax over regions
+//!   `1..=S`) from the Gaussian-sum weights `ω_{ik}^s` of eq. (15), and the state update of
+//!   Algorithm 2: the Gaussian-sum posterior (14)-(15) of the chosen region collapsed to one
+//!   Gaussian by moment matching (eq. 21).
+//!
+//! Implementation notes (same mathematics, better numerics):
+//! * `Θ_k` and `θ_{ik}^s` of (15) are computed in gain form: with `S_i = E P⁻ Eᵀ + Σ_i` and
+//!   `K_i = P⁻ Eᵀ S_i⁻¹` (a Cholesky solve), `θ^s = x̂⁻ + K_i (ũ^s − E x̂⁻)` and
+//!   `Θ = (I − K_i E) P⁻ (I − K_i E)ᵀ + K_i Σ_i K_iᵀ` (Joseph form). This is (15) by the matrix
+//!   inversion lemma and needs no inverse of `P⁻`.
+//! * The weights `ω_{ik}^s` are kept as logarithms and normalised by log-sum-exp, so a
+//!   prediction thousands of standard deviations from every region still yields a proper
+//!   posterior instead of `0/0`.
+//! * (21) becomes `x̂ = x̂⁻ + K_i (ū − E x̂⁻)` and `P = Θ + K_i C_u K_iᵀ`, with `ū` and `C_u` the
+//!   α-weighted mean and covariance of the component means `ũ^s`.
+//! * `Σ_i = V_i + Ψ` with `V_i = (r_i σ̂)² I` from the [`GaussSum`] table; with equal radii (as
+//!   in the paper) every region shares one `Σ_k`, as eq. (13) writes.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::filter::kalman::{kalman_update, CovarianceUpdate};
+use crate::gauss::{log_sum_exp, LN_SQRT_2PI};
+use crate::gsum::GaussSum;
+use crate::linalg::{check_finite, check_spd, cholesky, solve_spd_right, symmetrize};
+use crate::model::LinearSystem;
+use crate::protocol::occlusion::Occlusion;
+use crate::{Error, Real, Result};
+
+/// Cross-coupled region-label / state estimator (seed 001) on `NX` states, with `S` occlusion
+/// regions in an `NE`-dimensional space, each approximated by `N` Gaussians.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CrossCoupledEstimator<
+    T: Real,
+    const NX: usize,
+    const NE: usize,
+    const S: usize,
+    const N: usize,
+> {
+    x: SVector<T, NX>,
+    p: SMatrix<T, NX, NX>,
+    label: usize,
+    occ: Occlusion<T, NX, NE, S>,
+    /// `ũ_i^s`: component means scaled onto each region.
+    means: [[SVector<T, NE>; N]; S],
+    /// `Σ_i = V_i + Ψ`.
+    sigma: [SMatrix<T, NE, NE>; S],
+    /// `ln |R_i|`.
+    ln_vol: [T; S],
+    /// `ln Σ_s ω_{ik}^s` of the last dropout (eq. 16 up to the common `1/N`).
+    region_log_weights: [T; S],
+    form: CovarianceUpdate,
+}
+
+impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
+    CrossCoupledEstimator<T, NX, NE, S, N>
+{
+    /// Starts from `x̂_0 = x0`, `P_0 = p0` with the occlusion model and the Gaussian-sum table
+    /// (scaled here, once, onto every region).
+    pub fn new(
+        x0: SVector<T, NX>,
+        p0: SMatrix<T, NX, NX>,
+        occ: Occlusion<T, NX, NE, S>,
+        gsum: &GaussSum<T, NE, N>,
+    ) -> Result<Self> {
+        check_finite(&x0, "x0")?;
+        check_spd(&p0, "P0")?;
+        let mut means = [[SVector::<T, NE>::zeros(); N]; S];
+        let mut sigma = [SMatrix::<T, NE, NE>::zeros(); S];
+        let mut ln_vol = [T::zero(); S];
+        for i in 0..S {
+            let (c, r) = (*occ.regions.centre(i), occ.regions.radius(i));
+            for s in 0..N {
+                means[i][s] = c + gsum.means()[s] * r;
+            }
+            let sd = r * gsum.sigma();
+            sigma[i] = symmetrize(&(SMatrix::<T, NE, NE>::identity() * (sd * sd) + occ.psi));
+            ln_vol[i] = occ.regions.volume(i).ln();
+        }
+        Ok(Self {
+            x: x0,
+            p: symmetrize(&p0),
+            label: 0,
+            occ,
+            means,
+            sigma,
+            ln_vol,
+            region_log_weights: [T::zero(); S],
+            form: CovarianceUpdate::Joseph,
+        })
+    }
+
+    /// Selects the covariance form of the arrival update (Joseph by default).
+    #[must_use]
+    pub fn with_covariance_update(mut self, form: CovarianceUpdate) -> Self {
+        self.form = form;
+        self
+    }
+
+    /// Current estimate `x̂_k`.
+    #[inline]
+    pub fn state(&self) -> &SVector<T, NX> {
+        &self.x
+    }
+
+    /// Current covariance `P_k`.
+    #[inline]
+    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
+        &self.p
+    }
+
+    /// Last region-label estimate `ĥ_k` (0 on arrival, `1..=S` on a dropout).
+    #[inline]
+    pub fn label(&self) -> usize {
+        self.label
+    }
+
+    /// `ln Σ_s ω_{ik}^s` for every region at the last dropout: the label's log-score
+    /// (eq. 16 times `N`).
+    #[inline]
+    pub fn region_log_weights(&self) -> &[T; S] {
+        &self.region_log_weights
+    }
+
+    /// One instant `k ≥ 1`: predict from `k − 1` (eq. 11), then Algorithm 1 and 2 with
+    /// `y = Some(z_k)` on arrival or `None` on a dropout. Returns the label `ĥ_k`.
+    /// On error nothing changes.
+    pub fn step<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: Option<&SVector<T, NY>>,
+    ) -> Result<usize> {
+        if let Some(y) = y {
+            check_finite(y, "measurement")?;
+        }
+        let km1 = k.saturating_sub(1);
+        let a = model.a(km1);
+        let xp = a * self.x;
+        let pp = symmetrize(&(a * self.p * a.transpose() + model.process_cov(km1)));
+        check_finite(&xp, "predicted state")?;
+        check_finite(&pp, "predicted covariance")?;
+        match y {
+            Some(y) => {
+                let (x, p, _) = kalman_update(
+                    &xp,
+                    &pp,
+                    &model.c(k),
+                    &model.measurement_cov(k),
+                    y,
+                    self.form,
+                )?;
+                self.x = x;
+                self.p = p;
+                self.label = 0;
+            }
+            None => {
+                let (x, p, label, lw) = self.dropout_update(&xp, &pp)?;
+                self.x = x;
+                self.p = p;
+                self.label = label;
+                self.region_log_weights = lw;
+            }
+        }
+        Ok(self.label)
+    }
+
+    /// Algorithm 1 (dropout branch) and Algorithm 2 steps 5-6 on the prediction.
+    #[allow(clippy::type_complexity)]
+    fn dropout_update(
+        &self,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, usize, [T; S])> {
+        let e = &self.occ.e;
+        let pet = pp * e.transpose();
+        let epe = e * pet;
+        let ex = e * xp;
+        let half = T::lit(0.5);
+        let mut lnw = [[T::zero(); N]; S];
+        let mut lw = [T::zero(); S];
+        let mut best = 0usize;
+        for i in 0..S {
+            // ln ω_{ik}^s = ln|R_i| + ln N(ũ^s; E x̂⁻, E P⁻ Eᵀ + Σ_i)   (eq. 15)
+            let chol = cholesky(&symmetrize(&(epe + self.sigma[i])), "E P Eᵀ + Σ")?;
+            let l = chol.l_dirty();
+            let mut half_ln_det = T::zero();
+            for j in 0..NE {
+                half_ln_det += l[(j, j)].ln();
+            }
+            let c0 = self.ln_vol[i] - T::lit(NE as f64 * LN_SQRT_2PI) - half_ln_det;
+            for s in 0..N {
+                let d = self.means[i][s] - ex;
+                lnw[i][s] = c0 - half * d.dot(&chol.solve(&d));
+            }
+            lw[i] = log_sum_exp(&lnw[i]);
+            if !lw[i].finite() {
+                return Err(Error::Numerical {
+                    what: "region weight is not finite",
+                });
+            }
+            // eq. (17): argmax over regions 1..=S (first on ties).
+            if lw[i] > lw[best] {
+                best = i;
+            }
+        }
+        let i = best;
+        let s_i = symmetrize(&(epe + self.sigma[i]));
+        let gain = solve_spd_right(&pet, &s_i, "E P Eᵀ + Σ")?;
+        // α-weighted mean and covariance of the component means (eq. 21).
+        let mut ubar = SVector::<T, NE>::zeros();
+        let mut alpha = [T::zero(); N];
+        for s in 0..N {
+            alpha[s] = (lnw[i][s] - lw[i]).exp();
+            ubar += self.means[i][s] * alpha[s];
+        }
+        let mut cu = SMatrix::<T, NE, NE>::zeros();
+        for s in 0..N {
+            let du = self.means[i][s] - ubar;
+            cu += du * du.transpose() * alpha[s];
+        }
+        let x = xp + gain * (ubar - ex);
+        let i_ke = SMatrix::<T, NX, NX>::identity() - gain * e;
+        let theta = i_ke * pp * i_ke.transpose() + gain * self.sigma[i] * gain.transpose();
+        let p = symmetrize(&(theta + gain * cu * gain.transpose()));
+        check_finite(&x, "updated state")?;
+        check_finite(&p, "updated covariance")?;
+        Ok((x, p, i + 1, lw))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::LinearModel;
+    use crate::protocol::occlusion::OcclusionRegions;
+    use nalgebra::{matrix, vector};
+
+    type Cce = CrossCoupledEstimator<f64, 3, 1, 4, 15>;
+
+    fn paper_model() -> LinearModel<f64, 3, 3, 2, 2> {
+        LinearModel::new(
+            matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
+            SMatrix::identity(),
+            matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
+            SMatrix::identity(),
+            SMatrix::identity() * 0.3,
+            SMatrix::identity() * 0.2,
+        )
+        .unwrap()
+    }
+
+    fn paper_occlusion() -> Occlusion<f64, 3, 1, 4> {
+        Occlusion::new(
+            matrix![1.0, 0.0, 0.0],
+            matrix![0.1],
+            OcclusionRegions::new(
+                [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
+                [5.0; 4],
+            )
+            .unwrap(),
+        )
+        .unwrap()
+    }
+
+    fn cce(x0: SVector<f64, 3>, p0: SMatrix<f64, 3, 3>) -> Cce {
+        Cce::new(x0, p0, paper_occlusion(), &GaussSum::uniform().unwrap()).unwrap()
+    }
+
+    /// Seed 001 eqs. (11), (15), (17), (21) written out literally, with explicit inverses,
+    /// as the paper prints them (no log domain, no gain form).
+    fn literal(
+        x: SVector<f64, 3>,
+        p: SMatrix<f64, 3, 3>,
+        m: &LinearModel<f64, 3, 3, 2, 2>,
+        occ: &Occlusion<f64, 3, 1, 4>,
+        g: &GaussSum<f64, 1, 15>,
+    ) -> (SVector<f64, 3>, SMatrix<f64, 3, 3>, usize) {
+        let xp = m.a * x;
+        let pp = m.a * p * m.a.transpose() + m.b * m.q * m.b.transpose();
+        let e = occ.e;
+        let r = 5.0;
+        let v = (r * g.sigma()).powi(2);
+        let sig = matrix![v] + occ.psi;
+        let pp_inv = pp.try_inverse().unwrap();
+        let sig_inv = sig.try_inverse().unwrap();
+        let theta_cov = (pp_inv + e.transpose() * sig_inv * e)
+            .try_inverse()
+            .unwrap();
+        let mut best = (0usize, -1.0f64);
+        let mut all = [[(0.0f64, SVector::<f64, 3>::zeros()); 15]; 4];
+        for i in 0..4 {
+            let zeta = 20.0 * (i + 1) as f64;
+            let mut sum = 0.0;
+            for s in 0..15 {
+                let u = zeta - r + 2.0 * r * s as f64 / 14.0;
+                let cov = (e * pp * e.transpose() + sig)[(0, 0)];
+                let d = u - (e * xp)[0];
+                let w = 2.0 * r * (-0.5 * d * d / cov).exp()
+                    / (2.0 * core::f64::consts::PI * cov).sqrt();
+                let th = theta_cov * (pp_inv * xp + e.transpose() * sig_inv * vector![u]);
+                all[i][s] = (w, th);
+                sum += w;
+            }
+            if sum > best.1 {
+                best = (i, sum);
+            }
+        }
+        let (i, tot) = best;
+        let mut xh = SVector::<f64, 3>::zeros();
+        for s in 0..15 {
+            xh += all[i][s].1 * (all[i][s].0 / tot);
+        }
+        let mut ph = SMatrix::<f64, 3, 3>::zeros();
+        for s in 0..15 {
+            let d = xh - all[i][s].1;
+            ph += (theta_cov + d * d.transpose()) * (all[i][s].0 / tot);
+        }
+        (xh, ph, i + 1)
+    }
+
+    #[test]
+    fn dropout_step_matches_literal_equations() {
+        let m = paper_model();
+        let occ = paper_occlusion();
+        let g = GaussSum::<f64, 1, 15>::uniform().unwrap();
+        let p0 = matrix![1.2, 0.3, -0.1; 0.3, 0.9, 0.2; -0.1, 0.2, 0.7];
+        // Predictions near region 1 edge, inside region 2, between 3 and 4.
+        for x0 in [
+            vector![14.5, 2.0, 1.0],
+            vector![38.0, 3.0, -2.0],
+            vector![68.5, 1.0, 0.5],
+        ] {
+            let mut f = cce(x0, p0);
+            let label = f.step::<2, _>(&m, 1, None).unwrap();
+            let (xl, pl, hl) = literal(x0, p0, &m, &occ, &g);
+            assert_eq!(label, hl);
+            for j in 0..3 {
+                assert!((f.state()[j] - xl[j]).abs() <= 1e-12 * xl[j].abs().max(1.0));
+                for l in 0..3 {
+                    assert!(
+                        (f.covariance()[(j, l)] - pl[(j, l)]).abs() <= 1e-12,
+                        "P[{j},{l}] {} vs {}",
+                        f.covariance()[(j, l)],
+                        pl[(j, l)]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn arrival_step_is_the_kalman_update_and_label_zero() {
+        let m = paper_model();
+        let mut f = cce(vector![5.0, 5.0, 5.0], SMatrix::identity() * 4.0);
+        let mut kf =
+            crate::filter::KalmanFilter::new(vector![5.0, 5.0, 5.0], SMatrix::identity() * 4.0)
+                .unwrap();
+        let y = vector![30.0, 10.0];
+        assert_eq!(f.step(&m, 1, Some(&y)).unwrap(), 0);
+        kf.step(&m, 1, &y).unwrap();
+        assert_eq!(f.state(), kf.state());
+        assert_eq!(f.covariance(), kf.covariance());
+    }
+
+    #[test]
+    fn label_is_correct_deep_inside_a_region() {
+        let m = paper_model();
+        for (centre, want) in [(20.0, 1), (40.0, 2), (60.0, 3), (80.0, 4)] {
+            // Prediction A x0 has first component ≈ centre; small covariance.
+            let x0 = vector![(centre - 0.1 * 0.5) / 1.01, 0.5, 0.0];
+            let mut f = cce(x0, SMatrix::identity() * 0.05);
+            assert_eq!(f.step::<2, _>(&m, 1, None).unwrap(), want);
+            assert!((f.state()[0] - centre).abs() < 1.0);
+        }
+    }
+
+    #[test]
+    fn log_domain_weights_survive_a_prediction_far_from_every_region() {
+        // P⁻₁₁ ≈ 0.31 + ..., so 1000 σ ≈ 600 away from the nearest region (80 + 5).
+        let m = paper_model();
+        for far in [-600.0, 700.0] {
+            let mut f = cce(vector![far, 0.0, 0.0], SMatrix::identity() * 0.01);
+            let sd = (f.occ.e
+                * (m.a * f.p * m.a.transpose() + m.b * m.q * m.b.transpose())
+                * f.occ.e.transpose())[(0, 0)]
+                .sqrt();
+            let dist = if far < 0.0 {
+                15.0 - far * 1.01
+            } else {
+                far * 1.01 - 85.0
+            };
+            assert!(dist / sd > 1000.0);
+            let h = f.step::<2, _>(&m, 1, None).unwrap();
+            // The nearest region wins and the estimate moves onto it.
+            assert_eq!(h, if far < 0.0 { 1 } else { 4 });
+            assert!(f.state().iter().all(|v| v.is_finite()));
+            assert!(f.covariance().iter().all(|v| v.is_finite()));
+            // All the weight sits on the nearest component mean (the region's edge), and the
+            // state moves toward it by the scalar gain P⁻₁₁ / (P⁻₁₁ + V + Ψ) — the paper's
+            // Gaussian-sum region is "soft", so it does not jump all the way.
+            let edge = if far < 0.0 { 15.0 } else { 85.0 };
+            let pp = m.a * SMatrix::<f64, 3, 3>::identity() * 0.01 * m.a.transpose()
+                + m.b * m.q * m.b.transpose();
+            let xp = far * 1.01;
+            let gain = pp[(0, 0)]
+                / (pp[(0, 0)]
+                    + (5.0 * GaussSum::<f64, 1, 15>::uniform().unwrap().sigma()).powi(2)
+                    + 0.1);
+            let want = xp + gain * (edge - xp);
+            assert!(
+                (f.state()[0] - want).abs() < 1e-9 * want.abs(),
+                "{} vs {want}",
+                f.state()[0]
+            );
+            // The naive linear-domain weights are all exactly zero here.
+            assert!(f.region_log_weights().iter().all(|w| w.exp() == 0.0));
+        }
+    }
+
+    #[test]
+    fn nan_input_is_an_error_and_state_unchanged() {
+        let m = paper_model();
+        let mut f = cce(vector![5.0, 5.0, 5.0], SMatrix::identity() * 4.0);
+        f.step::<2, _>(&m, 1, None).unwrap();
+        let before = f;
+        assert_eq!(
+            f.step(&m, 2, Some(&vector![f64::NAN, 1.0])),
+            Err(Error::NonFinite {
+                what: "measurement"
+            })
+        );
+        assert_eq!(f, before);
+        /// A time-varying model that goes bad: A has a NaN.
+        struct Bad(LinearModel<f64, 3, 3, 2, 2>);
+        impl LinearSystem<f64, 3, 2> for Bad {
+            fn a(&self, _k: usize) -> SMatrix<f64, 3, 3> {
+                matrix![f64::NAN, 0.0, 0.0; 0.0, 1.0, 0.0; 0.0, 0.0, 1.0]
+            }
+            fn c(&self, k: usize) -> SMatrix<f64, 2, 3> {
+                self.0.c(k)
+            }
+            fn process_cov(&self, k: usize) -> SMatrix<f64, 3, 3> {
+                self.0.process_cov(k)
+            }
+            fn measurement_cov(&self, k: usize) -> SMatrix<f64, 2, 2> {
+                self.0.measurement_cov(k)
+            }
+        }
+        assert!(f.step(&Bad(m), 2, None).is_err());
+        assert_eq!(f, before);
+        assert!(f.step(&Bad(m), 2, Some(&vector![1.0, 1.0])).is_err());
+        assert_eq!(f, before);
+        assert!(Cce::new(
+            vector![f64::NAN, 0.0, 0.0],
+            SMatrix::identity(),
+            paper_occlusion(),
+            &GaussSum::uniform().unwrap()
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn f32_runs_and_tracks_f64() {
+        let m = paper_model();
+        let m32 = m.cast::<f32>().unwrap();
+        let occ = paper_occlusion();
+        let occ32 = Occlusion::<f32, 3, 1, 4>::new(
+            occ.e.map(|v| v as f32),
+            occ.psi.map(|v| v as f32),
+            OcclusionRegions::new(
+                [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
+                [5.0; 4],
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let mut a = cce(vector![18.0, 1.0, 0.5], SMatrix::identity());
+        let mut b = CrossCoupledEstimator::<f32, 3, 1, 4, 15>::new(
+            vector![18.0, 1.0, 0.5],
+            SMatrix::identity(),
+            occ32,
+            &GaussSum::uniform().unwrap(),
+        )
+        .unwrap();
+        for k in 1..=5 {
+            let y = vector![40.0 + k as f64, 20.0];
+            let y32 = y.map(|v| v as f32);
+            let (ya, yb) = if k % 2 == 0 {
+                (Some(&y), Some(&y32))
+            } else {
+                (None, None)
+            };
+            assert_eq!(a.step(&m, k, ya).unwrap(), b.step(&m32, k, yb).unwrap());
+        }
+        for j in 0..3 {
+            assert!(
+                (a.state()[j] - b.state()[j] as f64).abs() < 1e-3 * a.state()[j].abs().max(1.0)
+            );
+        }
+    }
+}

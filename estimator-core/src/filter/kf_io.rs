@@ -1,0 +1,223 @@
+//! `kf-io`: a linear MMSE filter that treats packet arrival as a Bernoulli variable whose
+//! probability comes from the prior — the baseline the seed 001 paper compares against
+//! (its ref. [37], Thapliyal et al. 2019), which it cites without equations. The construction
+//! is fixed in DESIGN.md ("Seed 001 … KF-IO"):
+//!
+//! ```text
+//! p_k = P(u_k in no region)                    under u_k ~ N(E x̂⁻, E P⁻ Eᵀ + Ψ)
+//! ỹ_k = γ_k z_k                                (0 on a dropout)
+//! X   = P⁻ + x̂⁻ x̂⁻ᵀ
+//! S_y = p² C P⁻ Cᵀ + p(1 − p) C X Cᵀ + p DRDᵀ
+//! K   = p P⁻ Cᵀ S_y⁻¹
+//! x̂   = x̂⁻ + K (ỹ − p C x̂⁻)
+//! P   = P⁻ − K S_y Kᵀ
+//! ```
+//!
+//! Computed with `S' = S_y / p = p C P⁻ Cᵀ + (1 − p) C X Cᵀ + DRDᵀ` (positive definite for
+//! every `p ∈ [0, 1]`), so `K = P⁻ Cᵀ S'⁻¹` and `P = P⁻ − p K S' Kᵀ`: identical for `p > 0`
+//! and well defined as `p → 0`. `p_k` is the sum of the probabilities of the gaps between
+//! the (sorted, disjoint) intervals, each from `gauss::ln_interval_prob`, so it keeps its
+//! digits when it is tiny. `n_e = 1` (intervals).
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::gauss::{ln_interval_prob, log_sum_exp};
+use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
+use crate::model::LinearSystem;
+use crate::protocol::occlusion::Occlusion;
+use crate::{Error, Real, Result};
+
+/// The KF-IO-style linear MMSE filter on `NX` states with `S` occlusion intervals.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KfIo<T: Real, const NX: usize, const S: usize> {
+    x: SVector<T, NX>,
+    p: SMatrix<T, NX, NX>,
+    occ: Occlusion<T, NX, 1, S>,
+    sorted: [(T, T, usize); S],
+    arrival_prob: T,
+}
+
+impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
+    /// Starts from `x̂_0 = x0`, `P_0 = p0`.
+    pub fn new(
+        x0: SVector<T, NX>,
+        p0: SMatrix<T, NX, NX>,
+        occ: Occlusion<T, NX, 1, S>,
+    ) -> Result<Self> {
+        check_finite(&x0, "x0")?;
+        check_spd(&p0, "P0")?;
+        Ok(Self {
+            x: x0,
+            p: symmetrize(&p0),
+            sorted: occ.regions.sorted_intervals(),
+            occ,
+            arrival_prob: T::one(),
+        })
+    }
+
+    /// Current estimate.
+    #[inline]
+    pub fn state(&self) -> &SVector<T, NX> {
+        &self.x
+    }
+
+    /// Current covariance (the filter's own, unconditional-in-γ recursion).
+    #[inline]
+    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
+        &self.p
+    }
+
+    /// `p_k` used by the last step.
+    #[inline]
+    pub fn arrival_prob(&self) -> T {
+        self.arrival_prob
+    }
+
+    /// `P(u in no region)` for `u ~ N(m, s²)`.
+    fn prob_outside(&self, m: T, s: T) -> T {
+        let inf = T::one() / T::zero();
+        let mut lp = [T::zero(); 65];
+        let n = (S + 1).min(lp.len());
+        for (j, slot) in lp.iter_mut().enumerate().take(n) {
+            let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
+            let hi = if j == S { inf } else { self.sorted[j].0 };
+            *slot = ln_interval_prob((lo - m) / s, (hi - m) / s);
+        }
+        log_sum_exp(&lp[..n]).exp().min(T::one())
+    }
+
+    /// One instant `k ≥ 1`: predict, then the linear MMSE update with `ỹ = z_k` (arrival) or
+    /// `ỹ = 0` (dropout). On error nothing changes.
+    pub fn step<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: Option<&SVector<T, NY>>,
+    ) -> Result<()> {
+        if S > 64 {
+            return Err(Error::InvalidConfig {
+                field: "S",
+                reason: "kf-io supports at most 64 regions",
+            });
+        }
+        let y_tilde = match y {
+            Some(y) => {
+                check_finite(y, "measurement")?;
+                *y
+            }
+            None => SVector::<T, NY>::zeros(),
+        };
+        let km1 = k.saturating_sub(1);
+        let a = model.a(km1);
+        let xp = a * self.x;
+        let pp = symmetrize(&(a * self.p * a.transpose() + model.process_cov(km1)));
+        check_finite(&xp, "predicted state")?;
+        check_finite(&pp, "predicted covariance")?;
+        let e = &self.occ.e;
+        let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
+        let p = self.prob_outside((e * xp)[0], s2.sqrt());
+        if !p.finite() {
+            return Err(Error::Numerical {
+                what: "arrival probability",
+            });
+        }
+        let c = model.c(k);
+        let r = model.measurement_cov(k);
+        let big_x = pp + xp * xp.transpose();
+        let s_prime = symmetrize(
+            &(c * pp * c.transpose() * p + c * big_x * c.transpose() * (T::one() - p) + r),
+        );
+        let pct = pp * c.transpose();
+        let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
+        let x = xp + gain * (y_tilde - c * xp * p);
+        let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
+        check_finite(&x, "updated state")?;
+        check_finite(&p_new, "updated covariance")?;
+        self.x = x;
+        self.p = p_new;
+        self.arrival_prob = p;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::KalmanFilter;
+    use crate::model::LinearModel;
+    use crate::protocol::occlusion::OcclusionRegions;
+    use nalgebra::{matrix, vector};
+
+    fn setup() -> (LinearModel<f64, 3, 3, 2, 2>, Occlusion<f64, 3, 1, 4>) {
+        (
+            LinearModel::new(
+                matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
+                SMatrix::identity(),
+                matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
+                SMatrix::identity(),
+                SMatrix::identity() * 0.3,
+                SMatrix::identity() * 0.2,
+            )
+            .unwrap(),
+            Occlusion::new(
+                matrix![1.0, 0.0, 0.0],
+                matrix![0.1],
+                OcclusionRegions::new(
+                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
+                    [5.0; 4],
+                )
+                .unwrap(),
+            )
+            .unwrap(),
+        )
+    }
+
+    /// DESIGN.md's equations written literally (S_y, its inverse, K = p P Cᵀ S_y⁻¹).
+    #[test]
+    fn matches_the_design_equations_literally() {
+        let (m, occ) = setup();
+        let x0 = vector![22.0, 1.0, 2.0];
+        let p0 = matrix![3.0, 0.2, 0.0; 0.2, 1.0, 0.1; 0.0, 0.1, 2.0];
+        for y in [Some(vector![70.0, 25.0]), None] {
+            let mut f = KfIo::new(x0, p0, occ).unwrap();
+            f.step(&m, 1, y.as_ref()).unwrap();
+            let xp = m.a * x0;
+            let pp = m.a * p0 * m.a.transpose() + m.b * m.q * m.b.transpose();
+            let s = (pp[(0, 0)] + 0.1f64).sqrt();
+            // p = 1 − Σ_i [Φ(b_i) − Φ(a_i)], Φ via erfc here.
+            let phi = |t: f64| 0.5 * libm::erfc(-t / core::f64::consts::SQRT_2);
+            let mut inside = 0.0;
+            for c in [20.0, 40.0, 60.0, 80.0] {
+                inside += phi((c + 5.0 - xp[0]) / s) - phi((c - 5.0 - xp[0]) / s);
+            }
+            let p = 1.0 - inside;
+            assert!((f.arrival_prob() - p).abs() < 1e-12);
+            let c = m.c;
+            let x_big = pp + xp * xp.transpose();
+            let sy = c * pp * c.transpose() * (p * p)
+                + c * x_big * c.transpose() * (p * (1.0 - p))
+                + m.d * m.r * m.d.transpose() * p;
+            let k = pp * c.transpose() * p * sy.try_inverse().unwrap();
+            let yt = y.unwrap_or_else(SVector::zeros);
+            let want_x = xp + k * (yt - c * xp * p);
+            let want_p = pp - k * sy * k.transpose();
+            assert!((f.state() - want_x).amax() < 1e-10 * want_x.amax().max(1.0));
+            assert!((f.covariance() - want_p).amax() < 1e-10 * want_p.amax().max(1.0));
+        }
+    }
+
+    #[test]
+    fn far_from_regions_it_is_the_kalman_filter() {
+        let (m, occ) = setup();
+        let mut f = KfIo::new(vector![-50.0, 0.0, 0.0], SMatrix::identity(), occ).unwrap();
+        let mut kf = KalmanFilter::new(vector![-50.0, 0.0, 0.0], SMatrix::identity()).unwrap();
+        let y = vector![-100.0, -50.0];
+        f.step(&m, 1, Some(&y)).unwrap();
+        kf.step(&m, 1, &y).unwrap();
+        assert_eq!(f.arrival_prob(), 1.0);
+        assert!((f.state() - kf.state()).amax() < 1e-9);
+        let before = f;
+        assert!(f.step(&m, 2, Some(&vector![f64::NAN, 0.0])).is_err());
+        assert_eq!(f, before);
+    }
+}

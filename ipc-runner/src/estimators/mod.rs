@@ -1,0 +1,60 @@
+//! The estimator registry: which estimators apply to a scenario, built fresh for every run.
+//!
+//! Each estimator family is one file with a [`Factory`]; a family returns an empty list for
+//! scenarios it does not apply to. Adding a family is one file and one line in [`FACTORIES`].
+
+pub mod ikf;
+pub mod kf;
+
+use channel_sim::Scenario;
+
+use crate::Estimator;
+
+/// Options of an evaluation that estimators may need. Families add their own fields (with a
+/// default in [`Default`]) and the matching CLI flag.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// Number of Monte-Carlo runs.
+    pub runs: u64,
+    /// Horizon T: instants k = 1..=T are simulated.
+    pub horizon: u32,
+    /// Experiment seed.
+    pub seed: u64,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        Self {
+            runs: 500,
+            horizon: 100,
+            seed: 0,
+        }
+    }
+}
+
+/// Builds a family's estimators for run `run` of `scenario` (empty when the family does not
+/// apply). An error means the scenario's parameters are unusable for this family.
+pub type Factory = fn(
+    scenario: &dyn Scenario,
+    options: &EvalOptions,
+    seed: u64,
+    run: u64,
+) -> anyhow::Result<Vec<Box<dyn Estimator>>>;
+
+/// Every estimator family, in the order they appear in tables, JSON and plots.
+pub const FACTORIES: &[Factory] = &[kf::build, ikf::build];
+
+/// All estimators that apply to `scenario`, from `factories` in order.
+pub fn build_all(
+    factories: &[Factory],
+    scenario: &dyn Scenario,
+    options: &EvalOptions,
+    seed: u64,
+    run: u64,
+) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
+    let mut all = Vec::new();
+    for f in factories {
+        all.extend(f(scenario, options, seed, run)?);
+    }
+    Ok(all)
+}

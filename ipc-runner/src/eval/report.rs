@@ -1,0 +1,397 @@
+//! The evaluation's results: reduction over runs (in run order), JSON, CSV and the summary
+//! table.
+//!
+//! JSON shape (fields beyond the issue's are additions):
+//! ```text
+//! { "scenario", "runs", "horizon", "seed",
+//!   "estimators": { NAME: { "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
+//!                           "median_run_avg", "diverged_runs", "valid_runs",
+//!                           "first_error", "mse_per_state": [[MSE_i(k)]…],
+//!                           <diagnostic name>: [mean over runs per k]… } },
+//!   "channel": { "delivery_rate", "nodes": [ { "node", "instants", "delivered", "dropped",
+//!                "sent", "triggered", "blocked", "censored", "random_loss", "occluded",
+//!                "delivery_rate" }… ] } }
+//! ```
+//! MSE(k) is the mean over valid runs of ‖x_k − x̂_k‖²; `avg_mse` the mean of MSE(k) over
+//! k = 1..=T (equivalently the mean of the valid runs' averages), `avg_mse_se` its Monte-Carlo
+//! standard error (sample standard deviation of the run averages / √valid_runs),
+//! `median_run_avg` the median of the run averages. Non-finite values are written as `null`.
+
+use std::fmt::Write as _;
+
+use channel_sim::Scenario;
+use serde::ser::{SerializeMap, Serializer};
+use serde::Serialize;
+
+use super::RunOutput;
+use crate::estimators::EvalOptions;
+
+/// Everything an evaluation produced.
+#[derive(Debug, Serialize)]
+pub struct EvalResult {
+    /// Scenario name.
+    pub scenario: String,
+    /// Number of runs.
+    pub runs: u64,
+    /// Horizon T.
+    pub horizon: u32,
+    /// Experiment seed.
+    pub seed: u64,
+    /// Per estimator, in registry order.
+    #[serde(serialize_with = "ordered_map")]
+    pub estimators: Vec<(String, EstimatorResult)>,
+    /// Channel statistics over all runs.
+    pub channel: ChannelSummary,
+    /// Run 0's trajectories (plots only).
+    #[serde(skip)]
+    pub trajectory: Trajectory,
+}
+
+/// One estimator's results.
+#[derive(Debug, Serialize)]
+pub struct EstimatorResult {
+    /// MSE(k), k = 0..=T.
+    pub mse: Vec<f64>,
+    /// Mean of MSE(k) over k = 1..=T.
+    pub avg_mse: f64,
+    /// Monte-Carlo standard error of `avg_mse`.
+    pub avg_mse_se: f64,
+    /// Median over valid runs of the run's mean squared error over k = 1..=T.
+    pub median_run_avg: f64,
+    /// Runs excluded because the estimate became non-finite or a step failed.
+    pub diverged_runs: u64,
+    /// Runs included in the means.
+    pub valid_runs: u64,
+    /// The first failure message (lowest run index), if any run diverged.
+    pub first_error: Option<String>,
+    /// Per-state MSE: `mse_per_state[i][k]`.
+    pub mse_per_state: Vec<Vec<f64>>,
+    /// Named diagnostics, mean over valid runs per k.
+    #[serde(flatten, serialize_with = "ordered_map")]
+    pub diagnostics: Vec<(String, Vec<f64>)>,
+}
+
+/// Channel statistics.
+#[derive(Debug, Serialize)]
+pub struct ChannelSummary {
+    /// Delivered / instants over all nodes.
+    pub delivery_rate: f64,
+    /// Per node.
+    pub nodes: Vec<NodeCounts>,
+}
+
+/// Counts of one node's observations over all runs and instants k = 1..=T.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct NodeCounts {
+    /// Node index.
+    pub node: usize,
+    /// Observations (runs × T).
+    pub instants: u64,
+    /// Delivered measurements.
+    pub delivered: u64,
+    /// Dropped (not delivered) for any reason.
+    pub dropped: u64,
+    /// Packets put on the wire: delivered, or lost in transit by a random-loss stage.
+    pub sent: u64,
+    /// `FLAG_TRIGGERED` set.
+    pub triggered: u64,
+    /// `FLAG_TOKEN_BLOCKED` set.
+    pub blocked: u64,
+    /// `FLAG_CENSORED` set.
+    pub censored: u64,
+    /// `FLAG_RANDOM_LOSS` set.
+    pub random_loss: u64,
+    /// `FLAG_OCCLUDED` set.
+    pub occluded: u64,
+    /// delivered / instants.
+    pub delivery_rate: f64,
+}
+
+/// One run's true and estimated trajectories, `[k * nx + i]`.
+#[derive(Clone, Debug, Default)]
+pub struct Trajectory {
+    /// State dimension.
+    pub nx: usize,
+    /// x_k.
+    pub truth: Vec<f64>,
+    /// Estimator names.
+    pub names: Vec<&'static str>,
+    /// x̂_k per estimator (NaN after a divergence).
+    pub estimates: Vec<Vec<f64>>,
+}
+
+impl Trajectory {
+    pub(super) fn new(names: &[&'static str], nx: usize, horizon: usize) -> Self {
+        let len = (horizon + 1) * nx;
+        Self {
+            nx,
+            truth: vec![f64::NAN; len],
+            names: names.to_vec(),
+            estimates: vec![vec![f64::NAN; len]; names.len()],
+        }
+    }
+}
+
+fn ordered_map<S: Serializer, V: Serialize>(
+    entries: &[(String, V)],
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    let mut map = s.serialize_map(Some(entries.len()))?;
+    for (k, v) in entries {
+        map.serialize_entry(k, v)?;
+    }
+    map.end()
+}
+
+/// Sums over runs, fed in run order.
+pub(super) struct Accumulator {
+    scenario: String,
+    options: EvalOptions,
+    nx: usize,
+    names: Vec<&'static str>,
+    estimators: Vec<EstimatorAcc>,
+    channel: Vec<NodeCounts>,
+    trajectory: Option<Trajectory>,
+    next_run: u64,
+}
+
+#[derive(Default)]
+struct EstimatorAcc {
+    sum_sq: Vec<f64>,
+    run_avgs: Vec<f64>,
+    diverged: u64,
+    first_error: Option<String>,
+    diag: Vec<(&'static str, Vec<f64>, Vec<u64>)>,
+}
+
+impl Accumulator {
+    pub(super) fn new(
+        scenario: &dyn Scenario,
+        options: &EvalOptions,
+        names: &[&'static str],
+    ) -> Self {
+        let nx = scenario.nx();
+        let len = (options.horizon as usize + 1) * nx;
+        Self {
+            scenario: scenario.name().to_owned(),
+            options: options.clone(),
+            nx,
+            names: names.to_vec(),
+            estimators: names
+                .iter()
+                .map(|_| EstimatorAcc {
+                    sum_sq: vec![0.0; len],
+                    ..Default::default()
+                })
+                .collect(),
+            channel: (0..scenario.nodes())
+                .map(|node| NodeCounts {
+                    node,
+                    ..Default::default()
+                })
+                .collect(),
+            trajectory: None,
+            next_run: 0,
+        }
+    }
+
+    pub(super) fn add(&mut self, out: RunOutput) {
+        assert_eq!(out.run, self.next_run, "runs must be reduced in order");
+        self.next_run += 1;
+        let (nx, t) = (self.nx, self.options.horizon as usize);
+        for (acc, rec) in self.estimators.iter_mut().zip(out.estimators) {
+            let Some(sq) = rec.sq_err else {
+                acc.diverged += 1;
+                if acc.first_error.is_none() {
+                    acc.first_error = Some(format!(
+                        "run {}: {}",
+                        out.run,
+                        rec.error.unwrap_or_default()
+                    ));
+                }
+                continue;
+            };
+            for (s, v) in acc.sum_sq.iter_mut().zip(&sq) {
+                *s += v;
+            }
+            acc.run_avgs.push(sq[nx..].iter().sum::<f64>() / t as f64);
+            for (name, values) in rec.diagnostics {
+                let slot = match acc.diag.iter().position(|(n, _, _)| *n == name) {
+                    Some(i) => i,
+                    None => {
+                        acc.diag.push((name, vec![0.0; t + 1], vec![0; t + 1]));
+                        acc.diag.len() - 1
+                    }
+                };
+                let (_, sums, counts) = &mut acc.diag[slot];
+                for k in 0..=t {
+                    if values[k].is_finite() {
+                        sums[k] += values[k];
+                        counts[k] += 1;
+                    }
+                }
+            }
+        }
+        for (total, c) in self.channel.iter_mut().zip(out.channel) {
+            total.instants += c.instants;
+            total.delivered += c.delivered;
+            total.dropped += c.dropped;
+            total.sent += c.sent;
+            total.triggered += c.triggered;
+            total.blocked += c.blocked;
+            total.censored += c.censored;
+            total.random_loss += c.random_loss;
+            total.occluded += c.occluded;
+        }
+        if out.trajectory.is_some() {
+            self.trajectory = out.trajectory;
+        }
+    }
+
+    pub(super) fn finish(self) -> EvalResult {
+        let (nx, t) = (self.nx, self.options.horizon as usize);
+        let estimators = self
+            .names
+            .iter()
+            .zip(self.estimators)
+            .map(|(name, acc)| {
+                let n = acc.run_avgs.len() as f64;
+                let per_state: Vec<Vec<f64>> = (0..nx)
+                    .map(|i| (0..=t).map(|k| acc.sum_sq[k * nx + i] / n).collect())
+                    .collect();
+                let mse: Vec<f64> = (0..=t)
+                    .map(|k| acc.sum_sq[k * nx..][..nx].iter().sum::<f64>() / n)
+                    .collect();
+                let avg_mse = mse[1..].iter().sum::<f64>() / t as f64;
+                let mean_run = acc.run_avgs.iter().sum::<f64>() / n;
+                let var = acc
+                    .run_avgs
+                    .iter()
+                    .map(|r| (r - mean_run).powi(2))
+                    .sum::<f64>()
+                    / (n - 1.0);
+                let diagnostics = acc
+                    .diag
+                    .into_iter()
+                    .map(|(name, sums, counts)| {
+                        let mean = sums
+                            .iter()
+                            .zip(&counts)
+                            .map(|(s, &c)| if c == 0 { f64::NAN } else { s / c as f64 })
+                            .collect();
+                        (name.to_owned(), mean)
+                    })
+                    .collect();
+                let result = EstimatorResult {
+                    mse,
+                    avg_mse,
+                    avg_mse_se: (var / n).sqrt(),
+                    median_run_avg: median(acc.run_avgs),
+                    diverged_runs: acc.diverged,
+                    valid_runs: n as u64,
+                    first_error: acc.first_error,
+                    mse_per_state: per_state,
+                    diagnostics,
+                };
+                ((*name).to_owned(), result)
+            })
+            .collect();
+        let mut channel = self.channel;
+        for c in &mut channel {
+            c.delivery_rate = c.delivered as f64 / c.instants.max(1) as f64;
+        }
+        let (delivered, instants) = channel
+            .iter()
+            .fold((0, 0), |(d, i), c| (d + c.delivered, i + c.instants));
+        EvalResult {
+            scenario: self.scenario,
+            runs: self.options.runs,
+            horizon: self.options.horizon,
+            seed: self.options.seed,
+            estimators,
+            channel: ChannelSummary {
+                delivery_rate: delivered as f64 / instants.max(1) as f64,
+                nodes: channel,
+            },
+            trajectory: self.trajectory.unwrap_or_default(),
+        }
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        (v[m - 1] + v[m]) / 2.0
+    }
+}
+
+impl EvalResult {
+    /// The JSON document (pretty-printed, trailing newline).
+    pub fn to_json(&self) -> String {
+        let mut s = serde_json::to_string_pretty(self).expect("plain data serialises");
+        s.push('\n');
+        s
+    }
+
+    /// CSV: one row per k, column `k` then one MSE(k) column per estimator.
+    pub fn to_csv(&self) -> String {
+        let mut s = String::from("k");
+        for (name, _) in &self.estimators {
+            let _ = write!(s, ",{name}");
+        }
+        s.push('\n');
+        for k in 0..=self.horizon as usize {
+            let _ = write!(s, "{k}");
+            for (_, r) in &self.estimators {
+                let _ = write!(s, ",{}", r.mse[k]);
+            }
+            s.push('\n');
+        }
+        s
+    }
+
+    /// The human-readable summary table.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "scenario {}: {} runs, horizon {}, seed {}",
+            self.scenario, self.runs, self.horizon, self.seed
+        );
+        let _ = writeln!(
+            s,
+            "{:<12} {:>12} {:>10} {:>14} {:>9}",
+            "estimator", "avg_mse", "± s.e.", "median_run_avg", "diverged"
+        );
+        for (name, r) in &self.estimators {
+            let _ = writeln!(
+                s,
+                "{:<12} {:>12.6} {:>10.6} {:>14.6} {:>9}",
+                name, r.avg_mse, r.avg_mse_se, r.median_run_avg, r.diverged_runs
+            );
+        }
+        for c in &self.channel.nodes {
+            let _ = writeln!(
+                s,
+                "node {}: delivered {:.1} % ({} of {}), random loss {}, occluded {}, blocked {}, \
+                 triggered {}, censored {}",
+                c.node,
+                100.0 * c.delivery_rate,
+                c.delivered,
+                c.instants,
+                c.random_loss,
+                c.occluded,
+                c.blocked,
+                c.triggered,
+                c.censored
+            );
+        }
+        s
+    }
+}

@@ -1,0 +1,229 @@
+//! Plots of an evaluation: MSE(k) of every estimator on a log axis (the papers' MSE figures)
+//! above one run's true and estimated trajectories, one panel per state.
+//!
+//! `.svg` or `.png` by the file's extension. PNG text is rendered with DejaVu Sans, embedded
+//! from `assets/` (Bitstream Vera licence, `assets/DejaVuSans.LICENSE`).
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::eval::EvalResult;
+
+const FONT: &str = "sans-serif";
+const WIDTH: u32 = 1100;
+const MSE_HEIGHT: u32 = 460;
+const STATE_HEIGHT: u32 = 260;
+
+/// Errors unless `path` ends in `.svg` or `.png`.
+pub fn check_extension(path: &Path) -> Result<(), String> {
+    match extension(path).as_deref() {
+        Some("svg" | "png") => Ok(()),
+        _ => Err(format!(
+            "--plot {}: the file must end in .svg or .png",
+            path.display()
+        )),
+    }
+}
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+}
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // The embedded font is valid; a failure would only lose the PNG's text.
+        let _ = plotters::style::register_font(
+            FONT,
+            FontStyle::Normal,
+            include_bytes!("../assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
+/// Writes the plot of `result` to `path` (`.svg` or `.png`).
+pub fn plot(result: &EvalResult, path: &Path) -> anyhow::Result<()> {
+    check_extension(path).map_err(anyhow::Error::msg)?;
+    register_font();
+    let nx = result.trajectory.nx;
+    let size = (WIDTH, MSE_HEIGHT + STATE_HEIGHT * nx as u32);
+    if extension(path).as_deref() == Some("png") {
+        let root = BitMapBackend::new(path, size).into_drawing_area();
+        draw(result, &root)?;
+        root.present()?;
+    } else {
+        let root = SVGBackend::new(path, size).into_drawing_area();
+        draw(result, &root)?;
+        root.present()?;
+    }
+    Ok(())
+}
+
+fn color(j: usize) -> RGBColor {
+    // Colour-blind-safe palette (Okabe–Ito).
+    const P: [RGBColor; 7] = [
+        RGBColor(0, 114, 178),
+        RGBColor(213, 94, 0),
+        RGBColor(0, 158, 115),
+        RGBColor(204, 121, 167),
+        RGBColor(230, 159, 0),
+        RGBColor(86, 180, 233),
+        RGBColor(120, 120, 120),
+    ];
+    P[j % P.len()]
+}
+
+fn draw<DB: DrawingBackend>(
+    result: &EvalResult,
+    root: &DrawingArea<DB, Shift>,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    let (top, bottom) = root.split_vertically(MSE_HEIGHT);
+    draw_mse(result, &top)?;
+    let nx = result.trajectory.nx;
+    if nx > 0 {
+        let panels = bottom.split_evenly((nx, 1));
+        for (i, panel) in panels.iter().enumerate() {
+            draw_state(result, panel, i)?;
+        }
+    }
+    Ok(())
+}
+
+fn draw_mse<DB: DrawingBackend>(
+    result: &EvalResult,
+    area: &DrawingArea<DB, Shift>,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let t = result.horizon as usize;
+    // k = 1..=T: k = 0 is the prior, the same for every estimator.
+    let values = result
+        .estimators
+        .iter()
+        .flat_map(|(_, r)| r.mse[1..].iter().copied())
+        .filter(|v| v.is_finite() && *v > 0.0);
+    let (lo, hi) = values.fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    });
+    let (lo, hi) = if lo.is_finite() {
+        (lo / 1.5, hi * 1.5)
+    } else {
+        (1e-3, 1.0)
+    };
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            format!(
+                "{}: MSE(k) over {} runs (seed {})",
+                result.scenario, result.runs, result.seed
+            ),
+            (FONT, 24),
+        )
+        .margin(12)
+        .x_label_area_size(42)
+        .y_label_area_size(80)
+        .build_cartesian_2d(1f64..t.max(2) as f64, (lo..hi).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("instant k")
+        .y_desc("MSE(k) = mean ‖x_k − x̂_k‖²  (log)")
+        .label_style((FONT, 15))
+        .axis_desc_style((FONT, 17))
+        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .draw()?;
+    for (j, (name, r)) in result.estimators.iter().enumerate() {
+        let c = color(j);
+        let label = format!("{name} (avg {:.4})", r.avg_mse);
+        chart
+            .draw_series(LineSeries::new(
+                (1..=t)
+                    .filter(|&k| r.mse[k].is_finite() && r.mse[k] > 0.0)
+                    .map(|k| (k as f64, r.mse[k])),
+                c.stroke_width(2),
+            ))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 16))
+        .draw()?;
+    Ok(())
+}
+
+fn draw_state<DB: DrawingBackend>(
+    result: &EvalResult,
+    area: &DrawingArea<DB, Shift>,
+    i: usize,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let tr = &result.trajectory;
+    let (nx, t) = (tr.nx, result.horizon as usize);
+    let series = |v: &[f64]| -> Vec<(f64, f64)> {
+        (0..=t)
+            .map(|k| (k as f64, v[k * nx + i]))
+            .filter(|p| p.1.is_finite())
+            .collect()
+    };
+    let truth = series(&tr.truth);
+    let estimates: Vec<Vec<(f64, f64)>> = tr.estimates.iter().map(|e| series(e)).collect();
+    let (lo, hi) = truth
+        .iter()
+        .chain(estimates.iter().flatten())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.1), hi.max(p.1))
+        });
+    let (lo, hi) = if lo.is_finite() && hi > lo {
+        let pad = 0.08 * (hi - lo);
+        (lo - pad, hi + pad)
+    } else {
+        (-1.0, 1.0)
+    };
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            format!("run 0: state x{} — truth and estimates", i + 1),
+            (FONT, 18),
+        )
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0f64..t as f64, lo..hi)?;
+    chart
+        .configure_mesh()
+        .x_desc("instant k")
+        .y_desc(format!("x{}", i + 1))
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+        .draw()?;
+    chart
+        .draw_series(LineSeries::new(truth, BLACK.stroke_width(2)))?
+        .label("truth")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(3)));
+    for (j, (points, name)) in estimates.into_iter().zip(&tr.names).enumerate() {
+        let c = color(j);
+        chart
+            .draw_series(LineSeries::new(points, c.stroke_width(1)))?
+            .label(*name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 14))
+        .draw()?;
+    Ok(())
+}

@@ -1,0 +1,303 @@
+//! The core on a microcontroller: the firmware in `estimator-core/firmware` runs each estimator
+//! in `f32` over the embedded occlusion stream on QEMU's emulated Cortex-M4F (`mps2-an386`);
+//! this test runs the same driver source on the host over the same bytes and requires the two
+//! result lines to be identical (a 64-bit FNV-1a digest over the bit patterns of every
+//! estimate x̂_k and P_k, and the bits of the final x̂). It also reports flash and peak stack per
+//! estimator and holds them to their budgets.
+//!
+//! Needs `qemu-system-arm` and the `thumbv7em-none-eabihf` target; without them the QEMU test
+//! is skipped with a message, unless `REQUIRE_QEMU=1` (set by CI), which makes it fail.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use estimator_core::filter::{IntermittentKalmanFilter, KalmanFilter};
+use estimator_core::model::LinearModel;
+use nalgebra::{matrix, vector, Matrix3, SMatrix, Vector3};
+
+#[allow(dead_code)] // the firmware uses parts the host check does not
+#[path = "../estimator-core/firmware/src/run.rs"]
+mod run;
+
+use run::{Stream, Summary, VECTORS, VECTORS_FNV1A64};
+
+/// The firmware binaries, their host-side drivers and budgets (flash bytes, stack bytes).
+/// The budget (≤ 32 KiB flash, ≤ 4 KiB stack) is stated for the cross-coupled
+/// estimator; the Kalman filters are held to it too.
+type Driver = fn(&Stream<'_>, usize) -> Summary;
+const BINS: &[(&str, Driver, usize, usize)] = &[
+    ("kf", run::run_kf, 32 * 1024, 4 * 1024),
+    ("ikf", run::run_ikf, 32 * 1024, 4 * 1024),
+];
+
+fn firmware_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../estimator-core/firmware")
+}
+
+fn stream() -> Stream<'static> {
+    Stream::parse_checked(VECTORS, VECTORS_FNV1A64).expect("embedded vectors are valid")
+}
+
+#[test]
+fn vectors_are_the_documented_stream() {
+    let s = stream();
+    assert_eq!(s.steps, 100);
+    assert_eq!(s.seed, 0x5EED_0001_F1A5_0008);
+    let mut drops = 0;
+    for (i, r) in s.records().enumerate() {
+        assert_eq!(r.k as usize, i + 1);
+        // A drop happens iff u_k = x₁ + n_k is in a region [20i − 5, 20i + 5]; n_k has
+        // standard deviation √0.1 ≈ 0.32, so x₁ must be within 5 + 6σ of the region's centre.
+        assert_eq!(r.delivered, r.label == 0);
+        assert_eq!(r.delivered, r.flags & 0x10 == 0);
+        if !r.delivered {
+            drops += 1;
+            let centre = 20.0 * f32::from(r.label);
+            assert!((r.truth[0] - centre).abs() < 5.0 + 6.0 * 0.1f32.sqrt());
+        }
+    }
+    // Both kinds of instants occur, or the IKF would say nothing the KF does not.
+    assert!(drops > 10 && drops < 90, "{drops} dropouts");
+    // A changed file must fail the check.
+    let mut corrupt = VECTORS.to_vec();
+    corrupt[40] ^= 1;
+    assert_eq!(
+        Stream::parse_checked(&corrupt, VECTORS_FNV1A64).map(|_| ()),
+        Err(run::StreamError::BadHash)
+    );
+    assert_eq!(
+        Stream::parse(&VECTORS[..VECTORS.len() - 1]).map(|_| ()),
+        Err(run::StreamError::Truncated)
+    );
+}
+
+/// Seed 001's model in f64, written out here independently of the firmware's `run::model`.
+fn model_f64() -> LinearModel<f64, 3, 3, 2, 2> {
+    LinearModel::new(
+        matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
+        Matrix3::identity(),
+        matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
+        SMatrix::identity(),
+        Matrix3::identity() * 0.3,
+        SMatrix::identity() * 0.2,
+    )
+    .unwrap()
+}
+
+/// The f32 runs the firmware does are the filters they claim to be: they agree with an f64
+/// run of the same filters to f32 accuracy, and the KF is consistent with the stream's truth.
+#[test]
+fn host_f32_runs_match_f64_filters() {
+    let s = stream();
+    let m = model_f64();
+    let x0 = vector![5.0, 5.0, 5.0];
+    let p0 = Matrix3::identity() * 4.0;
+    let mut kf = KalmanFilter::new(x0, p0).unwrap();
+    let mut ikf = IntermittentKalmanFilter::new(x0, p0).unwrap();
+    let mut nees = 0.0;
+    for r in s.records() {
+        let y = vector![f64::from(r.y[0]), f64::from(r.y[1])];
+        kf.step(&m, r.k as usize, &y).unwrap();
+        ikf.step(&m, r.k as usize, r.delivered.then_some(&y))
+            .unwrap();
+        let e = Vector3::from(r.truth.map(f64::from)) - kf.state();
+        nees += e.dot(&kf.covariance().cholesky().unwrap().solve(&e));
+    }
+    nees /= f64::from(s.steps);
+    // Mean NEES of a consistent 3-state filter is 3. Over 100 time-correlated steps of one run
+    // the spread is wide; [1.5, 4.5] still rejects a stream simulated with other noise levels
+    // or matrices than the filter's (e.g. R = 2 instead of 0.2 gives far larger errors).
+    assert!((1.5..4.5).contains(&nees), "KF mean NEES {nees}");
+
+    let k32 = run::run_kf(&s, usize::MAX);
+    let i32_ = run::run_ikf(&s, usize::MAX);
+    assert_eq!((k32.errors, i32_.errors), (0, 0));
+    assert_eq!(i32_.arrivals + i32_.dropouts, s.steps);
+    // f32 carries 24 bits; the filters are stable, so rounding does not accumulate beyond a few
+    // hundred ulps of the state's magnitude (|x| ≈ 100 here): 1e-3 relative is loose enough for
+    // that and far tighter than any real difference between the filters.
+    for (sum, reference) in [(k32, kf.state()), (i32_, ikf.state())] {
+        for i in 0..3 {
+            let (a, b) = (f64::from(sum.x()[i]), reference[i]);
+            assert!(
+                (a - b).abs() <= 1e-3 * b.abs().max(1.0),
+                "{} x[{i}]: f32 {a} vs f64 {b}",
+                sum.name
+            );
+        }
+    }
+    // The IKF loses information on dropouts: its final estimate differs from the KF's.
+    assert_ne!(k32.digest, i32_.digest);
+}
+
+fn require_qemu() -> bool {
+    std::env::var("REQUIRE_QEMU").is_ok_and(|v| v == "1")
+}
+
+/// Why the QEMU check cannot run here, if it cannot.
+fn missing_tools() -> Option<String> {
+    let qemu = Command::new("qemu-system-arm")
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status();
+    if !qemu.is_ok_and(|s| s.success()) {
+        return Some("qemu-system-arm not found".into());
+    }
+    if Command::new("timeout").arg("--version").output().is_err() {
+        return Some("`timeout` (coreutils) not found".into());
+    }
+    let sysroot = Command::new("rustc").args(["--print", "sysroot"]).output();
+    let has_target = sysroot.is_ok_and(|o| {
+        Path::new(String::from_utf8_lossy(&o.stdout).trim())
+            .join("lib/rustlib/thumbv7em-none-eabihf")
+            .is_dir()
+    });
+    if !has_target {
+        return Some("rust target thumbv7em-none-eabihf not installed".into());
+    }
+    None
+}
+
+/// Builds the firmware (release profile: opt-level "s", LTO, one codegen unit).
+fn build_firmware() -> PathBuf {
+    let dir = firmware_dir();
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    // Run in the firmware's directory so its .cargo/config.toml (target, linker script)
+    // applies; keep the outer build's settings out of it.
+    let status = Command::new(cargo)
+        .current_dir(&dir)
+        .args(["build", "--release", "--locked", "--bins"])
+        .arg("--target-dir")
+        .arg(dir.join("target"))
+        .env_remove("RUSTFLAGS")
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
+        .env_remove("CARGO_BUILD_RUSTFLAGS")
+        .env_remove("CARGO_BUILD_TARGET")
+        .env_remove("CARGO_TARGET_DIR")
+        .status()
+        .expect("run cargo build for the firmware");
+    assert!(status.success(), "firmware build failed");
+    dir.join("target/thumbv7em-none-eabihf/release")
+}
+
+/// Runs an ELF on the emulated Cortex-M4F under `timeout`, output to a file (a semihosting
+/// write to a closed pipe would spin forever). Returns (exit status, output).
+fn run_qemu(elf: &Path, out: &Path) -> (i32, String) {
+    let file = File::create(out).expect("create QEMU output file");
+    let status = Command::new("timeout")
+        .arg("120")
+        .arg("qemu-system-arm")
+        .args(["-machine", "mps2-an386", "-cpu", "cortex-m4", "-nographic"])
+        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(elf)
+        .stdin(Stdio::null())
+        .stdout(Stdio::from(file))
+        .status()
+        .expect("run qemu-system-arm");
+    let text = std::fs::read_to_string(out).unwrap_or_default();
+    (status.code().unwrap_or(-1), text)
+}
+
+/// Sizes of the allocated sections of a 32-bit little-endian ELF file, by name.
+fn elf32_alloc_sections(bytes: &[u8]) -> Vec<(String, u32, bool)> {
+    let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]) as usize;
+    let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
+    assert_eq!(&bytes[..4], b"\x7fELF", "not an ELF file");
+    assert_eq!((bytes[4], bytes[5]), (1, 1), "not ELF32 little-endian");
+    let (shoff, shentsize, shnum, shstrndx) = (
+        u32_at(0x20) as usize,
+        u16_at(0x2E),
+        u16_at(0x30),
+        u16_at(0x32),
+    );
+    let sh = |i: usize| shoff + i * shentsize;
+    let strtab = u32_at(sh(shstrndx) + 16) as usize;
+    (0..shnum)
+        .filter_map(|i| {
+            let h = sh(i);
+            let (name, kind, flags, size) =
+                (u32_at(h), u32_at(h + 4), u32_at(h + 8), u32_at(h + 20));
+            const SHF_ALLOC: u32 = 2;
+            const SHT_NOBITS: u32 = 8;
+            (flags & SHF_ALLOC != 0).then(|| {
+                let start = strtab + name as usize;
+                let end = start + bytes[start..].iter().position(|&b| b == 0).unwrap();
+                let name = String::from_utf8_lossy(&bytes[start..end]).into_owned();
+                (name, size, kind != SHT_NOBITS)
+            })
+        })
+        .collect()
+}
+
+/// Flash figures: (code = .vector_table + .text, .rodata, .data load image, total).
+fn flash_sizes(elf: &Path) -> (u32, u32, u32, u32) {
+    let bytes = std::fs::read(elf).expect("read ELF");
+    let (mut code, mut rodata, mut data) = (0, 0, 0);
+    for (name, size, in_file) in elf32_alloc_sections(&bytes) {
+        match name.as_str() {
+            ".vector_table" | ".text" => code += size,
+            ".rodata" => rodata += size,
+            ".data" => data += size,
+            _ if in_file => code += size,
+            _ => {}
+        }
+    }
+    (code, rodata, data, code + rodata + data)
+}
+
+#[test]
+fn firmware_on_qemu_is_bit_exact_with_host() {
+    if let Some(why) = missing_tools() {
+        assert!(!require_qemu(), "REQUIRE_QEMU=1 but {why}");
+        eprintln!("SKIPPED firmware_on_qemu_is_bit_exact_with_host: {why}");
+        return;
+    }
+    let bin_dir = build_firmware();
+    let s = stream();
+    let mut mismatches = Vec::new();
+    println!(
+        "{:<5} {:>10} {:>8} {:>8} {:>8} {:>11}  result",
+        "bin", "code+vt", "rodata", "data", "flash", "stack peak"
+    );
+    for &(name, driver, flash_budget, stack_budget) in BINS {
+        let elf = bin_dir.join(name);
+        let out = bin_dir.join(format!("{name}.qemu.txt"));
+        let (code, text) = run_qemu(&elf, &out);
+        let host = format!("{}", driver(&s, usize::MAX));
+        let target = text
+            .lines()
+            .find_map(|l| l.strip_prefix("RESULT "))
+            .unwrap_or("<no RESULT line>");
+        let stack: usize = text
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("STACK {name} peak=")))
+            .and_then(|v| v.split_whitespace().next()?.parse().ok())
+            .unwrap_or(usize::MAX);
+        let (code_sz, rodata, data, flash) = flash_sizes(&elf);
+        println!("{name:<5} {code_sz:>10} {rodata:>8} {data:>8} {flash:>8} {stack:>11}  {target}");
+        println!("{:<5} host:{:>52}{host}", "", "");
+        assert_eq!(code, 0, "{name}: QEMU exit status {code}, output:\n{text}");
+        if target != host {
+            mismatches.push(format!("{name}:\n  qemu {target}\n  host {host}"));
+        }
+        assert!(
+            flash as usize <= flash_budget,
+            "{name}: flash {flash} B over budget {flash_budget} B"
+        );
+        assert!(
+            stack <= stack_budget,
+            "{name}: stack {stack} B over budget {stack_budget} B"
+        );
+    }
+    assert!(
+        mismatches.is_empty(),
+        "firmware and host differ:\n{}",
+        mismatches.join("\n")
+    );
+    println!(
+        "firmware_qemu: all {} estimators bit-exact with the host",
+        BINS.len()
+    );
+}
