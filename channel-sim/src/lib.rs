@@ -4,7 +4,9 @@
 //! The data path reads top to bottom: plant → sensor → channel stages → [`sim::Instant`]
 //! (→ shared memory in the pipeline) → estimator.
 
+pub mod publisher;
 pub mod sim;
+pub mod wire;
 
 pub use sim::{Instant, Observation, Scenario, Simulation};
 pub mod loss;
