@@ -9,8 +9,8 @@
 
 pub mod config;
 pub mod linear;
-pub mod occlusion;
 pub mod nn_token_bucket;
+pub mod occlusion;
 pub mod tobit_fusion;
 
 use std::any::Any;

@@ -5,9 +5,9 @@
 
 pub mod ikf;
 pub mod kf;
+pub mod nn;
 pub mod occlusion;
 pub mod pf;
-pub mod nn;
 pub mod tobit;
 
 use channel_sim::Scenario;
