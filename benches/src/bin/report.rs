@@ -243,7 +243,7 @@ fn icount(o: &Opts, md: &mut String) -> Result<BTreeMap<String, u64>> {
     );
     md.push_str("| kernel | I(N) | I(2N) | I(2N) again | same twice | instructions / step |\n|---|---:|---:|---:|---|---:|\n");
     let mut res = BTreeMap::new();
-    for k in list.lines().filter(|l| !l.starts_with("parts/")) {
+    for k in list.lines() {
         say(&format!("callgrind {k}"));
         let a = callgrind_ir(&bin, k, n)?;
         let b = callgrind_ir(&bin, k, 2 * n)?;
@@ -270,8 +270,42 @@ fn icount(o: &Opts, md: &mut String) -> Result<BTreeMap<String, u64>> {
         }
     }
     md.push('\n');
+    md.push_str(KF_NOTES);
     Ok(res)
 }
+
+/// What was done about the KF target, and what is proposed (the numbers of the "before"
+/// column were measured once, with the previous `kalman.rs`, by the same icount method).
+const KF_NOTES: &str = "### Our KF step: what was changed, what is proposed\n\n\
+The first measurement missed the ≤ 0.8× target by far (callgrind: 1404 instructions per \
+3x2 f64 step against adskalman's 704; criterion in the same run: 492 ns against 248 ns, \
+ratio 1.98). A minimal, separate change in `estimator-core/src/filter/kalman.rs` only:\n\n\
+1. one Cholesky factor of S per update, used for the gain and for the NIS (before: a \
+second validated factorisation for the NIS);\n\
+2. `step` predicts and updates into locals and commits once, instead of saving a copy, \
+committing the prediction and rolling back on error; the prediction's finiteness checks run \
+only when the update fails (a non-finite prediction always makes the update fail, and the \
+error is then the one `predict` gives). Results are bit-identical to `predict` + `update` \
+(tests `fused_step_is_bit_identical_to_predict_then_update`, \
+`fused_step_reports_a_non_finite_prediction_like_predict`).\n\n\
+| instructions / step | before | after | adskalman |\n|---|---:|---:|---:|\n\
+| kf 3x2 f64 | 1404 | 1119 | 704 |\n\
+| kf 4x2 f32 | 1432 | 1258 | 815 |\n\n\
+The target is still missed (see the ratios above). Where the remaining difference goes (the \
+`parts/…` kernels in the table above): our step does everything adskalman does (same \
+Joseph form) plus validation adskalman skips: finiteness checks of y, x⁺ and P⁺, \
+symmetrisation after predict and update, and `linalg::cholesky`'s checks on S, which cost \
+~150 instructions for a 2×2 (`parts/validated_cholesky_2x2` against \
+`parts/nalgebra_cholesky_2x2`), mostly `asymmetry` (two `amax` over nalgebra's generic \
+iterators, `parts/asymmetry_3x3`) on a matrix that was symmetrised one line earlier. \
+Proposed (in `linalg`, owned by the core's maintainer, not changed here): a \
+`cholesky_of_symmetric` entry point that skips the asymmetry test and the second \
+symmetrisation for matrices symmetric by construction, and slice-based `amax`/`all_finite` \
+loops. Measured in a trial: −41 instructions per step from the `amax` loops alone; the \
+asymmetry skip is worth most of the remaining ~150. Even then, validation costs more than \
+the 20 % margin the target asks for on problems this small: meeting ≤ 0.8× would take a \
+hand-written small-matrix path (symmetric products computed once per pair), which is a \
+rewrite rather than a minimal change.\n\n";
 
 // ----------------------------------------------------------------------------- firmware
 
@@ -353,7 +387,7 @@ const PCT_HEAD: &str =
 fn ipc(o: &Opts, md: &mut String) -> Result<BTreeMap<String, (Pct, Pct)>> {
     let bin = o.target.join("release/ipc_latency");
     let json = std::env::temp_dir().join(format!("benches-report-ipc-{}.json", std::process::id()));
-    let samples = if o.quick { "20000" } else { "200000" };
+    let samples = if o.quick { "20000" } else { "100000" };
     say(&format!("ipc_latency --samples {samples}"));
     let st = Command::new(&bin)
         .args(["--samples", samples, "--warmup", "5000", "--json"])
@@ -454,7 +488,7 @@ fn demo(o: &Opts, wait: &str, rate: f64, steps: u32) -> Result<(Value, f64)> {
 }
 
 fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Result<()> {
-    let steps: u32 = if o.quick { 20_000 } else { 200_000 };
+    let steps: u32 = if o.quick { 20_000 } else { 100_000 };
     md.push_str("## IPC latency: the full pipeline end to end\n\n");
     md.push_str(
         "`ipc-runner demo` (scenario given below): `channel-sim` publishes slots from its \
@@ -533,7 +567,11 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
 
 fn eval(o: &Opts, md: &mut String) -> Result<()> {
     let bin = o.target.join("release/ipc-runner");
-    let (runs, horizon) = if o.quick { (50u64, 100u32) } else { (500, 100) };
+    let (runs, horizon) = if o.quick {
+        (100u64, 100u32)
+    } else {
+        (1000, 100)
+    };
     md.push_str("## Monte-Carlo evaluation throughput (`ipc-runner eval`)\n\n");
     let _ = writeln!(
         md,
@@ -576,12 +614,9 @@ fn eval(o: &Opts, md: &mut String) -> Result<()> {
                 .ok()
                 .and_then(|s| serde_json::from_str::<Value>(&s).ok())
                 .and_then(|v| {
-                    v["estimators"].as_array().map(|a| {
-                        a.iter()
-                            .filter_map(|e| e[0].as_str().map(str::to_string))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    })
+                    v["estimators"]
+                        .as_object()
+                        .map(|m| m.keys().cloned().collect::<Vec<_>>().join(", "))
                 })
                 .unwrap_or_default();
             let _ = std::fs::remove_file(&json);
@@ -686,25 +721,30 @@ fn run() -> Result<()> {
             }),
         ),
     ];
+    // Each part writes into its own buffer, kept only if the part completed.
+    let mut keep = |name: &str, r: Result<()>, part: String, body: &mut String| match r {
+        Ok(()) => body.push_str(&part),
+        Err(e) => {
+            say(&format!("{name}: {e:#}"));
+            failures.push(format!("{name}: {e:#}"));
+        }
+    };
     for (name, mut f) in parts {
         if o.runs(name) {
-            if let Err(e) = f(&o, &mut body) {
-                say(&format!("{name}: {e:#}"));
-                failures.push(format!("{name}: {e:#}"));
-            }
+            let mut part = String::new();
+            let r = f(&o, &mut part);
+            keep(name, r, part, &mut body);
         }
     }
     if o.runs("pipeline") {
-        if let Err(e) = pipeline(&o, &mut body, &raw) {
-            say(&format!("pipeline: {e:#}"));
-            failures.push(format!("pipeline: {e:#}"));
-        }
+        let mut part = String::new();
+        let r = pipeline(&o, &mut part, &raw);
+        keep("pipeline", r, part, &mut body);
     }
     if o.runs("eval") {
-        if let Err(e) = eval(&o, &mut body) {
-            say(&format!("eval: {e:#}"));
-            failures.push(format!("eval: {e:#}"));
-        }
+        let mut part = String::new();
+        let r = eval(&o, &mut part);
+        keep("eval", r, part, &mut body);
     }
     let load1 = loadavg();
 
