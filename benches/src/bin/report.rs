@@ -387,7 +387,7 @@ const PCT_HEAD: &str =
 fn ipc(o: &Opts, md: &mut String) -> Result<BTreeMap<String, (Pct, Pct)>> {
     let bin = o.target.join("release/ipc_latency");
     let json = std::env::temp_dir().join(format!("benches-report-ipc-{}.json", std::process::id()));
-    let samples = if o.quick { "20000" } else { "100000" };
+    let samples = if o.quick { "10000" } else { "30000" };
     say(&format!("ipc_latency --samples {samples}"));
     let st = Command::new(&bin)
         .args(["--samples", samples, "--warmup", "5000", "--json"])
@@ -487,7 +487,7 @@ fn demo(o: &Opts, wait: &str, rate: f64, steps: u32) -> Result<(Value, f64)> {
 }
 
 fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Result<()> {
-    let steps: u32 = if o.quick { 20_000 } else { 100_000 };
+    let steps: u32 = if o.quick { 10_000 } else { 50_000 };
     md.push_str("## IPC latency: the full pipeline end to end\n\n");
     md.push_str(
         "`ipc-runner demo` (scenario given below): `channel-sim` publishes slots from its \
