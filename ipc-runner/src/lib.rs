@@ -7,3 +7,4 @@ pub use estimator::Estimator;
 pub mod estimators;
 pub mod eval;
 pub mod plot;
+pub mod plot_tokens;

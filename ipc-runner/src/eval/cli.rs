@@ -114,6 +114,14 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     for path in [&args.json, &args.csv, &args.plot].into_iter().flatten() {
         println!("wrote {}", path.display());
     }
+    // Scenarios with a shared token bucket (seed 004): Fig. 2 beside the plot.
+    if let Some(path) = &args.plot {
+        let written = crate::plot_tokens::plot_for(&*scenario, options.seed, options.horizon, path)
+            .map_err(|e| CommandError::failure(format!("token plot: {e:#}")))?;
+        if let Some(p) = written {
+            println!("wrote {}", p.display());
+        }
+    }
     Ok(())
 }
 
