@@ -31,6 +31,8 @@ pub struct TokenTrace {
     pub sent: Vec<Vec<u32>>,
     /// Per node, the instants k whose trigger fired but was blocked for lack of tokens.
     pub blocked: Vec<Vec<u32>>,
+    /// Per node, η_{m,k} used at k = 1..=T (negative values show the λχ ≤ 1 violation).
+    pub eta: Vec<Vec<f64>>,
 }
 
 /// Replays run `run` of `scenario` (`None` when the scenario has no token bucket stage).
@@ -56,6 +58,7 @@ pub fn trace(
         grant_level: l as u32 * spec.costs().iter().copied().max().unwrap_or(0),
         sent: vec![Vec::new(); l],
         blocked: vec![Vec::new(); l],
+        eta: vec![Vec::new(); l],
     };
     let mut sim = composed.simulate(seed, run);
     // The replayed stages draw nothing; a generator is only needed for the signature.
@@ -81,6 +84,7 @@ pub fn trace(
                  acts on the packets)",
                 m + 1
             );
+            out.eta[m].push(d.eta);
             if d.sent {
                 out.sent[m].push(k);
             } else if d.blocked() {

@@ -37,6 +37,7 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
 fn paper_example_what_holds() {
     let runs = runs();
     let scenario = preset("tobit-fusion").unwrap();
+    #[allow(clippy::needless_update)] // estimator families add fields
     let options = EvalOptions {
         runs,
         horizon: T,
@@ -81,6 +82,22 @@ fn paper_example_what_holds() {
             "run {run}: {spent} tokens spent"
         );
     }
+
+    // The λχ ≤ 1 violation in numbers: the share of instants with η < 0 per node (first 200
+    // runs, replayed by plot_tokens). The paper's claim η ≥ 0 needs λχ > 1; here it fails.
+    let mut neg = [0usize; 3];
+    let replayed = runs.min(200);
+    for run in 0..replayed {
+        let tr = ipc_runner::plot_tokens::trace(&*scenario, SEED, run, T)
+            .unwrap()
+            .unwrap();
+        for m in 0..3 {
+            neg[m] += tr.eta[m].iter().filter(|&&e| e < 0.0).count();
+        }
+    }
+    let share = neg.map(|n| n as f64 / (replayed as f64 * T as f64));
+    println!("share of instants with eta < 0 per node: {share:.3?}");
+    assert!(share.iter().all(|&s| s > 0.05), "{share:?}");
 
     for k in 1..=t {
         let (m, se) = mean_se(&nees[k]);
