@@ -9,6 +9,8 @@
 
 pub mod config;
 pub mod linear;
+pub mod nn_token_bucket;
+pub mod occlusion;
 pub mod tobit_fusion;
 
 use std::any::Any;
@@ -27,6 +29,8 @@ pub type PresetFn = fn() -> Result<Box<dyn Scenario>, ScenarioError>;
 /// The preset registry: name → constructor. Paper presets add one line each.
 pub const PRESETS: &[(&str, PresetFn)] = &[
     ("linear", linear::preset),
+    ("occlusion", occlusion::preset),
+    ("nn-token-bucket", nn_token_bucket::preset),
     ("tobit-fusion", tobit_fusion::preset),
 ];
 
