@@ -10,6 +10,10 @@ pub mod wire;
 
 pub use sim::{Instant, Observation, Scenario, Simulation};
 pub mod loss;
+pub mod nn_plant;
+pub mod occlusion;
 pub mod plant;
 pub mod scenario;
 pub mod stage;
+pub mod tobit_channel;
+pub mod token_bucket;

@@ -9,6 +9,7 @@ pub mod estimators;
 pub mod eval;
 pub mod latency;
 pub mod plot;
+pub mod plot_bound;
 pub mod replay;
 pub mod run;
 pub mod transport;

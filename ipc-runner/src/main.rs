@@ -58,12 +58,17 @@ fn main() {
             ) {
                 e.exit();
             }
-            // clap's message is several lines (usage, tips); keep the first, which names the
-            // problem.
+            // clap's message has paragraphs (problem, tips, usage); keep the first, which names
+            // the problem, on one line.
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments");
-            let first = first.strip_prefix("error: ").unwrap_or(first);
-            eprintln!("ipc-runner: error: {first} (see --help)");
+            let problem: Vec<&str> = text
+                .lines()
+                .take_while(|l| !l.trim().is_empty())
+                .map(str::trim)
+                .collect();
+            let problem = problem.join(" ");
+            let problem = problem.strip_prefix("error: ").unwrap_or(&problem);
+            eprintln!("ipc-runner: error: {problem} (see --help)");
             std::process::exit(2);
         }
     };
