@@ -62,6 +62,36 @@ pub fn plot(result: &EvalResult, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Tick values for a log axis over `[lo, hi]`: 1-2-5 per decade, every integer mantissa when
+/// the range is narrower than that gives, only powers of ten when it is wide.
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let ticks = |mantissas: &[f64]| -> Vec<f64> {
+        let (d0, d1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+        (d0..=d1)
+            .flat_map(|d| mantissas.iter().map(move |m| m * 10f64.powi(d)))
+            .filter(|v| (lo..=hi).contains(v))
+            .collect()
+    };
+    let standard = ticks(&[1.0, 2.0, 5.0]);
+    if standard.len() < 4 {
+        ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
+    } else if standard.len() > 14 {
+        ticks(&[1.0])
+    } else {
+        standard
+    }
+}
+
+/// A log-axis tick: plain decimals in the readable range, scientific outside it.
+fn tick(v: f64) -> String {
+    if (1e-3..1e4).contains(&v.abs()) {
+        let s = format!("{v:.4}");
+        s.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        format!("{v:.1e}")
+    }
+}
+
 fn color(j: usize) -> RGBColor {
     // Colour-blind-safe palette (Okabe–Ito).
     const P: [RGBColor; 7] = [
@@ -129,14 +159,18 @@ where
         .margin(12)
         .x_label_area_size(42)
         .y_label_area_size(80)
-        .build_cartesian_2d(1f64..t.max(2) as f64, (lo..hi).log_scale())?;
+        .build_cartesian_2d(
+            1f64..t.max(2) as f64,
+            (lo..hi).log_scale().with_key_points(log_ticks(lo, hi)),
+        )?;
     chart
         .configure_mesh()
         .x_desc("instant k")
-        .y_desc("MSE(k) = mean ‖x_k − x̂_k‖²  (log)")
+        .y_desc("MSE(k), mean over runs of squared error norm (log scale)")
         .label_style((FONT, 15))
-        .axis_desc_style((FONT, 17))
-        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .axis_desc_style((FONT, 16))
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| tick(*v))
         .draw()?;
     for (j, (name, r)) in result.estimators.iter().enumerate() {
         let c = color(j);
@@ -204,6 +238,7 @@ where
         .configure_mesh()
         .x_desc("instant k")
         .y_desc(format!("x{}", i + 1))
+        .x_label_formatter(&|v| format!("{v:.0}"))
         .label_style((FONT, 14))
         .axis_desc_style((FONT, 16))
         .draw()?;

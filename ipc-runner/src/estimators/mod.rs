@@ -5,8 +5,10 @@
 
 pub mod ikf;
 pub mod kf;
+pub mod nn;
 pub mod occlusion;
 pub mod pf;
+pub mod tobit;
 
 use channel_sim::Scenario;
 
@@ -47,7 +49,14 @@ pub type Factory = fn(
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>>;
 
 /// Every estimator family, in the order they appear in tables, JSON and plots.
-pub const FACTORIES: &[Factory] = &[kf::build, ikf::build, occlusion::build, pf::build];
+pub const FACTORIES: &[Factory] = &[
+    kf::build,
+    ikf::build,
+    occlusion::build,
+    pf::build,
+    nn::build,
+    tobit::build,
+];
 
 /// All estimators that apply to `scenario`, from `factories` in order.
 pub fn build_all(

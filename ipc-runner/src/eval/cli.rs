@@ -96,8 +96,16 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         threads: args.threads.map(|t| t as usize),
         progress: !args.quiet,
     };
-    let result = evaluate(&*scenario, &options, FACTORIES, &run_config)
+    let mut result = evaluate(&*scenario, &options, FACTORIES, &run_config)
         .map_err(|e| CommandError::failure(format!("{e:#}")))?;
+    crate::estimators::nn::after_eval(&mut result, &*scenario, args.plot.as_deref())
+        .map_err(|e| CommandError::failure(format!("{e:#}")))?;
+    if let Some(c) = scenario
+        .as_any()
+        .downcast_ref::<scenario::ComposedScenario>()
+    {
+        result.warnings = c.warnings();
+    }
     print!("{}", result.summary());
     if let Some(path) = &args.json {
         write(path, &result.to_json())?;

@@ -1,0 +1,126 @@
+//! `ipc-runner eval` as a user runs it: outputs, and one-line errors with exit code 2.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn ipc_runner(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ipc-runner"))
+        .args(args)
+        .output()
+        .expect("start ipc-runner")
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("ipc-runner-eval-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Exit code 2, exactly one line on stderr containing `needle`, nothing panicked.
+fn assert_usage_error(out: &Output, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
+    assert_eq!(err.lines().count(), 1, "not one line: {err:?}");
+    assert!(err.contains(needle), "expected {needle:?} in {err:?}");
+    assert!(!err.contains("panicked"));
+}
+
+#[test]
+fn bad_flags_are_one_line_errors_with_code_2() {
+    assert_usage_error(
+        &ipc_runner(&["eval", "--scenario", "linear", "--bogus"]),
+        "--bogus",
+    );
+    assert_usage_error(
+        &ipc_runner(&["eval", "--scenario", "nope"]),
+        "unknown scenario 'nope'",
+    );
+    assert_usage_error(
+        &ipc_runner(&["eval", "--scenario", "linear", "--runs", "0"]),
+        "--runs",
+    );
+    assert_usage_error(
+        &ipc_runner(&["eval", "--scenario", "linear", "--runs", "x"]),
+        "--runs",
+    );
+    assert_usage_error(&ipc_runner(&["eval"]), "--scenario");
+    assert_usage_error(
+        &ipc_runner(&["eval", "--scenario", "linear", "--plot", "out.jpg"]),
+        ".svg or .png",
+    );
+    assert_usage_error(&ipc_runner(&["frobnicate"]), "frobnicate");
+}
+
+#[test]
+fn bad_toml_is_a_one_line_error_naming_the_field() {
+    let dir = temp_dir("toml");
+    let example = include_str!("../../channel-sim/scenarios/example.toml");
+    let cases = [
+        ("p_loss = 0.1", "p_loss = 1.5", "stages[0].p_loss"),
+        ("r = [[0.25]]", "r = [[-0.25]]", "sensors[0].r"),
+        (
+            "a = [[0.95, 0.10], [-0.10, 0.95]]",
+            "a = [[0.95, 0.10]]",
+            "model.a",
+        ),
+        ("p_loss = 0.1", "p_loss = [", "line"),
+    ];
+    for (i, (from, to, needle)) in cases.into_iter().enumerate() {
+        let path = dir.join(format!("bad{i}.toml"));
+        std::fs::write(&path, example.replacen(from, to, 1)).unwrap();
+        let out = ipc_runner(&["eval", "--config", path.to_str().unwrap(), "--quiet"]);
+        assert_usage_error(&out, needle);
+    }
+    let missing = dir.join("missing.toml");
+    assert_usage_error(
+        &ipc_runner(&["eval", "--config", missing.to_str().unwrap()]),
+        "missing.toml",
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn writes_json_csv_and_plots() {
+    let dir = temp_dir("outputs");
+    let (json, csv, svg, png) = (
+        dir.join("r.json"),
+        dir.join("r.csv"),
+        dir.join("r.svg"),
+        dir.join("r.png"),
+    );
+    for plot in [&svg, &png] {
+        let out = ipc_runner(&[
+            "eval",
+            "--scenario",
+            "linear",
+            "--runs",
+            "20",
+            "--horizon",
+            "25",
+            "--seed",
+            "4",
+            "--quiet",
+            "--json",
+            json.to_str().unwrap(),
+            "--csv",
+            csv.to_str().unwrap(),
+            "--plot",
+            plot.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(stdout.contains("kf") && stdout.contains("ikf"), "{stdout}");
+    }
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["estimators"]["kf"]["mse"].as_array().unwrap().len(), 26);
+    assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 27);
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
