@@ -16,11 +16,11 @@ pub use adf::AssumedDensityFilter;
 pub mod kf_io;
 pub use kf_io::KfIo;
 pub mod coupled_kf;
+pub mod fusion;
 pub mod nn_assumptions;
 pub mod nn_bound;
 pub mod nn_system;
 pub mod nn_tbcp;
-pub mod fusion;
 pub mod tobit;
 
 pub use fusion::TobitFusion;

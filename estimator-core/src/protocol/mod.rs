@@ -4,8 +4,8 @@
 //!
 //! Each lives in its own file, added by the issue that implements it.
 
-pub mod occlusion;
-pub mod token_bucket;
 pub mod event_trigger;
+pub mod occlusion;
 pub mod shared_token_bucket;
 pub mod tobit;
+pub mod token_bucket;
