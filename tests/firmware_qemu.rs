@@ -1,9 +1,10 @@
 //! The core on a microcontroller: the firmware in `estimator-core/firmware` runs each estimator
-//! in `f32` over the embedded occlusion stream on QEMU's emulated Cortex-M4F (`mps2-an386`);
+//! in `f32` over an embedded measurement stream on QEMU's emulated Cortex-M4F (`mps2-an386`);
 //! this test runs the same driver source on the host over the same bytes and requires the two
 //! result lines to be identical (a 64-bit FNV-1a digest over the bit patterns of every
 //! estimate x̂_k and P_k, and the bits of the final x̂). It also reports flash and peak stack per
-//! estimator and holds them to their budgets.
+//! estimator and holds them to their budgets, and checks the `f32` runs against `f64` runs of
+//! the same estimators set up independently here.
 //!
 //! Needs `qemu-system-arm` and the `thumbv7em-none-eabihf` target; without them the QEMU test
 //! is skipped with a message, unless `REQUIRE_QEMU=1` (set by CI), which makes it fail.
@@ -12,23 +13,36 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use estimator_core::filter::{IntermittentKalmanFilter, KalmanFilter};
+use estimator_core::filter::nn_bound::NnBoundConfig;
+use estimator_core::filter::nn_system::{Seed003Example, Tanh};
+use estimator_core::filter::nn_tbcp::NnTbcpEstimator;
+use estimator_core::filter::{
+    AssumedDensityFilter, CrossCoupledEstimator, IntermittentKalmanFilter, KalmanFilter, KfIo,
+};
+use estimator_core::gsum::GaussSum;
 use estimator_core::model::LinearModel;
+use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
 use nalgebra::{matrix, vector, Matrix3, SMatrix, Vector3};
 
 #[allow(dead_code)] // the firmware uses parts the host check does not
 #[path = "../estimator-core/firmware/src/run.rs"]
 mod run;
 
-use run::{Stream, Summary, VECTORS, VECTORS_FNV1A64};
+use run::{Stream, Summary, Vectors};
 
 /// The firmware binaries, their host-side drivers and budgets (flash bytes, stack bytes).
 /// The budget (≤ 32 KiB flash, ≤ 4 KiB stack) is stated for the cross-coupled
-/// estimator; the Kalman filters are held to it too.
+/// estimator; the others have no stated budget and are held to 32 KiB / 8 KiB only as a guard
+/// against regressions. The NN estimator (seed 003) needs more flash than that (its Kronecker gain solve and bound
+/// recursions); it is held to 48 KiB / 8 KiB, again only as a regression guard.
 type Driver = fn(&Stream<'_>, usize) -> Summary;
-const BINS: &[(&str, Driver, usize, usize)] = &[
-    ("kf", run::run_kf, 32 * 1024, 4 * 1024),
-    ("ikf", run::run_ikf, 32 * 1024, 4 * 1024),
+const BINS: &[(&str, Vectors, Driver, usize, usize)] = &[
+    ("kf", run::OCCLUSION, run::run_kf, 32 * 1024, 8 * 1024),
+    ("ikf", run::OCCLUSION, run::run_ikf, 32 * 1024, 8 * 1024),
+    ("cce", run::OCCLUSION, run::run_cce, 32 * 1024, 4 * 1024),
+    ("adf", run::OCCLUSION, run::run_adf, 32 * 1024, 8 * 1024),
+    ("kf-io", run::OCCLUSION, run::run_kf_io, 32 * 1024, 8 * 1024),
+    ("nn", run::NN, run::run_nn, 48 * 1024, 8 * 1024),
 ];
 
 fn firmware_dir() -> PathBuf {
@@ -36,7 +50,7 @@ fn firmware_dir() -> PathBuf {
 }
 
 fn stream() -> Stream<'static> {
-    Stream::parse_checked(VECTORS, VECTORS_FNV1A64).expect("embedded vectors are valid")
+    run::OCCLUSION.stream().expect("embedded vectors are valid")
 }
 
 #[test]
@@ -60,16 +74,31 @@ fn vectors_are_the_documented_stream() {
     // Both kinds of instants occur, or the IKF would say nothing the KF does not.
     assert!(drops > 10 && drops < 90, "{drops} dropouts");
     // A changed file must fail the check.
-    let mut corrupt = VECTORS.to_vec();
+    let bytes = run::OCCLUSION.bytes;
+    let mut corrupt = bytes.to_vec();
     corrupt[40] ^= 1;
     assert_eq!(
-        Stream::parse_checked(&corrupt, VECTORS_FNV1A64).map(|_| ()),
+        Stream::parse_checked(&corrupt, run::OCCLUSION.fnv1a64).map(|_| ()),
         Err(run::StreamError::BadHash)
     );
     assert_eq!(
-        Stream::parse(&VECTORS[..VECTORS.len() - 1]).map(|_| ()),
+        Stream::parse(&bytes[..bytes.len() - 1]).map(|_| ()),
         Err(run::StreamError::Truncated)
     );
+
+    // The token-bucket stream: the bucket (a, b, S, z₀) = (2, 3, 10, 6) transmits a data-
+    // independent pattern, recomputed here by hand from eq. (2).
+    let nn = run::NN.stream().expect("embedded NN vectors are valid");
+    assert_eq!((nn.steps, nn.seed), (100, 0x5EED_0003_F1A5_0008));
+    let mut z = 6u32;
+    for (i, r) in nn.records().enumerate() {
+        assert_eq!(r.k as usize, i + 1);
+        let filled = (z + 2).min(10);
+        let sent = filled >= 3;
+        z = if sent { filled - 3 } else { filled };
+        assert_eq!(r.delivered, sent, "k = {}", r.k);
+        assert_eq!(r.flags & 0x2 != 0, !sent);
+    }
 }
 
 /// Seed 001's model in f64, written out here independently of the firmware's `run::model`.
@@ -131,6 +160,107 @@ fn host_f32_runs_match_f64_filters() {
     assert_ne!(k32.digest, i32_.digest);
 }
 
+/// Seed 001's occlusion model in f64, written out independently of `run::occlusion`.
+fn occlusion_f64() -> Occlusion<f64, 3, 1, 4> {
+    let regions = OcclusionRegions::new(
+        [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
+        [5.0; 4],
+    )
+    .unwrap();
+    Occlusion::new(matrix![1.0, 0.0, 0.0], matrix![0.1], regions).unwrap()
+}
+
+/// The occlusion-aware estimators in the firmware compute what their f64 versions compute,
+/// and the CCE's labels are mostly right (a number from the stream, printed).
+#[test]
+fn host_f32_occlusion_estimators_match_f64() {
+    let s = stream();
+    let m = model_f64();
+    let x0 = vector![5.0, 5.0, 5.0];
+    let p0 = Matrix3::identity() * 4.0;
+    let g = GaussSum::<f64, 1, 15>::uniform().unwrap();
+    let mut cce = CrossCoupledEstimator::new(x0, p0, occlusion_f64(), &g).unwrap();
+    let mut adf = AssumedDensityFilter::new(x0, p0, occlusion_f64()).unwrap();
+    let mut kfio = KfIo::new(x0, p0, occlusion_f64()).unwrap();
+    let (mut right, mut drops) = (0, 0);
+    for r in s.records() {
+        let y = vector![f64::from(r.y[0]), f64::from(r.y[1])];
+        let y = r.delivered.then_some(&y);
+        let label = cce.step(&m, r.k as usize, y).unwrap();
+        adf.step(&m, r.k as usize, y).unwrap();
+        kfio.step(&m, r.k as usize, y).unwrap();
+        if !r.delivered {
+            drops += 1;
+            right += usize::from(label == usize::from(r.label));
+        }
+    }
+    println!("cce (f64): {right} of {drops} dropout labels right");
+    // Regions are 20 apart and the prediction's spread is a few units: a wrong label on more
+    // than a few dropouts would mean the label estimator is broken.
+    assert!(right * 10 >= drops * 9, "{right} of {drops}");
+    let runs = [
+        (run::run_cce(&s, usize::MAX), *cce.state()),
+        (run::run_adf(&s, usize::MAX), *adf.state()),
+        (run::run_kf_io(&s, usize::MAX), *kfio.state()),
+    ];
+    for (sum, reference) in runs {
+        assert_eq!(sum.errors, 0, "{}", sum.name);
+        for i in 0..3 {
+            let (a, b) = (f64::from(sum.x()[i]), reference[i]);
+            println!("{} x[{i}]: f32 {a} f64 {b}", sum.name);
+            assert!(
+                (a - b).abs() <= 1e-3 * b.abs().max(1.0),
+                "{} x[{i}]: f32 {a} vs f64 {b}",
+                sum.name
+            );
+        }
+    }
+}
+
+/// The NN estimator in f32 with the paper's configuration follows its f64 run until f32
+/// gives up: at k = 45 (cos 44 ≈ 0.99984, the two rows of C_k nearly coincide) the gain
+/// system is too ill-conditioned for f32's Cholesky, which refuses instead of returning a
+/// meaningless gain; the error is counted and the estimate kept. The f64 run goes through.
+#[test]
+fn host_f32_nn_matches_f64_until_f32_refuses() {
+    let s = run::NN.stream().unwrap();
+    let mut nn = NnTbcpEstimator::<f64, 3, 1, 2, 3, 6, Tanh>::new(
+        NnBoundConfig::seed003_example(),
+        Tanh,
+        Seed003Example::xhat0(),
+        Seed003Example::h0(),
+        Seed003Example::p0(),
+        Seed003Example::p0(),
+    )
+    .unwrap();
+    let full = run::run_nn(&s, usize::MAX);
+    println!("nn (f32, paper configuration): {full}");
+    let ok_steps = full.first_error.saturating_sub(1) as usize;
+    assert!(
+        ok_steps >= 40,
+        "f32 NN failed early, at k = {}",
+        full.first_error
+    );
+    for r in s.records().take(ok_steps) {
+        let y = vector![f64::from(r.y[0]), f64::from(r.y[1])];
+        nn.step(&Seed003Example, r.delivered.then_some(&y)).unwrap();
+    }
+    let part = run::run_nn(&s, ok_steps);
+    assert_eq!(part.errors, 0);
+    for i in 0..3 {
+        let (a, b) = (f64::from(part.x()[i]), nn.state()[i]);
+        println!("nn x[{i}] at k = {ok_steps}: f32 {a} f64 {b}");
+        assert!(
+            (a - b).abs() <= TOL_NN * b.abs().max(1.0),
+            "x[{i}]: f32 {a} vs f64 {b}"
+        );
+    }
+}
+
+/// Loose on purpose: the estimator's gain comes from an ill-conditioned Kronecker system
+/// near k = 44, which amplifies f32 rounding.
+const TOL_NN: f64 = 1e-2;
+
 fn require_qemu() -> bool {
     std::env::var("REQUIRE_QEMU").is_ok_and(|v| v == "1")
 }
@@ -168,7 +298,7 @@ fn build_firmware() -> PathBuf {
     // applies; keep the outer build's settings out of it.
     let status = Command::new(cargo)
         .current_dir(&dir)
-        .args(["build", "--release", "--locked", "--bins"])
+        .args(["build", "--release", "--bins"])
         .arg("--target-dir")
         .arg(dir.join("target"))
         .env_remove("RUSTFLAGS")
@@ -255,13 +385,13 @@ fn firmware_on_qemu_is_bit_exact_with_host() {
         return;
     }
     let bin_dir = build_firmware();
-    let s = stream();
     let mut mismatches = Vec::new();
     println!(
         "{:<5} {:>10} {:>8} {:>8} {:>8} {:>11}  result",
         "bin", "code+vt", "rodata", "data", "flash", "stack peak"
     );
-    for &(name, driver, flash_budget, stack_budget) in BINS {
+    for &(name, vectors, driver, flash_budget, stack_budget) in BINS {
+        let s = vectors.stream().expect("embedded vectors are valid");
         let elf = bin_dir.join(name);
         let out = bin_dir.join(format!("{name}.qemu.txt"));
         let (code, text) = run_qemu(&elf, &out);

@@ -58,3 +58,11 @@ unsafe impl GlobalAlloc for CountingAllocator {
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
+
+impl CountingAllocator {
+    /// Allocations counted since the process started (for probes that read the count at two
+    /// points of a long-running loop).
+    pub fn total(&self) -> usize {
+        self.allocations.load(Ordering::SeqCst)
+    }
+}

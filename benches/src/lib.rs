@@ -9,4 +9,5 @@
 //! branch pattern, and our filter and `adskalman` see bit-for-bit the same inputs.
 
 pub mod ads;
+pub mod latency;
 pub mod problems;

@@ -4,10 +4,16 @@
 //! The data path reads top to bottom: plant → sensor → channel stages → [`sim::Instant`]
 //! (→ shared memory in the pipeline) → estimator.
 
+pub mod publisher;
 pub mod sim;
+pub mod wire;
 
 pub use sim::{Instant, Observation, Scenario, Simulation};
 pub mod loss;
+pub mod nn_plant;
+pub mod occlusion;
 pub mod plant;
 pub mod scenario;
 pub mod stage;
+pub mod tobit_channel;
+pub mod token_bucket;

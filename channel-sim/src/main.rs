@@ -1,6 +1,25 @@
-//! `channel-sim`: simulates a plant, its sensors and the channel, and publishes the slots.
+//! `channel-sim`: simulates a plant, its sensors and the channel, and publishes the slots on
+//! iceoryx2 shared memory (see `channel_sim::publisher`). The same publisher is reachable as
+//! the hidden `ipc-runner channel-sim` subcommand, which is what `ipc-runner demo` starts.
+
+use clap::Parser;
+
+/// Publishes one scenario's slots and truth on iceoryx2 shared memory.
+#[derive(Debug, Parser)]
+#[command(name = "channel-sim", version)]
+struct Cli {
+    #[command(flatten)]
+    args: channel_sim::publisher::PublisherArgs,
+}
 
 fn main() {
-    eprintln!("channel-sim: the publisher arrives with the pipeline issue");
-    std::process::exit(2);
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let cli = Cli::parse();
+    match channel_sim::publisher::run(&cli.args, channel_sim::publisher::resolve_scenario) {
+        Ok(_) => {}
+        Err(e) => {
+            eprintln!("channel-sim: error: {e:#}");
+            std::process::exit(1);
+        }
+    }
 }

@@ -25,6 +25,11 @@ pub trait StageSpec: Send + Sync + Debug {
     fn build(&self, nodes: usize) -> Box<dyn Stage>;
     /// For downcasting to the concrete spec (estimators read channel parameters this way).
     fn as_any(&self) -> &dyn Any;
+    /// Parameters accepted although they violate the source paper's own conditions (accepted
+    /// only by an explicit opt-in), one line each: the evaluation prints them. Default: none.
+    fn warnings(&self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// A channel stage's state within one run.

@@ -18,6 +18,11 @@ pub trait Estimator: Send {
     /// every successful step. `eval` averages each name over runs per k and writes it as an
     /// array into the estimator's JSON entry. Default: none.
     fn diagnostics(&self, _sink: &mut dyn FnMut(&'static str, f64)) {}
+    /// Evaluation only: diagnostics that need the true state x_k (e.g. the normalised
+    /// estimation error squared against the estimator's own covariance), reported like
+    /// [`Estimator::diagnostics`] and averaged over runs per k. Takes `&self`, so the truth
+    /// can never influence an estimate; a real-time loop never calls it. Default: none.
+    fn diagnostics_vs_truth(&self, _truth: &[f64], _sink: &mut dyn FnMut(&'static str, f64)) {}
     /// True for oracle baselines that must be fed the observations *before* the channel
     /// (`Simulation::raw_observations`, every packet delivered) instead of what the channel
     /// delivered, such as the full-information `kf`. Only offline evaluation can do that; a

@@ -4,6 +4,12 @@
 pub mod estimator;
 
 pub use estimator::Estimator;
+pub mod demo;
 pub mod estimators;
 pub mod eval;
+pub mod latency;
 pub mod plot;
+pub mod plot_bound;
+pub mod replay;
+pub mod run;
+pub mod transport;

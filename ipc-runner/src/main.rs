@@ -20,11 +20,32 @@ struct Cli {
 enum Command {
     /// Monte-Carlo evaluation of every estimator that applies to a scenario.
     Eval(EvalArgs),
-    /// One-command demo of the shared-memory pipeline.
-    Demo,
+    /// One-command demo of the shared-memory pipeline: starts the publisher as a child
+    /// process, runs the real-time loop, prints the summary and writes a plot.
+    Demo(ipc_runner::demo::DemoArgs),
+    /// The real-time loop against a running channel-sim (same --prefix).
+    Run(ipc_runner::run::RunArgs),
+    /// Run the estimators over a recorded slot log (CSV, see docs/replay.md).
+    Replay(ipc_runner::replay::ReplayArgs),
+    /// The channel-sim publisher built into this executable (what `demo` starts).
+    #[command(hide = true)]
+    ChannelSim(channel_sim::publisher::PublisherArgs),
+}
+
+/// Runs a pipeline subcommand: its exit code, or code 1 with the error chain.
+fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
+    match r {
+        Ok(0) => Ok(()),
+        Ok(code) => std::process::exit(code),
+        Err(e) => Err(CommandError {
+            code: 1,
+            message: format!("{e:#}"),
+        }),
+    }
 }
 
 fn main() {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {
@@ -53,10 +74,12 @@ fn main() {
     };
     let result = match cli.command {
         Command::Eval(args) => ipc_runner::eval::cli::run(args),
-        Command::Demo => {
-            println!("ipc-runner demo: not yet available (the pipeline issue adds it)");
-            Ok(())
-        }
+        Command::Demo(a) => pipeline(ipc_runner::demo::main(&a)),
+        Command::Run(a) => pipeline(ipc_runner::run::main(&a)),
+        Command::Replay(a) => pipeline(ipc_runner::replay::main(&a)),
+        Command::ChannelSim(a) => pipeline(
+            channel_sim::publisher::run(&a, channel_sim::publisher::resolve_scenario).map(|_| 0),
+        ),
     };
     if let Err(CommandError { code, message }) = result {
         eprintln!("ipc-runner: error: {message}");

@@ -9,6 +9,9 @@
 
 pub mod config;
 pub mod linear;
+pub mod nn_token_bucket;
+pub mod occlusion;
+pub mod tobit_fusion;
 
 use std::any::Any;
 use std::fmt;
@@ -24,7 +27,12 @@ use crate::stage::{Stage, StageSpec};
 pub type PresetFn = fn() -> Result<Box<dyn Scenario>, ScenarioError>;
 
 /// The preset registry: name → constructor. Paper presets add one line each.
-pub const PRESETS: &[(&str, PresetFn)] = &[("linear", linear::preset)];
+pub const PRESETS: &[(&str, PresetFn)] = &[
+    ("linear", linear::preset),
+    ("occlusion", occlusion::preset),
+    ("nn-token-bucket", nn_token_bucket::preset),
+    ("tobit-fusion", tobit_fusion::preset),
+];
 
 /// The preset named `name`.
 pub fn preset(name: &str) -> Result<Box<dyn Scenario>, ScenarioError> {
@@ -225,6 +233,18 @@ impl ComposedScenario {
     /// The channel stage specs in application order.
     pub fn stages(&self) -> &[Arc<dyn StageSpec>] {
         &self.stages
+    }
+
+    /// Every stage's [`StageSpec::warnings`], prefixed with the stage name.
+    pub fn warnings(&self) -> Vec<String> {
+        self.stages
+            .iter()
+            .flat_map(|s| {
+                s.warnings()
+                    .into_iter()
+                    .map(|w| format!("{}: {w}", s.name()))
+            })
+            .collect()
     }
 
     /// The first stage spec of concrete type `T`, if any.

@@ -12,7 +12,7 @@ use core::ptr::{addr_of, read_volatile, write_volatile};
 
 use cortex_m_semihosting::hio;
 
-use run::{Stream, Summary, VECTORS, VECTORS_FNV1A64};
+use run::{Stream, Summary, Vectors};
 
 /// Exit status: run completed (estimator errors, if any, are in the result line).
 pub const EXIT_OK: u32 = 0;
@@ -50,8 +50,8 @@ pub fn exit(code: u32) -> ! {
     }
 }
 
-/// Reads `steps=N` from the semihosting command line (QEMU's `-append`, after the kernel's
-/// path); `None` when absent or when the line does not fit the buffer.
+/// Reads `steps=N` from the semihosting command line (QEMU's `-semihosting-config arg=steps=N`,
+/// or `-append` after the kernel's path); `None` when absent or when the line does not fit.
 // Not inlined, so its buffer is not part of `main_with`'s frame (and of the measured stack).
 #[inline(never)]
 pub fn cmdline_steps() -> Option<usize> {
@@ -121,14 +121,14 @@ pub fn stack_peak() -> (usize, bool) {
     (top - a, a == lo)
 }
 
-/// The body of every firmware binary: check the embedded stream, run `driver` over it, report.
+/// The body of every firmware binary: check the embedded stream `vectors`, run `driver` over it, report.
 ///
 /// With `steps=N` on the command line (instruction-count mode) it runs only the first N
 /// instants and exits silently, so that the instruction count of two runs differs only by the
 /// estimator steps; otherwise it runs the whole stream with the stack painted and prints
 /// `RESULT <summary>` and `STACK <name> peak=<bytes>`.
-pub fn main_with(driver: fn(&Stream<'_>, usize) -> Summary) -> ! {
-    let stream = match Stream::parse_checked(VECTORS, VECTORS_FNV1A64) {
+pub fn main_with(vectors: Vectors, driver: fn(&Stream<'_>, usize) -> Summary) -> ! {
+    let stream = match vectors.stream() {
         Ok(s) => s,
         Err(e) => {
             out!("ERROR {e}\n");

@@ -5,6 +5,10 @@
 
 pub mod ikf;
 pub mod kf;
+pub mod nn;
+pub mod occlusion;
+pub mod pf;
+pub mod tobit;
 
 use channel_sim::Scenario;
 
@@ -20,6 +24,8 @@ pub struct EvalOptions {
     pub horizon: u32,
     /// Experiment seed.
     pub seed: u64,
+    /// Particles of the `pf` reference filter (0 disables it).
+    pub particles: usize,
 }
 
 impl Default for EvalOptions {
@@ -28,6 +34,7 @@ impl Default for EvalOptions {
             runs: 500,
             horizon: 100,
             seed: 0,
+            particles: pf::DEFAULT_PARTICLES,
         }
     }
 }
@@ -42,7 +49,14 @@ pub type Factory = fn(
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>>;
 
 /// Every estimator family, in the order they appear in tables, JSON and plots.
-pub const FACTORIES: &[Factory] = &[kf::build, ikf::build];
+pub const FACTORIES: &[Factory] = &[
+    kf::build,
+    ikf::build,
+    occlusion::build,
+    pf::build,
+    nn::build,
+    tobit::build,
+];
 
 /// All estimators that apply to `scenario`, from `factories` in order.
 pub fn build_all(

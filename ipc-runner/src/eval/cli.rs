@@ -41,6 +41,9 @@ pub struct EvalArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Particles of the `pf` reference filter on occlusion scenarios (0: no `pf`).
+    #[arg(long, default_value_t = crate::estimators::pf::DEFAULT_PARTICLES)]
+    pub particles: usize,
 }
 
 /// A failed command: exit code 2 for bad input (flags, scenario, configuration), 1 otherwise.
@@ -91,14 +94,23 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         runs: args.runs,
         horizon: args.horizon,
         seed: args.seed,
+        particles: args.particles,
         ..EvalOptions::default()
     };
     let run_config = RunConfig {
         threads: args.threads.map(|t| t as usize),
         progress: !args.quiet,
     };
-    let result = evaluate(&*scenario, &options, FACTORIES, &run_config)
+    let mut result = evaluate(&*scenario, &options, FACTORIES, &run_config)
         .map_err(|e| CommandError::failure(format!("{e:#}")))?;
+    crate::estimators::nn::after_eval(&mut result, &*scenario, args.plot.as_deref())
+        .map_err(|e| CommandError::failure(format!("{e:#}")))?;
+    if let Some(c) = scenario
+        .as_any()
+        .downcast_ref::<scenario::ComposedScenario>()
+    {
+        result.warnings = c.warnings();
+    }
     print!("{}", result.summary());
     if let Some(path) = &args.json {
         write(path, &result.to_json())?;

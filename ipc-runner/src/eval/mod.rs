@@ -132,9 +132,15 @@ pub struct RunEstimator {
 }
 
 impl RunEstimator {
-    fn record_diagnostics(&mut self, e: &dyn crate::Estimator, k: usize, len: usize) {
+    fn record_diagnostics(
+        &mut self,
+        e: &dyn crate::Estimator,
+        k: usize,
+        len: usize,
+        truth: &[f64],
+    ) {
         let diags = &mut self.diagnostics;
-        e.diagnostics(&mut |name, value| {
+        let mut sink = |name, value| {
             let slot = match diags.iter().position(|(n, _)| *n == name) {
                 Some(i) => i,
                 None => {
@@ -143,7 +149,9 @@ impl RunEstimator {
                 }
             };
             diags[slot].1[k] = value;
-        });
+        };
+        e.diagnostics(&mut sink);
+        e.diagnostics_vs_truth(truth, &mut sink);
     }
 }
 
@@ -256,7 +264,7 @@ fn record_estimate(
         for i in 0..nx {
             sq[k * nx + i] = (truth[i] - xhat[i]).powi(2);
         }
-        rec.record_diagnostics(e, k, len);
+        rec.record_diagnostics(e, k, len, truth);
     }
 }
 

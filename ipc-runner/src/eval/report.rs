@@ -45,6 +45,9 @@ pub struct EvalResult {
     /// Run 0's trajectories (plots only).
     #[serde(skip)]
     pub trajectory: Trajectory,
+    /// The scenario's warnings (parameters accepted against the paper's own conditions).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// One estimator's results.
@@ -314,6 +317,7 @@ impl Accumulator {
                 nodes: channel,
             },
             trajectory: self.trajectory.unwrap_or_default(),
+            warnings: Vec::new(),
         }
     }
 }
@@ -375,6 +379,29 @@ impl EvalResult {
                 "{:<12} {:>12.6} {:>10.6} {:>14.6} {:>9}",
                 name, r.avg_mse, r.avg_mse_se, r.median_run_avg, r.diverged_runs
             );
+        }
+        // Consistency of an estimator's own covariance (diagnostics `inside_95`, `trace_p`).
+        for (name, r) in &self.estimators {
+            let get = |n: &str| r.diagnostics.iter().find(|(d, _)| d == n).map(|(_, v)| v);
+            if let (Some(inside), Some(tr)) = (get("inside_95"), get("trace_p")) {
+                let t = self.horizon as usize;
+                let avg = |v: &[f64]| v[1..].iter().sum::<f64>() / t as f64;
+                let worst = inside[1..].iter().copied().fold(f64::INFINITY, f64::min);
+                let above = (1..=t).filter(|&k| r.mse[k] > tr[k]).count();
+                let _ = writeln!(
+                    s,
+                    "{name}: error inside its 95 % ellipse in {:.2} % of run-instants (worst k: \
+                     {:.1} %); avg MSE {:.4} vs avg tr P {:.4}; MSE(k) > tr P(k) at {above} of \
+                     {t} instants",
+                    100.0 * avg(inside),
+                    100.0 * worst,
+                    r.avg_mse,
+                    avg(tr)
+                );
+            }
+        }
+        for w in &self.warnings {
+            let _ = writeln!(s, "WARNING: {w}");
         }
         for c in &self.channel.nodes {
             let _ = writeln!(

@@ -11,6 +11,7 @@ fn options(runs: u64, horizon: u32, seed: u64) -> EvalOptions {
         runs,
         horizon,
         seed,
+        ..EvalOptions::default()
     }
 }
 

@@ -2,7 +2,9 @@
 #![no_std]
 #![no_main]
 
+use estimator_firmware::run;
+
 #[cortex_m_rt::entry]
 fn main() -> ! {
-    estimator_firmware::main_with(estimator_firmware::run::run_kf)
+    estimator_firmware::main_with(run::OCCLUSION, run::run_kf)
 }

@@ -1,0 +1,10 @@
+//! The assumed-density filter (exact interval likelihoods) over the embedded occlusion stream.
+#![no_std]
+#![no_main]
+
+use estimator_firmware::run;
+
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    estimator_firmware::main_with(run::OCCLUSION, run::run_adf)
+}

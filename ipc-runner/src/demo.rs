@@ -1,0 +1,326 @@
+//! `ipc-runner demo`: the whole pipeline with one command.
+//!
+//! Starts the publisher as a child process, runs the real-time loop in this process, and at
+//! the end prints the summary (slots, MSE against truth per estimator, latency table) and
+//! writes a plot of true vs estimated trajectories plus CSV/JSON files.
+//!
+//! The child is this very executable, started with the hidden `channel-sim` subcommand (the
+//! publisher of the `channel-sim` crate, identical to the `channel-sim` binary). That makes
+//! `cargo run --release -p ipc-runner -- demo` work on a fresh clone: cargo builds only the
+//! `ipc-runner` binary for `cargo run -p ipc-runner`, so a separate `channel-sim` executable
+//! might not exist or might be stale, whereas `std::env::current_exe()` always is the binary
+//! that is running. `--channel-sim PATH` uses an external publisher binary instead.
+
+use crate::run::{self, select, Hooks, RunArgs, WaitMode};
+use anyhow::{anyhow, bail, Context, Result};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+/// Default scenario of the demo.
+pub const DEFAULT_SCENARIO: &str = "occlusion";
+/// Used when [`DEFAULT_SCENARIO`] is not in the preset registry of this build.
+pub const FALLBACK_SCENARIO: &str = "linear";
+
+/// Options of `ipc-runner demo`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct DemoArgs {
+    /// Scenario preset (default: occlusion).
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Scenario TOML file (instead of a preset).
+    #[arg(long, conflicts_with = "scenario")]
+    pub config: Option<PathBuf>,
+    /// Number of sampling instants (default: the scenario's horizon).
+    #[arg(long)]
+    pub steps: Option<u32>,
+    /// Sampling rate in Hz (0 = as fast as possible).
+    #[arg(long, default_value_t = 200.0)]
+    pub rate: f64,
+    /// Experiment seed (same meaning and default as `eval --seed`).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Run index within the seed.
+    #[arg(long, default_value_t = 0)]
+    pub run: u64,
+    /// Estimators, comma-separated (default: all that apply).
+    #[arg(long, value_delimiter = ',')]
+    pub estimators: Vec<String>,
+    /// How the loop waits for slots.
+    #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
+    pub wait: WaitMode,
+    /// Directory for the plot, CSV and JSON outputs.
+    #[arg(long, default_value = "demo-out")]
+    pub out: PathBuf,
+    /// Service-name prefix (default: unique per demo process).
+    #[arg(long)]
+    pub prefix: Option<String>,
+    /// Publisher executable (default: this executable's hidden `channel-sim` subcommand).
+    #[arg(long)]
+    pub channel_sim: Option<PathBuf>,
+    /// Pin the loop to this CPU (best effort).
+    #[arg(long)]
+    pub cpu: Option<usize>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Kills the child if the demo bails out early.
+struct ChildGuard(Option<Child>);
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        if let Some(c) = self.0.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// The publisher command: `--channel-sim PATH`, else this executable + `channel-sim`.
+fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
+    if let Some(p) = explicit {
+        if !p.exists() {
+            bail!(
+                "--channel-sim {p:?} does not exist; build it with `cargo build --release -p \
+                 channel-sim` (target/release/channel-sim) or omit --channel-sim to use the \
+                 publisher built into ipc-runner"
+            );
+        }
+        return Ok(Command::new(p));
+    }
+    let me = std::env::current_exe().map_err(|e| {
+        anyhow!(
+            "cannot locate the running executable ({e}); start the publisher yourself with \
+             `cargo run --release -p channel-sim -- --prefix P` and use `ipc-runner run --prefix P`"
+        )
+    })?;
+    let mut c = Command::new(me);
+    c.arg("channel-sim");
+    Ok(c)
+}
+
+/// `ipc-runner demo`. Returns the exit code.
+pub fn main(args: &DemoArgs) -> Result<i32> {
+    let (scenario_name, (scenario, horizon)) = match (&args.scenario, &args.config) {
+        (Some(n), _) => (n.clone(), select::scenario(n, None)?),
+        (None, Some(c)) => (
+            c.display().to_string(),
+            select::scenario(DEFAULT_SCENARIO, Some(c))?,
+        ),
+        (None, None) => match select::scenario(DEFAULT_SCENARIO, None) {
+            Ok(s) => (DEFAULT_SCENARIO.to_string(), s),
+            Err(e) => {
+                let fallback = FALLBACK_SCENARIO;
+                eprintln!(
+                    "demo: the default scenario {DEFAULT_SCENARIO:?} is not available in this \
+                     build ({e:#}); running {fallback:?} instead"
+                );
+                (fallback.to_string(), select::scenario(fallback, None)?)
+            }
+        },
+    };
+    let steps = args.steps.unwrap_or(horizon);
+    let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
+    let make = select::estimators(
+        scenario.clone(),
+        &args.estimators,
+        select::Experiment {
+            seed: args.seed,
+            run: args.run,
+            horizon: steps,
+        },
+    )?;
+    let prefix = args
+        .prefix
+        .clone()
+        .unwrap_or_else(|| format!("estpipe-demo-{}", std::process::id()));
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory {:?}", args.out))?;
+
+    let mut cmd = publisher_command(args.channel_sim.as_deref())?;
+    if let Some(c) = &args.config {
+        cmd.arg("--config").arg(c);
+    } else {
+        cmd.arg("--scenario").arg(&scenario_name);
+    }
+    cmd.args(["--seed", &args.seed.to_string()])
+        .args(["--run", &args.run.to_string()])
+        .args(["--steps", &steps.to_string()])
+        .args(["--rate", &args.rate.to_string()])
+        .args(["--prefix", &prefix])
+        .arg("--quiet")
+        .stdin(Stdio::null());
+    let child = cmd
+        .spawn()
+        .with_context(|| format!("cannot start the publisher {cmd:?}"))?;
+    let mut guard = ChildGuard(Some(child));
+
+    let mut rargs = RunArgs::new(&scenario_name, &prefix);
+    rargs.config = args.config.clone();
+    rargs.estimators = args.estimators.clone();
+    rargs.wait = args.wait;
+    rargs.cpu = args.cpu;
+    rargs.quiet = true;
+    rargs.connect_timeout = 30.0;
+    rargs.steps = steps;
+    rargs.seed = args.seed;
+    rargs.run = args.run;
+    rargs.buffer = 1024;
+    rargs.estimates_csv = Some(args.out.join("estimates.csv"));
+    rargs.slots_csv = Some(args.out.join("slots.csv"));
+    rargs.json = Some(args.out.join("report.json"));
+
+    eprintln!(
+        "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
+         (prefix {prefix})",
+        if args.rate > 0.0 {
+            format!("{} Hz", args.rate)
+        } else {
+            "full speed".into()
+        },
+        args.seed,
+        args.run,
+        args.wait.as_str()
+    );
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(u64::from(steps)).with_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} instants · {msg}")
+                .expect("static template"),
+        )
+    };
+    let mut progress = |k: u32, c: &run::assemble::Counts| {
+        bar.set_position(u64::from(k));
+        bar.set_message(format!(
+            "{} delivered, {} dropped, {} lost in IPC",
+            c.delivered, c.dropped_by_channel, c.lost_in_ipc
+        ));
+    };
+    let hooks = Hooks {
+        progress: Some(&mut progress),
+        ..Hooks::default()
+    };
+    let result = run::run_loop(
+        &rargs,
+        scenario.nx(),
+        u8::try_from(scenario.nodes())?,
+        u8::try_from(scenario.ny())?,
+        &make,
+        hooks,
+    );
+    bar.finish_and_clear();
+    let (report, traj) = result?;
+    let status = guard.0.take().map(|mut c| c.wait()).transpose()?;
+    if let Some(s) = status {
+        if !s.success() {
+            eprintln!("demo: the publisher exited with {s}");
+        }
+    }
+    run::finish(&rargs, &report, &traj, scenario.ny())?;
+    let plot = args.out.join("trajectories.svg");
+    if let Err(e) = plot_trajectories(&traj, &plot, &scenario_name) {
+        eprintln!("demo: no plot ({e:#})");
+    }
+
+    println!("{}", report.summary());
+    println!(
+        "wrote {} (true vs estimated), estimates.csv, slots.csv (replayable), report.json in {:?}",
+        plot.file_name().and_then(|f| f.to_str()).unwrap_or(""),
+        args.out
+    );
+    Ok(run::exit_code(&report))
+}
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // The embedded font is valid; a failure would only lose the plot's text.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            plotters::style::FontStyle::Normal,
+            include_bytes!("../assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
+/// One panel per state component: truth and each estimator over k (first session).
+pub fn plot_trajectories(traj: &run::Trajectories, path: &Path, title: &str) -> Result<()> {
+    use plotters::prelude::*;
+    register_font();
+    let nx = traj.nx.max(1);
+    let n = traj
+        .keys
+        .iter()
+        .take_while(|(s, _)| *s == traj.keys.first().map_or(1, |f| f.0))
+        .count();
+    let ne = traj.names.len();
+    let root = SVGBackend::new(path, (900, 260 * nx as u32)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
+    let panels = root.split_evenly((nx, 1));
+    let colors = [&BLUE, &RED, &GREEN, &MAGENTA, &CYAN, &BLACK];
+    for (j, panel) in panels.iter().enumerate() {
+        let truth: Vec<(f64, f64)> = (0..n)
+            .map(|i| (f64::from(traj.keys[i].1), traj.truth[i * nx + j]))
+            .filter(|p| p.1.is_finite())
+            .collect();
+        let est = |e: usize| -> Vec<(f64, f64)> {
+            (0..n)
+                .map(|i| {
+                    (
+                        f64::from(traj.keys[i].1),
+                        traj.estimates[(i * ne + e) * nx + j],
+                    )
+                })
+                .filter(|p| p.1.is_finite())
+                .collect()
+        };
+        let all: Vec<f64> = truth
+            .iter()
+            .map(|p| p.1)
+            .chain((0..ne).flat_map(|e| est(e).into_iter().map(|p| p.1)))
+            .collect();
+        let (lo, hi) = all
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let (lo, hi) = if lo < hi { (lo, hi) } else { (-1.0, 1.0) };
+        let pad = 0.05 * (hi - lo);
+        let kmax = traj.keys.get(n.saturating_sub(1)).map_or(1, |k| k.1).max(1);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(format!("{title}: x[{j}]"), ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0f64..f64::from(kmax), (lo - pad)..(hi + pad))
+            .map_err(|e| anyhow!("plot: {e}"))?;
+        chart
+            .configure_mesh()
+            .x_desc("k")
+            .draw()
+            .map_err(|e| anyhow!("plot: {e}"))?;
+        chart
+            .draw_series(LineSeries::new(truth, BLACK.stroke_width(2)))
+            .map_err(|e| anyhow!("plot: {e}"))?
+            .label("truth")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
+        for e in 0..ne {
+            let c = colors[e % colors.len()];
+            chart
+                .draw_series(LineSeries::new(est(e), c))
+                .map_err(|e| anyhow!("plot: {e}"))?
+                .label(traj.names[e].clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| anyhow!("plot: {e}"))?;
+    }
+    root.present().map_err(|e| anyhow!("plot: {e}"))?;
+    Ok(())
+}

@@ -1,0 +1,327 @@
+//! `nn`, `kf`, `ekf`, `ekf-std`: the estimators of seed 003 on the `nn-token-bucket` scenario
+//! (any composed scenario whose plant is channel-sim's `Seed003Plant`).
+//!
+//! * **`nn`** — the paper's recursive NN-based estimator (5)-(6) with the Theorem 1 bounds and
+//!   the Theorem 2 gain (Kronecker solve of (35)), section IV's scalars (`α = 0.1`, `β = 0.9`,
+//!   `θ = 0.001`, `H̄ = 8`, `φ̄ = 1`, `ε̄ = 0.1`), `tanh` activation, `Ĥ₀` of section IV,
+//!   `P̄₀ = Q̄₀ = 10 I`. Diagnostics: `bound_trace` = tr P̄_k, `bound_q_trace` = tr Q̄_k,
+//!   `phi_norm` = ‖φ(x̂_k)‖ and `phi_exceeds` = 1{‖φ(x̂_k)‖ > φ̄} (its mean over runs is the
+//!   fraction of runs violating the paper's `‖φ‖ ≤ φ̄` at k). [`after_eval`] adds
+//!   `empirical_trace` = tr E[e_k e_kᵀ] = MSE(k).
+//! * **`kf`** — the paper's KF: `A_k` only, `f` ignored.
+//! * **`ekf`** — the paper's EKF: `A_k + ∂f/∂x|_{x̂_{k|k−1}}` as the linear transition.
+//! * **`ekf-std`** — a standard EKF (mean `A_k x̂ + f(x̂)`), the product's option beside the
+//!   paper's.
+//!
+//! The three baselines are estimator-core's `CoupledNoiseKf`: the exact one-step predictor for
+//! noise that drives state and measurement (cross-covariance `B_k w̄² D_kᵀ`), prediction only
+//! when the bucket withheld the packet, and a spectral pseudo-inverse of the innovation
+//! covariance, which becomes singular because `D w̄² Dᵀ` has rank 1 in two dimensions.
+//! All four produce `x̂_k` from `y_1 … y_{k−1}` (the paper's `x̂_k` is a one-step prediction).
+//! This scenario's plant has no linear description, so the framework's `kf`/`ikf` do not
+//! apply to it and the name `kf` means the paper's KF here.
+
+use std::path::Path;
+
+use channel_sim::nn_plant::Seed003Plant;
+use channel_sim::scenario::ComposedScenario;
+use channel_sim::token_bucket::TokenBucketStage;
+use channel_sim::{Observation, Scenario};
+use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
+use estimator_core::filter::nn_assumptions::{check_before_run, BucketParams, PreRunVerdict};
+use estimator_core::filter::nn_bound::NnBoundConfig;
+use estimator_core::filter::nn_system::{Seed003Example, Tanh};
+use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
+use estimator_core::Error;
+use nalgebra::{matrix, SMatrix, SVector};
+
+use super::EvalOptions;
+use crate::eval::EvalResult;
+use crate::Estimator;
+
+/// The seed 003 scenario's parts, if `scenario` is one.
+fn seed003(scenario: &dyn Scenario) -> Option<(&ComposedScenario, &Seed003Plant)> {
+    let composed = scenario.as_any().downcast_ref::<ComposedScenario>()?;
+    let plant = composed.plant().as_any().downcast_ref::<Seed003Plant>()?;
+    Some((composed, plant))
+}
+
+/// Section IV's configuration with the scenario's `w̄²`.
+pub fn config(w_var: f64) -> anyhow::Result<NnBoundConfig<f64>> {
+    Ok(NnBoundConfig::new(
+        [0.1; 4], [0.9; 12], [0.001; 2], 8.0, 1.0, 0.1, w_var,
+    )?)
+}
+
+/// `ε̄` of section IV.
+pub const EPS_BAR: f64 = 0.1;
+
+/// Builds the seed 003 estimators (none for other scenarios).
+pub fn build(
+    scenario: &dyn Scenario,
+    _options: &EvalOptions,
+    _seed: u64,
+    _run: u64,
+) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
+    let Some((composed, plant)) = seed003(scenario) else {
+        return Ok(Vec::new());
+    };
+    let init = composed.initial();
+    let x0 = SVector::<f64, 3>::from_column_slice(init.estimator_mean.as_slice());
+    let p0 = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.estimator_cov[(i, j)]);
+    let w = plant.w_var();
+    let nn = NnTbcpEstimator::new(
+        config(w)?,
+        Tanh,
+        x0,
+        Seed003Example::h0(),
+        p0,
+        Seed003Example::p0(),
+    )
+    .map_err(|e| anyhow::anyhow!("nn: {e}"))?;
+    let base = |name: &'static str, mode| -> anyhow::Result<Box<dyn Estimator>> {
+        let kf = CoupledNoiseKf::new(x0, p0, matrix![w], mode)
+            .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        Ok(Box::new(Baseline { name, kf }))
+    };
+    Ok(vec![
+        Box::new(Nn { nn }),
+        base("kf", Linearisation::None)?,
+        base("ekf", Linearisation::PaperJacobian)?,
+        base("ekf-std", Linearisation::Ekf)?,
+    ])
+}
+
+fn measurement(obs: &[Observation]) -> Option<SVector<f64, 2>> {
+    obs.first()
+        .and_then(|o| o.measurement())
+        .map(SVector::<f64, 2>::from_column_slice)
+}
+
+fn out_of_order() -> Error {
+    Error::InvalidConfig {
+        field: "k",
+        reason: "instants must be processed in increasing order",
+    }
+}
+
+struct Nn {
+    nn: Seed003Nn<f64>,
+}
+
+impl Estimator for Nn {
+    fn name(&self) -> &'static str {
+        "nn"
+    }
+
+    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
+        let k = k as usize;
+        if k <= self.nn.instant() {
+            return Err(out_of_order());
+        }
+        let mut nn = self.nn;
+        // Instants missing from the stream (lost inside the IPC) count as withheld packets.
+        while nn.instant() + 1 < k {
+            nn.step(&Seed003Example, None)?;
+        }
+        nn.step(&Seed003Example, measurement(obs).as_ref())?;
+        self.nn = nn;
+        Ok(())
+    }
+
+    fn estimate(&self, out: &mut [f64]) {
+        out[..3].copy_from_slice(self.nn.state().as_slice());
+    }
+
+    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
+        sink("bound_trace", self.nn.bound_p().trace());
+        sink("bound_q_trace", self.nn.bound_q().trace());
+        let phi = self.nn.phi_norm();
+        sink("phi_norm", phi);
+        sink(
+            "phi_exceeds",
+            f64::from(u8::from(phi > self.nn.config().phi_bar())),
+        );
+    }
+}
+
+struct Baseline {
+    name: &'static str,
+    kf: CoupledNoiseKf<f64, 3, 1, 2>,
+}
+
+impl Estimator for Baseline {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
+        let k = k as usize;
+        if k <= self.kf.instant() {
+            return Err(out_of_order());
+        }
+        let mut kf = self.kf;
+        let sys = Seed003Example;
+        while kf.instant() + 1 < k {
+            kf.step(&sys, &sys, None)?;
+        }
+        let y = measurement(obs);
+        if self.name == "kf" {
+            kf.step(&sys, &NoNonlinearity, y.as_ref())?;
+        } else {
+            kf.step(&sys, &sys, y.as_ref())?;
+        }
+        self.kf = kf;
+        Ok(())
+    }
+
+    fn estimate(&self, out: &mut [f64]) {
+        out[..3].copy_from_slice(self.kf.state().as_slice());
+    }
+
+    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
+        sink("trace_p", self.kf.covariance().trace());
+    }
+}
+
+/// The assumption checker's pre-run verdict for a seed 003 scenario (`None` otherwise).
+pub fn verdict(scenario: &dyn Scenario) -> anyhow::Result<Option<PreRunVerdict<f64>>> {
+    let Some((composed, plant)) = seed003(scenario) else {
+        return Ok(None);
+    };
+    let init = composed.initial();
+    let e0 = SVector::<f64, 3>::from_column_slice(init.mean.as_slice())
+        - SVector::<f64, 3>::from_column_slice(init.estimator_mean.as_slice());
+    let cov = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.cov[(i, j)]);
+    let p0_true = cov + e0 * e0.transpose();
+    let p0_bar = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.estimator_cov[(i, j)]);
+    let bucket = composed
+        .stage::<TokenBucketStage>()
+        .map(|b| BucketParams {
+            a: b.a,
+            b: b.b,
+            s: b.s,
+            z0: b.z0,
+        })
+        .ok_or_else(|| anyhow::anyhow!("seed 003 scenario without a token-bucket stage"))?;
+    // sup ‖f‖ of section IV's f: x₂ = π/2, |cos x₃| = 1, |sin x₁| = 1 give 8√3.
+    let f_sup = 8.0 * 3f64.sqrt();
+    Ok(Some(check_before_run::<f64, 3, 3, _>(
+        &config(plant.w_var())?,
+        &Tanh,
+        EPS_BAR,
+        &p0_true,
+        &p0_bar,
+        Some(f_sup),
+        bucket,
+    )?))
+}
+
+/// How the empirical covariance trace compares with the bound, per k.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoundCheck {
+    /// Instants k = 0..=T where tr E[e eᵀ] > tr P̄_k (a necessary condition of P_k ≤ P̄_k
+    /// failing).
+    pub exceeded_at: Vec<usize>,
+    /// Instants k ≥ 1 where the bound is not finite.
+    pub non_finite_at: Vec<usize>,
+    /// Smallest tr P̄_k / tr E[e eᵀ] over k ≥ 1.
+    pub min_ratio_after_0: f64,
+}
+
+/// Adds `empirical_trace` (= MSE(k) = tr E[e_k e_kᵀ]) to the `nn` entry, prints the assumption
+/// checker's verdict and the bound check, and writes the bound plot beside `plot` (as
+/// `<stem>-bound.png`/`.svg`). Does nothing for other scenarios.
+pub fn after_eval(
+    result: &mut EvalResult,
+    scenario: &dyn Scenario,
+    plot: Option<&Path>,
+) -> anyhow::Result<()> {
+    let Some(v) = verdict(scenario)? else {
+        return Ok(());
+    };
+    println!("seed 003 assumption checker (before the run):\n{v}");
+    let Some(check) = add_empirical_trace(result) else {
+        return Ok(());
+    };
+    println!(
+        "bound check: tr E[e eᵀ] > tr P̄_k at {} of {} instants {:?}; min tr P̄/tr E[eeᵀ] over k ≥ 1: {:.3e}",
+        check.exceeded_at.len(),
+        result.horizon as usize + 1,
+        check.exceeded_at,
+        check.min_ratio_after_0
+    );
+    if let Some((_, r)) = result.estimators.iter().find(|(n, _)| n == "nn") {
+        if let Some((_, phi)) = r.diagnostics.iter().find(|(n, _)| n == "phi_exceeds") {
+            let mean = phi.iter().skip(1).sum::<f64>() / (phi.len().max(2) - 1) as f64;
+            println!(
+                "during the run: ||phi(x_hat_k)|| > phi_bar in {:.1} % of (run, k) pairs, k ≥ 1",
+                100.0 * mean
+            );
+        }
+    }
+    for (name, r) in &result.estimators {
+        let per_state: Vec<String> = r
+            .mse_per_state
+            .iter()
+            .map(|m| {
+                let v: Vec<f64> = m.iter().skip(1).copied().collect();
+                format!("{:.4e}", v.iter().sum::<f64>() / v.len().max(1) as f64)
+            })
+            .collect();
+        println!(
+            "{name}: per-state MSE (mean over k = 1..T) [{}]",
+            per_state.join(", ")
+        );
+    }
+    if let Some(path) = plot {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "png".into());
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "plot".into());
+        let out = path.with_file_name(format!("{stem}-bound.{ext}"));
+        crate::plot_bound::plot_bound(result, &out)?;
+        println!("wrote {}", out.display());
+    }
+    Ok(())
+}
+
+/// Adds `empirical_trace` to the `nn` entry and compares it with `bound_trace`.
+pub fn add_empirical_trace(result: &mut EvalResult) -> Option<BoundCheck> {
+    let (_, r) = result.estimators.iter_mut().find(|(n, _)| n == "nn")?;
+    let empirical = r.mse.clone();
+    let bound = r
+        .diagnostics
+        .iter()
+        .find(|(n, _)| n == "bound_trace")?
+        .1
+        .clone();
+    if !r.diagnostics.iter().any(|(n, _)| n == "empirical_trace") {
+        r.diagnostics
+            .push(("empirical_trace".to_owned(), empirical.clone()));
+    }
+    let mut check = BoundCheck {
+        exceeded_at: Vec::new(),
+        non_finite_at: Vec::new(),
+        min_ratio_after_0: f64::INFINITY,
+    };
+    for (k, (&e, &b)) in empirical.iter().zip(&bound).enumerate() {
+        if !b.is_finite() {
+            if k > 0 {
+                check.non_finite_at.push(k);
+            }
+            continue;
+        }
+        if e > b {
+            check.exceeded_at.push(k);
+        }
+        if k > 0 && e > 0.0 {
+            check.min_ratio_after_0 = check.min_ratio_after_0.min(b / e);
+        }
+    }
+    Some(check)
+}

@@ -1,0 +1,335 @@
+//! `tobit-1` … `tobit-l` and `fused`: the federated Tobit Kalman fusion filter of seed 004
+//! (estimator-core's [`TobitFusion`]: local Tobit filters (21)-(23), (30), (37), fusion (50),
+//! reset (51), Algorithm 1).
+//!
+//! **Definition.** One fusion filter per run; `fused` reports x̂^g_{k|k}, and `tobit-m`
+//! reports node m's local estimate x̂_{m,k|k} *before* the reset (51), as in the paper's
+//! Figs. 5-10. The views share one filter (it steps once per instant, whichever view asks
+//! first), so they are always consistent with each other.
+//!
+//! Applies to a composed scenario with a linear plant, a [`TobitCensoring`] stage (τ_m) and a
+//! [`TriggeredTokenBucket`] stage (σ_m, χ_m, λ_m, η_{m,0} enter Ξ). A node whose packet was not
+//! delivered has θ = 1 (the filter holds its last received measurement, eq. 19). The filter's
+//! own scalars are the example's (ε₁…ε₅ = 0.05, ε₆…ε₁₃ = 0.7, ε₁₄ = 1, d = 1.5, e = 2),
+//! C(Υ∘Ω₁)Cᵀ as written, α_m = 1/l (DESIGN.md "Seed 004").
+//!
+//! Diagnostics: `trace_p` — tr P^g for `fused`, tr P̄_{m,k|k} for `tobit-m`; `fused` also
+//! reports `p11`, `p12`, `p22` (the entries of P^g). Against the truth (evaluation only):
+//! `nees` = eᵀP⁻¹e with the view's own P (P^g or P̄_m) and `inside_95` = 1 when
+//! `nees ≤ χ²_{n_x}(0.95)`, so its mean over runs is the fraction of runs whose error lies
+//! inside the 95 % ellipse of the bound (Theorem 5 claims E{eeᵀ} ≤ P^g).
+
+use std::sync::{Arc, Mutex};
+
+use channel_sim::plant::{LinearDescription, Plant};
+use channel_sim::scenario::ComposedScenario;
+use channel_sim::tobit_channel::{TobitCensoring, TriggeredTokenBucket};
+use channel_sim::{Observation, Scenario};
+use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
+use estimator_core::filter::TobitFusion;
+use estimator_core::linalg::check_finite;
+use estimator_core::Error;
+use nalgebra::{DMatrix, SMatrix, SVector};
+
+use super::EvalOptions;
+use crate::Estimator;
+
+/// The names of the local views, node 1 first.
+pub const LOCAL_NAMES: [&str; 8] = [
+    "tobit-1", "tobit-2", "tobit-3", "tobit-4", "tobit-5", "tobit-6", "tobit-7", "tobit-8",
+];
+/// The name of the fused view.
+pub const FUSED_NAME: &str = "fused";
+/// χ²_n(0.95) for n = 1, 2, 3 degrees of freedom.
+pub const CHI2_95: [f64; 3] = [
+    3.841_458_820_694_124,
+    5.991_464_547_107_979,
+    7.814_727_903_251_178,
+];
+/// `d_t` of Ξ in the example.
+pub const XI_D: f64 = 1.5;
+/// `e_t` of Ξ in the example.
+pub const XI_E: f64 = 2.0;
+
+/// Builds the views for a scenario with the seed 004 channel (empty otherwise).
+pub fn build(
+    scenario: &dyn Scenario,
+    _options: &EvalOptions,
+    _seed: u64,
+    _run: u64,
+) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
+    let Some(parts) = Parts::of(scenario) else {
+        return Ok(Vec::new());
+    };
+    let (nx, ny, l) = (scenario.nx(), scenario.ny(), scenario.nodes());
+    macro_rules! by_l {
+        ($n:literal) => {
+            match l {
+                1 => views::<$n, $n, 1>(&parts),
+                2 => views::<$n, $n, 2>(&parts),
+                3 => views::<$n, $n, 3>(&parts),
+                4 => views::<$n, $n, 4>(&parts),
+                _ => anyhow::bail!("tobit: {l} nodes not supported (1..=4 are compiled in)"),
+            }
+        };
+    }
+    match (nx, ny) {
+        (1, 1) => by_l!(1),
+        (2, 2) => by_l!(2),
+        (3, 3) => by_l!(3),
+        _ => anyhow::bail!(
+            "tobit: n_x = {nx}, n_y = {ny} not supported (C(Υ∘Ω₁)Cᵀ as written needs \
+             n_x = n_y; 1..=3 are compiled in)"
+        ),
+    }
+}
+
+/// What the factory reads from the scenario.
+#[derive(Debug)]
+pub struct Parts {
+    plant: Arc<dyn Plant>,
+    censoring: TobitCensoring,
+    trigger: TriggeredTokenBucket,
+    x0: Vec<f64>,
+    p0: DMatrix<f64>,
+}
+
+impl Parts {
+    /// The seed 004 parts of `scenario`, if it has them.
+    pub fn of(scenario: &dyn Scenario) -> Option<Self> {
+        let composed = scenario.as_any().downcast_ref::<ComposedScenario>()?;
+        let plant = composed.plant_arc();
+        plant.linear()?;
+        let init = composed.initial();
+        Some(Self {
+            censoring: composed.stage::<TobitCensoring>()?.clone(),
+            trigger: composed.stage::<TriggeredTokenBucket>()?.clone(),
+            plant,
+            x0: init.estimator_mean.as_slice().to_vec(),
+            p0: init.estimator_cov.clone(),
+        })
+    }
+
+    /// The λχ warnings of the scenario's triggers (printed by the evaluation).
+    pub fn warnings(&self) -> Vec<String> {
+        self.trigger.warnings()
+    }
+}
+
+fn fixed<const R: usize, const C: usize>(m: &DMatrix<f64>) -> SMatrix<f64, R, C> {
+    SMatrix::from_fn(|i, j| m[(i, j)])
+}
+
+/// A fresh fusion filter for the scenario.
+pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
+    parts: &Parts,
+) -> anyhow::Result<TobitFusion<f64, NX, NY, L>> {
+    anyhow::ensure!(
+        parts.censoring.nodes() == L && parts.trigger.nodes() == L,
+        "tobit: the censoring and trigger stages must have one entry per node ({L})"
+    );
+    let mut cfgs = Vec::with_capacity(L);
+    for m in 0..L {
+        let tau = parts.censoring.tau(m);
+        anyhow::ensure!(
+            tau.len() == NY,
+            "tobit: tau of node {m} must have {NY} entries"
+        );
+        cfgs.push(
+            TobitFilterConfig::new(
+                SVector::from_column_slice(tau),
+                BoundScalars::paper_example(),
+                *parts.trigger.trigger(m),
+                XI_D,
+                XI_E,
+            )
+            .map_err(|e| anyhow::anyhow!("tobit: node {m}: {e}"))?,
+        );
+    }
+    let cfgs: [TobitFilterConfig<f64, NY>; L] = core::array::from_fn(|m| cfgs[m]);
+    TobitFusion::new(
+        cfgs,
+        SVector::from_column_slice(&parts.x0),
+        fixed(&parts.p0),
+    )
+    .map_err(|e| anyhow::anyhow!("tobit: initial prior: {e}"))
+}
+
+/// One instant of the fusion filter from the observations (all-or-nothing).
+pub fn step_fusion<const NX: usize, const NY: usize, const L: usize>(
+    fusion: &mut TobitFusion<f64, NX, NY, L>,
+    model: &dyn LinearDescription,
+    k: u32,
+    obs: &[Observation],
+) -> Result<(), Error> {
+    let (k, prev) = (k as usize, k.saturating_sub(1) as usize);
+    let mut received = [None::<SVector<f64, NY>>; L];
+    for o in obs {
+        if let (Some(y), Some(slot)) = (o.measurement(), received.get_mut(o.node as usize)) {
+            let y = SVector::<f64, NY>::from_column_slice(y);
+            check_finite(&y, "measurement")?;
+            *slot = Some(y);
+        }
+    }
+    let c: [SMatrix<f64, NY, NX>; L] = core::array::from_fn(|m| fixed(&model.c(m, k)));
+    let mut r = [SVector::<f64, NY>::zeros(); L];
+    for m in 0..L {
+        r[m] = estimator_core::filter::tobit::diagonal_variances(&fixed(
+            &model.measurement_cov(m, k),
+        ))?;
+    }
+    let rec: [Option<&SVector<f64, NY>>; L] = core::array::from_fn(|m| received[m].as_ref());
+    fusion.step(
+        &fixed(&model.a(prev)),
+        &fixed(&model.process_cov(prev)),
+        &c,
+        &r,
+        rec,
+    )
+}
+
+struct Shared<const NX: usize, const NY: usize, const L: usize> {
+    fusion: TobitFusion<f64, NX, NY, L>,
+    plant: Arc<dyn Plant>,
+    done_k: u32,
+    last: Result<(), Error>,
+}
+
+struct View<const NX: usize, const NY: usize, const L: usize> {
+    name: &'static str,
+    node: Option<usize>,
+    shared: Arc<Mutex<Shared<NX, NY, L>>>,
+}
+
+fn views<const NX: usize, const NY: usize, const L: usize>(
+    parts: &Parts,
+) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
+    let shared = Arc::new(Mutex::new(Shared {
+        fusion: fusion_for::<NX, NY, L>(parts)?,
+        plant: Arc::clone(&parts.plant),
+        done_k: 0,
+        last: Ok(()),
+    }));
+    let mut out: Vec<Box<dyn Estimator>> = Vec::with_capacity(L + 1);
+    for m in 0..L {
+        out.push(Box::new(View {
+            name: LOCAL_NAMES[m],
+            node: Some(m),
+            shared: Arc::clone(&shared),
+        }));
+    }
+    out.push(Box::new(View {
+        name: FUSED_NAME,
+        node: None,
+        shared,
+    }));
+    Ok(out)
+}
+
+impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY, L> {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
+        let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        if s.done_k != k {
+            let plant = Arc::clone(&s.plant);
+            let model = plant.linear().ok_or(Error::InvalidConfig {
+                field: "plant",
+                reason: "has no linear description",
+            })?;
+            s.last = step_fusion(&mut s.fusion, model, k, obs);
+            s.done_k = k;
+        }
+        s.last
+    }
+
+    fn estimate(&self, out: &mut [f64]) {
+        let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        let x = match self.node {
+            Some(m) => s.fusion.local_state(m).copied(),
+            None => Some(*s.fusion.state()),
+        };
+        match x {
+            Some(x) => out[..NX].copy_from_slice(x.as_slice()),
+            None => out[..NX].fill(f64::NAN),
+        }
+    }
+
+    fn diagnostics_vs_truth(&self, truth: &[f64], sink: &mut dyn FnMut(&'static str, f64)) {
+        let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        let (x, p) = match self.node {
+            Some(m) => match (s.fusion.local_state(m), s.fusion.local_bound(m)) {
+                (Some(x), Some(p)) => (*x, *p),
+                _ => return,
+            },
+            None => (*s.fusion.state(), *s.fusion.covariance()),
+        };
+        let e = SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
+        if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "bound") {
+            let nees = e.dot(&pe);
+            sink("nees", nees);
+            sink("inside_95", f64::from(u8::from(nees <= CHI2_95[NX - 1])));
+        }
+    }
+
+    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
+        let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        match self.node {
+            Some(m) => {
+                if let Some(p) = s.fusion.local_bound(m) {
+                    sink("trace_p", p.trace());
+                }
+            }
+            None => {
+                let p = s.fusion.covariance();
+                sink("trace_p", p.trace());
+                if NX == 2 {
+                    sink("p11", p[(0, 0)]);
+                    sink("p12", p[(0, 1)]);
+                    sink("p22", p[(1, 1)]);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builds_views_for_the_preset_and_none_for_others() {
+        let s = channel_sim::scenario::preset("tobit-fusion").unwrap();
+        let v = build(&*s, &EvalOptions::default(), 0, 0).unwrap();
+        let names: Vec<_> = v.iter().map(|e| e.name()).collect();
+        assert_eq!(names, ["tobit-1", "tobit-2", "tobit-3", "fused"]);
+        let lin = channel_sim::scenario::preset("linear").unwrap();
+        assert!(build(&*lin, &EvalOptions::default(), 0, 0)
+            .unwrap()
+            .is_empty());
+    }
+
+    #[test]
+    fn views_step_one_shared_filter_once_per_instant() {
+        let s = channel_sim::scenario::preset("tobit-fusion").unwrap();
+        let parts = Parts::of(&*s).unwrap();
+        let mut v = build(&*s, &EvalOptions::default(), 0, 0).unwrap();
+        let mut alone = fusion_for::<2, 2, 3>(&parts).unwrap();
+        let mut sim = s.start(3, 0);
+        for k in 1..=50u32 {
+            let inst = sim.next_instant();
+            for e in v.iter_mut() {
+                e.step(k, &inst.obs).unwrap();
+            }
+            step_fusion(&mut alone, parts.plant.linear().unwrap(), k, &inst.obs).unwrap();
+            let mut out = [0.0; 2];
+            v[3].estimate(&mut out);
+            assert_eq!(out, [alone.state()[0], alone.state()[1]]);
+            v[1].estimate(&mut out);
+            let l1 = alone.local_state(1).unwrap();
+            assert_eq!(out, [l1[0], l1[1]]);
+        }
+    }
+}

@@ -1,0 +1,841 @@
+//! `ipc-runner run`: the real-time loop over shared memory.
+//!
+//! Per slot: receive in place → reassemble the instant ([`assemble`]) → step every estimator →
+//! publish each estimate in place (`loan_uninit` / `write_payload` / `send`) → record
+//! latencies ([`crate::latency`]) and the squared error against the truth service (evaluation
+//! beside the loop, never inside the estimator). Nothing in this path allocates once the
+//! estimators exist (`tests/pipeline_alloc.rs` counts).
+//!
+//! Waiting: `--wait spin` busy-polls `receive()`; `--wait block` sleeps in a WaitSet on the
+//! `slots-ready` event and re-drains `receive()` after every wake-up (wake-ups can be spurious
+//! and one notification may stand for several slots).
+//!
+//! Faults: when no slot arrives within `period + --deadline-ms` of the previous one the
+//! runner cleans up dead nodes (`try_cleanup_dead_nodes`: a SIGKILLed publisher is otherwise
+//! invisible), reports the publisher as lost and exits with [`EXIT_PUBLISHER_LOST`], or with
+//! `--wait-for-restart` waits for a new channel-sim and starts a new session (fresh
+//! estimators; the new process starts its stream at k = 1).
+
+pub mod assemble;
+pub mod select;
+pub mod system;
+
+use crate::latency::{Latency, LatencySummary};
+use crate::transport::Transport;
+use crate::Estimator;
+use anyhow::{anyhow, bail, Context, Result};
+use assemble::{Assembler, Counts, Pushed};
+use channel_sim::sim::MAX_NX;
+use channel_sim::wire::{self, Estimate, WIRE_VERSION};
+use channel_sim::Observation;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Exit code when the publisher was lost (deadline passed) and no restart was awaited.
+pub const EXIT_PUBLISHER_LOST: i32 = 3;
+
+/// How the loop waits for the next slot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WaitMode {
+    /// Busy-poll `receive()` (lowest latency, one core at 100 %).
+    Spin,
+    /// Sleep on the `slots-ready` event in a WaitSet (iceoryx2's event multiplexer; it
+    /// allocates a little per wake-up inside iceoryx2).
+    Block,
+    /// Sleep on the `slots-ready` listener directly (one file descriptor, no WaitSet): the
+    /// same kernel wake-up as `block` without its per-wake-up allocations. Termination
+    /// requests are checked after each wake-up (at least every 50 ms).
+    Listener,
+}
+
+impl WaitMode {
+    /// Lower-case name as on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Spin => "spin",
+            Self::Block => "block",
+            Self::Listener => "listener",
+        }
+    }
+}
+
+/// Options of `ipc-runner run` (shared with `demo`).
+#[derive(Clone, Debug, clap::Args)]
+pub struct RunArgs {
+    /// Scenario the publisher runs (the estimators need its model).
+    #[arg(long, default_value = "occlusion")]
+    pub scenario: String,
+    /// Scenario TOML file (instead of a preset).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Estimators to run, comma-separated (default: all that apply to the scenario).
+    #[arg(long, value_delimiter = ',')]
+    pub estimators: Vec<String>,
+    /// Service-name prefix (must match channel-sim's).
+    #[arg(long, default_value = wire::DEFAULT_PREFIX)]
+    pub prefix: String,
+    /// How to wait for slots.
+    #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
+    pub wait: WaitMode,
+    /// Data deadline: the publisher counts as lost this many ms after the expected slot.
+    #[arg(long, default_value_t = 100.0)]
+    pub deadline_ms: f64,
+    /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
+    #[arg(long, default_value_t = 30.0)]
+    pub connect_timeout: f64,
+    /// After losing the publisher, wait for channel-sim to come back instead of failing.
+    #[arg(long)]
+    pub wait_for_restart: bool,
+    /// Slot queue length of the subscriber (older slots are overwritten when it is full).
+    #[arg(long, default_value_t = 256)]
+    pub buffer: usize,
+    /// Pin the loop to this CPU (best effort).
+    #[arg(long)]
+    pub cpu: Option<usize>,
+    /// Lock memory with mlockall (best effort).
+    #[arg(long)]
+    pub mlock: bool,
+    /// Experiment seed the estimators are built for (as `eval --seed`; channel-sim's).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Run index the estimators are built for (channel-sim's `--run`).
+    #[arg(long, default_value_t = 0)]
+    pub run: u64,
+    /// Instants channel-sim publishes: the horizon the estimators are built for, and the
+    /// size of the preallocated trajectory recording (later instants are processed but not
+    /// recorded).
+    #[arg(long, default_value_t = channel_sim::publisher::DEFAULT_STEPS)]
+    pub steps: u32,
+    /// Write estimates and truth per instant to this CSV file at the end.
+    #[arg(long)]
+    pub estimates_csv: Option<PathBuf>,
+    /// Write the received slots to this CSV file at the end (input for `replay`).
+    #[arg(long)]
+    pub slots_csv: Option<PathBuf>,
+    /// Write the run report as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Do not publish estimates on `<prefix>/estimates` (iceoryx2 0.10 allocates a small
+    /// reference count per loaned sample; without publishing the loop allocates nothing).
+    #[arg(long)]
+    pub no_publish_estimates: bool,
+    /// Test hook: sleep this many µs after each slot (a deliberately slow consumer).
+    #[arg(long, hide = true)]
+    pub debug_slow_us: Option<u64>,
+    /// Suppress progress messages.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl RunArgs {
+    /// Defaults for `prefix` and `scenario` (as on the command line).
+    pub fn new(scenario: &str, prefix: &str) -> Self {
+        Self {
+            scenario: scenario.to_string(),
+            config: None,
+            estimators: Vec::new(),
+            prefix: prefix.to_string(),
+            wait: WaitMode::Spin,
+            deadline_ms: 100.0,
+            connect_timeout: 30.0,
+            wait_for_restart: false,
+            buffer: 256,
+            cpu: None,
+            mlock: false,
+            seed: 0,
+            run: 0,
+            steps: channel_sim::publisher::DEFAULT_STEPS,
+            estimates_csv: None,
+            slots_csv: None,
+            json: None,
+            no_publish_estimates: false,
+            debug_slow_us: None,
+            quiet: false,
+        }
+    }
+}
+
+/// Progress callback: latest instant and the counts so far.
+pub type Progress<'a> = dyn FnMut(u32, &Counts) + 'a;
+
+/// Optional instrumentation of the loop.
+#[derive(Default)]
+pub struct Hooks<'a> {
+    /// Returns the process's running allocation count (a counting global allocator); read
+    /// after instant [`Hooks::warmup`] and at the end of the stream.
+    pub alloc_probe: Option<fn() -> usize>,
+    /// Instants before the allocation count starts (default 20).
+    pub warmup: u64,
+    /// Called at most every 100 ms with the latest instant and the counts.
+    pub progress: Option<&'a mut Progress<'a>>,
+}
+
+impl std::fmt::Debug for Hooks<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Hooks")
+            .field("warmup", &self.warmup)
+            .finish()
+    }
+}
+
+/// Per-estimator results.
+#[derive(Clone, Debug, Serialize)]
+pub struct EstimatorReport {
+    /// Estimator name.
+    pub name: String,
+    /// Mean over instants of ‖x_k − x̂_k‖² (instants whose truth was received).
+    pub mse: f64,
+    /// Instants in the MSE.
+    pub mse_instants: u64,
+    /// Steps the estimator refused (e.g. non-finite measurement); its state was kept.
+    pub rejected: u64,
+}
+
+/// How the run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ending {
+    /// The publisher sent its END marker.
+    Completed,
+    /// The publisher was stopped early (ABORT marker).
+    PublisherStopped,
+    /// The runner got SIGINT/SIGTERM.
+    Interrupted,
+    /// The data deadline passed and no restart was awaited.
+    PublisherLost,
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunReport {
+    /// Scenario name.
+    pub scenario: String,
+    /// Wait mode.
+    pub wait: WaitMode,
+    /// Slot accounting.
+    pub counts: Counts,
+    /// Per-estimator results.
+    pub estimators: Vec<EstimatorReport>,
+    /// Latency percentiles.
+    pub latency: LatencySummary,
+    /// Streams followed (1 + publisher restarts).
+    pub sessions: u32,
+    /// Times the data deadline passed.
+    pub publisher_losses: u32,
+    /// Truth messages missing for processed instants.
+    pub truth_missing: u64,
+    /// Allocations after warm-up (only with an allocation probe).
+    pub allocations_after_warmup: Option<usize>,
+    /// Slots received after warm-up (denominator of the above).
+    pub slots_after_warmup: u64,
+    /// Estimates published after warm-up (iceoryx2 0.10's `loan_uninit` allocates one
+    /// reference count per sample, inside the library).
+    pub published_after_warmup: u64,
+    /// Outcome of `--cpu` / `--mlock` (`None` if not requested).
+    pub cpu_pinning: Option<String>,
+    /// Outcome of `--mlock`.
+    pub memory_lock: Option<String>,
+    /// How the run ended.
+    pub ending: Ending,
+}
+
+/// Recorded trajectories (preallocated; recording stops when full).
+#[derive(Debug, Default)]
+pub struct Trajectories {
+    /// Session, k per recorded instant.
+    pub keys: Vec<(u32, u32)>,
+    /// Truth per instant (`nx` values, NaN when missing).
+    pub truth: Vec<f64>,
+    /// Estimates per instant and estimator (`n_est · nx` values).
+    pub estimates: Vec<f64>,
+    /// Received slots (for `replay`), if requested.
+    pub slots: Vec<Observation>,
+    /// State dimension.
+    pub nx: usize,
+    /// Estimator names.
+    pub names: Vec<String>,
+}
+
+const TRUTH_RING: usize = 1024;
+
+struct State {
+    estimators: Vec<Box<dyn Estimator>>,
+    nx: usize,
+    xhat: [f64; MAX_NX],
+    truth_k: Box<[u32; TRUTH_RING]>,
+    truth_x: Box<[[f64; MAX_NX]; TRUTH_RING]>,
+    truth_stream: u64,
+    sq_err: Vec<f64>,
+    err_n: Vec<u64>,
+    rejected: Vec<u64>,
+    names: Vec<[u8; 16]>,
+    latency: Latency,
+    est_seq: u64,
+    truth_missing: u64,
+    session: u32,
+    traj: Trajectories,
+    record_slots: bool,
+    record_cap: usize,
+    publish: bool,
+    /// Estimates published (after warm-up, for the allocation accounting).
+    published: u64,
+    // set per slot by the receive path
+    last_send_ns: u64,
+    last_recv_ns: u64,
+    last_k: u32,
+    stream_id: u64,
+    err: Option<anyhow::Error>,
+}
+
+impl State {
+    fn drain_truth(&mut self, t: &Transport) {
+        while let Ok(Some(s)) = t.truth_sub.receive() {
+            let m = s.payload();
+            if m.version != WIRE_VERSION {
+                continue;
+            }
+            let i = m.k as usize % TRUTH_RING;
+            self.truth_k[i] = m.k;
+            self.truth_x[i] = m.x;
+            self.truth_stream = m.stream_id;
+        }
+    }
+
+    fn on_instant(&mut self, t: &Transport, k: u32, obs: &[Observation]) {
+        self.drain_truth(t);
+        let i = k as usize % TRUTH_RING;
+        let truth = (self.truth_k[i] == k && self.truth_stream == self.stream_id)
+            .then_some(self.truth_x[i]);
+        if truth.is_none() {
+            self.truth_missing += 1;
+        }
+        let record = self.traj.keys.len() < self.record_cap;
+        if record {
+            self.traj.keys.push((self.session, k));
+            for j in 0..self.nx {
+                self.traj.truth.push(truth.map_or(f64::NAN, |x| x[j]));
+            }
+        }
+        let nx = self.nx;
+        for (e, est) in self.estimators.iter_mut().enumerate() {
+            let t0 = wire::monotonic_ns();
+            let status = match est.step(k, obs) {
+                Ok(()) => 0,
+                Err(_) => {
+                    self.rejected[e] += 1;
+                    1
+                }
+            };
+            est.estimate(&mut self.xhat[..nx]);
+            let t1 = wire::monotonic_ns();
+            Latency::record(&mut self.latency.step, t0, t1);
+            if let Some(x) = truth {
+                let d: f64 = (0..nx).map(|j| (x[j] - self.xhat[j]).powi(2)).sum();
+                self.sq_err[e] += d;
+                self.err_n[e] += 1;
+            }
+            if record {
+                self.traj.estimates.extend_from_slice(&self.xhat[..nx]);
+            }
+            let msg = Estimate {
+                version: WIRE_VERSION,
+                k,
+                stream_id: self.stream_id,
+                seq: self.est_seq,
+                estimator: e as u32,
+                nx: nx as u32,
+                name: self.names[e],
+                status,
+                reserved: 0,
+                x: self.xhat,
+                slot_send_ns: self.last_send_ns,
+                receive_ns: self.last_recv_ns,
+                step_done_ns: t1,
+            };
+            self.est_seq += 1;
+            if !self.publish {
+                continue;
+            }
+            self.published += 1;
+            let sent = t
+                .estimate_pub
+                .loan_uninit()
+                .map_err(|e| anyhow!("loan for estimate: {e:?}"))
+                .and_then(|s| {
+                    s.write_payload(msg)
+                        .send()
+                        .map_err(|e| anyhow!("send estimate: {e:?}"))
+                });
+            if let Err(e) = sent {
+                self.err.get_or_insert(e);
+            }
+        }
+        Latency::record(
+            &mut self.latency.end_to_end,
+            self.last_send_ns,
+            wire::monotonic_ns(),
+        );
+        self.last_k = k;
+    }
+}
+
+enum Woke {
+    Ready,
+    Signal,
+}
+
+/// Runs the loop with estimators from `make` (called again for every new stream) until the
+/// stream ends. Errors are configuration/transport failures; a lost publisher is reported in
+/// [`RunReport::ending`].
+pub fn run_loop(
+    args: &RunArgs,
+    nx: usize,
+    nodes: u8,
+    ny: u8,
+    make: &dyn Fn() -> Result<Vec<Box<dyn Estimator>>>,
+    mut hooks: Hooks<'_>,
+) -> Result<(RunReport, Trajectories)> {
+    let cpu_pinning = args.cpu.map(|c| match system::pin_to_cpu(c) {
+        Ok(()) => format!("pinned to CPU {c}"),
+        Err(e) => format!("not pinned ({e})"),
+    });
+    let memory_lock = args.mlock.then(|| match system::lock_memory() {
+        Ok(()) => "locked".to_string(),
+        Err(e) => format!("not locked ({e})"),
+    });
+    let say = |m: &str| {
+        if !args.quiet {
+            eprintln!("ipc-runner: {m}");
+        }
+    };
+    for m in cpu_pinning.iter().chain(memory_lock.iter()) {
+        say(m);
+    }
+
+    let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
+    let estimators = make()?;
+    let n_est = estimators.len();
+    let record_cap = args.steps as usize;
+    let mut st = State {
+        names: estimators
+            .iter()
+            .map(|e| Estimate::encode_name(e.name()))
+            .collect(),
+        traj: Trajectories {
+            keys: Vec::with_capacity(record_cap),
+            truth: Vec::with_capacity(record_cap * nx),
+            estimates: Vec::with_capacity(record_cap * nx * n_est),
+            slots: Vec::with_capacity(if args.slots_csv.is_some() {
+                record_cap * usize::from(nodes)
+            } else {
+                0
+            }),
+            nx,
+            names: estimators.iter().map(|e| e.name().to_string()).collect(),
+        },
+        estimators,
+        nx,
+        xhat: [0.0; MAX_NX],
+        truth_k: Box::new([u32::MAX; TRUTH_RING]),
+        truth_x: Box::new([[0.0; MAX_NX]; TRUTH_RING]),
+        truth_stream: 0,
+        sq_err: vec![0.0; n_est],
+        err_n: vec![0; n_est],
+        rejected: vec![0; n_est],
+        latency: Latency::new(),
+        est_seq: 0,
+        truth_missing: 0,
+        session: 1,
+        record_slots: args.slots_csv.is_some(),
+        record_cap,
+        publish: !args.no_publish_estimates,
+        published: 0,
+        last_send_ns: 0,
+        last_recv_ns: 0,
+        last_k: 0,
+        stream_id: 0,
+        err: None,
+    };
+    let mut asm = Assembler::new(nodes, ny);
+    asm.set_subscribed_ns(t.subscribed_ns);
+    let deadline_ns = (args.deadline_ms * 1e6) as u64;
+    let connect_ns = (args.connect_timeout * 1e9) as u64;
+    let warmup = if hooks.warmup == 0 { 20 } else { hooks.warmup };
+    let mut allocs_at_warmup: Option<usize> = None;
+    let mut allocs_at_end: Option<usize> = None;
+    let mut slots_at_warmup = 0u64;
+    let mut published_at_warmup = 0u64;
+    let mut publisher_losses = 0u32;
+    let mut period_ns = 0u64;
+    let mut last_progress = 0u64;
+    // `None` while waiting for the first slot of a stream (connect timeout applies).
+    let mut last_data_ns: Option<u64> = None;
+    let mut waiting_since = wire::monotonic_ns();
+
+    say(&format!(
+        "waiting for channel-sim on prefix {:?} ({} wait)",
+        args.prefix,
+        args.wait.as_str()
+    ));
+
+    // The wait primitive: spin or WaitSet on the event listener.
+    let waitset = match &t.listener {
+        Some(_) if args.wait == WaitMode::Block => Some(
+            WaitSetBuilder::new()
+                .create::<ipc::Service>()
+                .map_err(|e| anyhow!("cannot create WaitSet: {e:?}"))?,
+        ),
+        _ => None,
+    };
+    let guard = match (&waitset, &t.listener) {
+        (Some(ws), Some(l)) => Some(
+            ws.attach_notification(l)
+                .map_err(|e| anyhow!("cannot attach listener to WaitSet: {e:?}"))?,
+        ),
+        _ => None,
+    };
+    let mut last_signal_check = 0u64;
+    let mut wait = |timeout_ns: u64| -> Result<Woke> {
+        match (&waitset, &guard, &t.listener) {
+            (Some(ws), Some(g), Some(l)) => {
+                let r = ws
+                    .wait_and_process_once_with_timeout(
+                        |id| {
+                            if id.has_event_from(g) {
+                                // Consume the notifications; the data is drained by the caller.
+                                let _ = l.try_wait(|_| {});
+                            }
+                            CallbackProgression::Continue
+                        },
+                        Duration::from_nanos(timeout_ns.max(1000)),
+                    )
+                    .map_err(|e| anyhow!("WaitSet failed: {e:?}"))?;
+                Ok(match r {
+                    WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
+                        Woke::Signal
+                    }
+                    _ => Woke::Ready,
+                })
+            }
+            (None, None, Some(l)) => {
+                l.timed_wait(|_| {}, Duration::from_nanos(timeout_ns.max(1000)))
+                    .map_err(|e| anyhow!("listener wait failed: {e:?}"))?;
+                let now = wire::monotonic_ns();
+                if now - last_signal_check > 1_000_000 {
+                    last_signal_check = now;
+                    if t.node.wait(Duration::ZERO).is_err() {
+                        return Ok(Woke::Signal);
+                    }
+                }
+                Ok(Woke::Ready)
+            }
+            _ => {
+                for _ in 0..32 {
+                    core::hint::spin_loop();
+                }
+                let now = wire::monotonic_ns();
+                if now - last_signal_check > 1_000_000 {
+                    last_signal_check = now;
+                    if t.node.wait(Duration::ZERO).is_err() {
+                        return Ok(Woke::Signal);
+                    }
+                }
+                Ok(Woke::Ready)
+            }
+        }
+    };
+
+    let ending = 'outer: loop {
+        // Drain everything that is there.
+        loop {
+            let sample = match t.slot_sub.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => break,
+                Err(e) => bail!("receive failed: {e:?}"),
+            };
+            let recv_ns = wire::monotonic_ns();
+            let slot = sample.payload();
+            if slot.version != WIRE_VERSION {
+                bail!(
+                    "{}",
+                    wire::WireError::Version {
+                        found: slot.version
+                    }
+                );
+            }
+            last_data_ns = Some(recv_ns);
+            if slot.kind == wire::SLOT_DATA {
+                Latency::record(&mut st.latency.transport, slot.send_ns, recv_ns);
+                period_ns = slot.period_ns;
+                st.last_send_ns = slot.send_ns;
+                st.last_recv_ns = recv_ns;
+            }
+            st.stream_id = slot.stream_id;
+            let mut pushed = asm.push(slot, &mut |k, obs: &[Observation]| {
+                st.on_instant(&t, k, obs);
+            });
+            if pushed == Ok(Pushed::NewStream) {
+                let old = asm.stream();
+                asm.reset();
+                st.session += 1;
+                st.estimators = make()?;
+                say(&format!(
+                    "new stream from channel-sim (restarted; was {old:x?}): session {} with fresh estimators",
+                    st.session
+                ));
+                pushed = asm.push(slot, &mut |k, obs: &[Observation]| {
+                    st.on_instant(&t, k, obs);
+                });
+            }
+            let pushed = pushed.with_context(|| "refusing slot from channel-sim")?;
+            if st.record_slots
+                && pushed == Pushed::Data
+                && st.traj.slots.len() < st.traj.slots.capacity()
+            {
+                if let Ok(o) = slot.observation() {
+                    st.traj.slots.push(o);
+                }
+            }
+            drop(sample);
+            if let Some(e) = st.err.take() {
+                return Err(e);
+            }
+            if let Some(us) = args.debug_slow_us {
+                std::thread::sleep(Duration::from_micros(us));
+            }
+            if let Some(probe) = hooks.alloc_probe {
+                if allocs_at_warmup.is_none() && asm.counts.instants >= warmup {
+                    allocs_at_warmup = Some(probe());
+                    slots_at_warmup = asm.counts.received;
+                    published_at_warmup = st.published;
+                }
+            }
+            match pushed {
+                Pushed::End | Pushed::Abort => {
+                    allocs_at_end = hooks.alloc_probe.map(|p| p());
+                    break 'outer if pushed == Pushed::End {
+                        Ending::Completed
+                    } else {
+                        Ending::PublisherStopped
+                    };
+                }
+                _ => {}
+            }
+            if let Some(p) = hooks.progress.as_mut() {
+                if recv_ns - last_progress > 100_000_000 {
+                    last_progress = recv_ns;
+                    p(st.last_k, &asm.counts);
+                }
+            }
+        }
+
+        // Nothing pending: check the deadline, then wait.
+        let now = wire::monotonic_ns();
+        let due = match last_data_ns {
+            Some(t_last) => t_last + period_ns + deadline_ns,
+            None if connect_ns == 0 => u64::MAX,
+            None => waiting_since + connect_ns,
+        };
+        if now > due {
+            let Some(t_last) = last_data_ns else {
+                say(&format!(
+                    "no data from channel-sim on prefix {:?} within {} s",
+                    args.prefix, args.connect_timeout
+                ));
+                break 'outer Ending::PublisherLost;
+            };
+            publisher_losses += 1;
+            let cleaned = t.node.try_cleanup_dead_nodes();
+            say(&format!(
+                "publisher lost: no slot for {:.1} ms after instant {} (deadline {} ms past the \
+                 expected slot); cleaned up {} dead node(s), {} publisher(s) remain",
+                (now - t_last) as f64 / 1e6,
+                st.last_k,
+                args.deadline_ms,
+                cleaned.cleanups,
+                t.publishers()
+            ));
+            if !args.wait_for_restart {
+                break 'outer Ending::PublisherLost;
+            }
+            say("waiting for channel-sim to restart (--wait-for-restart)");
+            last_data_ns = None;
+            waiting_since = now;
+            continue;
+        }
+        match wait(due.saturating_sub(now).min(50_000_000))? {
+            Woke::Ready => {}
+            Woke::Signal => break 'outer Ending::Interrupted,
+        }
+    };
+
+    let estimators = st
+        .estimators
+        .iter()
+        .enumerate()
+        .map(|(e, est)| EstimatorReport {
+            name: est.name().to_string(),
+            mse: if st.err_n[e] > 0 {
+                st.sq_err[e] / st.err_n[e] as f64
+            } else {
+                f64::NAN
+            },
+            mse_instants: st.err_n[e],
+            rejected: st.rejected[e],
+        })
+        .collect();
+    let report = RunReport {
+        scenario: args.scenario.clone(),
+        wait: args.wait,
+        counts: asm.counts,
+        estimators,
+        latency: st.latency.summary(),
+        sessions: st.session,
+        publisher_losses,
+        truth_missing: st.truth_missing,
+        allocations_after_warmup: match (allocs_at_warmup, allocs_at_end) {
+            (Some(a), Some(b)) => Some(b - a),
+            _ => None,
+        },
+        slots_after_warmup: asm.counts.received - slots_at_warmup,
+        published_after_warmup: st.published - published_at_warmup,
+        cpu_pinning,
+        memory_lock,
+        ending,
+    };
+    Ok((report, st.traj))
+}
+
+impl RunReport {
+    /// The summary a person reads at the end of a run.
+    pub fn summary(&self) -> String {
+        let c = &self.counts;
+        let mut s = format!(
+            "scenario {} · {} instants · {} wait · ended: {:?}\n\
+             slots: {} received ({} delivered, {} dropped by the channel), {} lost in IPC, {} missed before join\n",
+            self.scenario,
+            c.instants,
+            self.wait.as_str(),
+            self.ending,
+            c.received,
+            c.delivered,
+            c.dropped_by_channel,
+            c.lost_in_ipc,
+            c.missed_before_join,
+        );
+        if self.sessions > 1 || self.publisher_losses > 0 {
+            s.push_str(&format!(
+                "publisher lost {} time(s); {} session(s)\n",
+                self.publisher_losses, self.sessions
+            ));
+        }
+        s.push_str("estimator         MSE vs truth   instants   rejected\n");
+        for e in &self.estimators {
+            s.push_str(&format!(
+                "{:<16} {:>13.6} {:>10} {:>10}\n",
+                e.name, e.mse, e.mse_instants, e.rejected
+            ));
+        }
+        s.push_str(&self.latency.table());
+        if let Some(a) = self.allocations_after_warmup {
+            s.push_str(&format!(
+                "allocations after warm-up: {a} over {} slots ({} estimates published)\n",
+                self.slots_after_warmup, self.published_after_warmup
+            ));
+        }
+        s
+    }
+}
+
+impl Trajectories {
+    /// Writes `session,k,truth_0..,<est>_0..` rows.
+    pub fn write_estimates_csv(&self, path: &std::path::Path) -> Result<()> {
+        use std::io::Write;
+        let mut w = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
+        );
+        let mut head = String::from("session,k");
+        for j in 0..self.nx {
+            head.push_str(&format!(",truth_{j}"));
+        }
+        for n in &self.names {
+            for j in 0..self.nx {
+                head.push_str(&format!(",{n}_{j}"));
+            }
+        }
+        writeln!(w, "{head}")?;
+        let ne = self.names.len();
+        for (i, (session, k)) in self.keys.iter().enumerate() {
+            write!(w, "{session},{k}")?;
+            for v in &self.truth[i * self.nx..(i + 1) * self.nx] {
+                write!(w, ",{v:e}")?;
+            }
+            for v in &self.estimates[i * self.nx * ne..(i + 1) * self.nx * ne] {
+                write!(w, ",{v:e}")?;
+            }
+            writeln!(w)?;
+        }
+        Ok(())
+    }
+
+    /// Writes the received slots in the `replay` format (see `docs/replay.md`).
+    pub fn write_slots_csv(&self, path: &std::path::Path, ny: usize) -> Result<()> {
+        crate::replay::write_slots(path, &self.slots, ny)
+    }
+}
+
+/// `ipc-runner run`: resolves scenario and estimators, runs the loop, prints the summary.
+/// Returns the process exit code.
+pub fn main(args: &RunArgs) -> Result<i32> {
+    let (scenario, _) = select::scenario(&args.scenario, args.config.as_deref())?;
+    let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
+    let make = select::estimators(
+        scenario.clone(),
+        &args.estimators,
+        select::Experiment {
+            seed: args.seed,
+            run: args.run,
+            horizon: args.steps,
+        },
+    )?;
+    let (report, traj) = run_loop(
+        args,
+        scenario.nx(),
+        u8::try_from(scenario.nodes())?,
+        u8::try_from(scenario.ny())?,
+        &make,
+        Hooks::default(),
+    )?;
+    finish(args, &report, &traj, scenario.ny())?;
+    println!("{}", report.summary());
+    Ok(exit_code(&report))
+}
+
+/// Writes the requested output files.
+pub fn finish(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize) -> Result<()> {
+    if let Some(p) = &args.estimates_csv {
+        traj.write_estimates_csv(p)?;
+    }
+    if let Some(p) = &args.slots_csv {
+        traj.write_slots_csv(p, ny)?;
+    }
+    if let Some(p) = &args.json {
+        std::fs::write(p, serde_json::to_string_pretty(report)?)
+            .with_context(|| format!("cannot write {p:?}"))?;
+    }
+    Ok(())
+}
+
+/// 0 for a completed (or cleanly stopped) run, [`EXIT_PUBLISHER_LOST`] when the publisher was
+/// lost, 130 when interrupted.
+pub fn exit_code(r: &RunReport) -> i32 {
+    match r.ending {
+        Ending::Completed | Ending::PublisherStopped => 0,
+        Ending::PublisherLost => EXIT_PUBLISHER_LOST,
+        Ending::Interrupted => 130,
+    }
+}

@@ -1,0 +1,92 @@
+//! The runner's side of the shared-memory services (see `channel_sim::wire`).
+//!
+//! Ports are created in an order that makes the publisher's "wait for a subscriber" safe:
+//! truth subscriber and event listener first, the slot subscriber last — channel-sim starts
+//! publishing as soon as the slot subscriber exists, and by then everything else is connected.
+
+use anyhow::{anyhow, Result};
+use channel_sim::wire::{self, Estimate, Slot, Truth};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::publish_subscribe;
+
+/// Open ports of one runner.
+#[derive(Debug)]
+pub struct Transport {
+    /// The runner's iceoryx2 node (signal handling, dead-node cleanup).
+    pub node: Node<ipc::Service>,
+    /// Slot service (for publisher counts).
+    pub slots: publish_subscribe::PortFactory<ipc::Service, Slot, ()>,
+    /// Slot subscriber.
+    pub slot_sub: Subscriber<ipc::Service, Slot, ()>,
+    /// Truth subscriber (evaluation beside the loop).
+    pub truth_sub: Subscriber<ipc::Service, Truth, ()>,
+    /// Estimate publisher.
+    pub estimate_pub: Publisher<ipc::Service, Estimate, ()>,
+    /// Listener of `slots-ready` (only in blocking mode).
+    pub listener: Option<Listener<ipc::Service>>,
+    /// `CLOCK_MONOTONIC` just before the slot subscriber was created.
+    pub subscribed_ns: u64,
+}
+
+impl Transport {
+    /// Opens (or creates) the services under `prefix` with a slot queue of `buffer` samples.
+    pub fn open(prefix: &str, buffer: usize, with_listener: bool) -> Result<Self> {
+        if buffer == 0 || buffer > wire::MAX_SUBSCRIBER_BUFFER {
+            return Err(anyhow!(
+                "--buffer must be in 1..={}, got {buffer}",
+                wire::MAX_SUBSCRIBER_BUFFER
+            ));
+        }
+        let node = NodeBuilder::new()
+            .name(&NodeName::new("ipc-runner").map_err(|e| anyhow!("{e:?}"))?)
+            .create::<ipc::Service>()
+            .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+        // Remove what SIGKILLed processes left behind (their ports would count as connected).
+        let _ = node.try_cleanup_dead_nodes();
+        let truth = wire::truth_service(&node, prefix)?;
+        let estimates = wire::estimate_service(&node, prefix)?;
+        let slots = wire::slot_service(&node, prefix)?;
+        let truth_sub = truth
+            .subscriber_builder()
+            .buffer_size(wire::MAX_SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| anyhow!("cannot subscribe to {prefix}/truth: {e:?}"))?;
+        let estimate_pub = estimates.publisher_builder().create().map_err(|e| {
+            anyhow!("cannot publish on {prefix}/estimates ({e:?}): is another runner using this --prefix?")
+        })?;
+        let listener = if with_listener {
+            let ready = wire::ready_event_service(&node, prefix)?;
+            Some(
+                ready
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| anyhow!("cannot listen on {prefix}/slots-ready: {e:?}"))?,
+            )
+        } else {
+            None
+        };
+        let subscribed_ns = wire::monotonic_ns();
+        let slot_sub = slots
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .create()
+            .map_err(|e| anyhow!("cannot subscribe to {prefix}/slots: {e:?}"))?;
+        Ok(Self {
+            node,
+            slots,
+            slot_sub,
+            truth_sub,
+            estimate_pub,
+            listener,
+            subscribed_ns,
+        })
+    }
+
+    /// Publishers currently registered on the slot service.
+    pub fn publishers(&self) -> usize {
+        self.slots.dynamic_config().number_of_publishers()
+    }
+}

@@ -1,0 +1,168 @@
+//! Shared helpers of the pipeline tests: unique service prefixes, child processes that are
+//! killed when a test fails, and dead-node cleanup.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+static COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// The binary with the product's subcommands.
+pub fn node_exe() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_pipeline-node"))
+}
+
+/// A service prefix no other test (or parallel test run) uses: pid + test name + counter.
+pub fn prefix(test: &str) -> String {
+    format!(
+        "estpipe-test-{}-{test}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::SeqCst)
+    )
+}
+
+/// A scratch directory for one test.
+pub fn scratch(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(prefix(test));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A child process, killed (SIGKILL) on drop unless it has been waited for.
+pub struct Proc {
+    pub child: Option<Child>,
+    pub stderr: PathBuf,
+    pub stdout: PathBuf,
+    pub name: String,
+}
+
+impl Proc {
+    /// Starts `pipeline-node <args>` with output captured to files in `dir`.
+    pub fn start(dir: &Path, name: &str, args: &[&str]) -> Self {
+        let stdout = dir.join(format!("{name}.out"));
+        let stderr = dir.join(format!("{name}.err"));
+        let child = Command::new(node_exe())
+            .args(args)
+            .env("IOX2_LOG_LEVEL", "Error")
+            .stdin(Stdio::null())
+            .stdout(std::fs::File::create(&stdout).unwrap())
+            .stderr(std::fs::File::create(&stderr).unwrap())
+            .spawn()
+            .expect("start pipeline-node");
+        Self {
+            child: Some(child),
+            stderr,
+            stdout,
+            name: name.to_string(),
+        }
+    }
+
+    pub fn pid(&self) -> i32 {
+        self.child.as_ref().unwrap().id() as i32
+    }
+
+    /// Sends `sig` (e.g. `libc::SIGKILL`).
+    pub fn signal(&self, sig: i32) {
+        // SAFETY: kill(2) on our own child's pid.
+        #[allow(unsafe_code)]
+        let rc = unsafe { libc::kill(self.pid(), sig) };
+        assert_eq!(rc, 0, "kill {}", self.name);
+    }
+
+    /// Waits for exit (panics after `secs`, killing the child).
+    pub fn wait(&mut self, secs: u64) -> ExitStatus {
+        let mut c = self.child.take().expect("not yet waited");
+        let start = Instant::now();
+        loop {
+            if let Some(s) = c.try_wait().unwrap() {
+                return s;
+            }
+            if start.elapsed() > Duration::from_secs(secs) {
+                let _ = c.kill();
+                let _ = c.wait();
+                panic!(
+                    "{} did not finish within {secs} s\nstderr:\n{}",
+                    self.name,
+                    self.err()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    pub fn err(&self) -> String {
+        std::fs::read_to_string(&self.stderr).unwrap_or_default()
+    }
+
+    pub fn out(&self) -> String {
+        std::fs::read_to_string(&self.stdout).unwrap_or_default()
+    }
+
+    /// Polls stderr until it contains `needle` (panics after `secs`).
+    pub fn wait_for_stderr(&self, needle: &str, secs: u64) {
+        let start = Instant::now();
+        while !self.err().contains(needle) {
+            assert!(
+                start.elapsed() < Duration::from_secs(secs),
+                "{}: {needle:?} not seen within {secs} s; stderr:\n{}",
+                self.name,
+                self.err()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Some(c) = self.child.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+        cleanup_dead_nodes();
+    }
+}
+
+/// Removes what killed processes left in shared memory.
+pub fn cleanup_dead_nodes() {
+    use iceoryx2::prelude::*;
+    if let Ok(node) = NodeBuilder::new().create::<ipc::Service>() {
+        let _ = node.try_cleanup_dead_nodes();
+    }
+}
+
+/// Reads a run report written with `--json`.
+pub fn report(path: &Path) -> serde_json::Value {
+    let s = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read report {path:?}: {e}"));
+    serde_json::from_str(&s).unwrap()
+}
+
+/// Reads a numeric CSV with a header: (header, rows).
+pub fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let s = std::fs::read_to_string(path).unwrap();
+    let mut lines = s.lines();
+    let head = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = lines
+        .map(|l| {
+            l.split(',')
+                .map(|v| {
+                    if v.is_empty() {
+                        f64::NAN
+                    } else {
+                        v.parse().unwrap()
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    (head, rows)
+}
