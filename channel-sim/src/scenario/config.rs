@@ -21,7 +21,8 @@
 //! is one variant (its spec type deriving `Deserialize`, `#[serde(deny_unknown_fields)]`) and
 //! one arm in [`StageConfig::into_spec`] that validates it, naming fields as
 //! `{field}.<name>` (e.g. `stages[2].b`), and a case in this file's test that each bad field
-//! is rejected.
+//! is rejected. Accepted parameters that break a paper's own assumption are reported through
+//! `StageSpec::warnings`, which `eval` prints.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -103,15 +104,8 @@ pub enum StageConfig {
 }
 
 impl StageConfig {
-    /// Validates the stage (fields named under `field`) and returns its spec. Parameters that
-    /// are accepted but violate a paper's own assumption push a message onto `warnings`
-    /// (printed by the front end, never silently accepted).
-    pub fn into_spec(
-        self,
-        field: &str,
-        warnings: &mut Vec<String>,
-    ) -> Result<Arc<dyn StageSpec>, ScenarioError> {
-        let _ = &warnings; // used by stage kinds whose paper example breaks its own assumption
+    /// Validates the stage (fields named under `field`) and returns its spec.
+    pub fn into_spec(self, field: &str) -> Result<Arc<dyn StageSpec>, ScenarioError> {
         Ok(match self {
             StageConfig::Bernoulli(s) => {
                 s.validate(field)?;
@@ -198,18 +192,14 @@ pub fn build(file: ScenarioFile, default_name: &str) -> Result<ComposedScenario,
     };
     let initial = InitialDistribution::new(mean, cov, est_mean, est_cov)?;
 
-    let mut warnings = Vec::new();
     let stages = file
         .stages
         .into_iter()
         .enumerate()
-        .map(|(i, s)| s.into_spec(&format!("stages[{i}]"), &mut warnings))
+        .map(|(i, s)| s.into_spec(&format!("stages[{i}]")))
         .collect::<Result<Vec<_>, _>>()?;
     let name = file.name.unwrap_or_else(|| default_name.to_owned());
-    let scenario = ComposedScenario::new(name, Arc::new(plant), initial, stages)?;
-    Ok(warnings
-        .into_iter()
-        .fold(scenario, ComposedScenario::with_warning))
+    ComposedScenario::new(name, Arc::new(plant), initial, stages)
 }
 
 /// A dense matrix from rows; errors unless non-empty, rectangular and finite.

@@ -171,7 +171,6 @@ pub struct ComposedScenario {
     plant: Arc<dyn Plant>,
     stages: Vec<Arc<dyn StageSpec>>,
     initial: InitialDistribution,
-    warnings: Vec<String>,
 }
 
 impl ComposedScenario {
@@ -203,21 +202,7 @@ impl ComposedScenario {
             plant,
             stages,
             initial,
-            warnings: Vec::new(),
         })
-    }
-
-    /// Adds a warning that front ends print before running: for parameters that are accepted
-    /// but violate a paper's own assumption (e.g. seed 004's example has λχ ≤ 1).
-    #[must_use]
-    pub fn with_warning(mut self, warning: impl Into<String>) -> Self {
-        self.warnings.push(warning.into());
-        self
-    }
-
-    /// The warnings to print.
-    pub fn warnings(&self) -> &[String] {
-        &self.warnings
     }
 
     /// The plant.
@@ -265,7 +250,6 @@ impl ComposedScenario {
             plant: Arc::clone(&self.plant),
             stages: Vec::new(),
             initial: self.initial.clone(),
-            warnings: self.warnings.clone(),
         }
     }
 

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use channel_sim::scenario::{self, config, ComposedScenario};
+use channel_sim::scenario::{self, config};
 use channel_sim::Scenario;
 
 use super::{evaluate, RunConfig};
@@ -80,11 +80,6 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         (None, Some(path)) => Box::new(config::load(path).map_err(CommandError::usage)?),
         (None, None) => return Err(CommandError::usage("give --scenario NAME or --config FILE")),
     };
-    if let Some(c) = scenario.as_any().downcast_ref::<ComposedScenario>() {
-        for w in c.warnings() {
-            eprintln!("ipc-runner: warning: {}: {w}", scenario.name());
-        }
-    }
     if let Some(plot) = &args.plot {
         crate::plot::check_extension(plot).map_err(CommandError::usage)?;
     }
