@@ -18,8 +18,11 @@
 //! ```
 //!
 //! Matrices are arrays of rows. A stage kind is one variant of [`StageConfig`]: adding a kind
-//! is one variant (its spec type deriving `Deserialize`) and one arm in
-//! [`StageConfig::into_spec`] that validates it.
+//! is one variant (its spec type deriving `Deserialize`, `#[serde(deny_unknown_fields)]`) and
+//! one arm in [`StageConfig::into_spec`] that validates it, naming fields as
+//! `{field}.<name>` (e.g. `stages[2].b`), and a case in this file's test that each bad field
+//! is rejected. Accepted parameters that break a paper's own assumption are reported through
+//! `StageSpec::warnings`, which `eval` prints.
 
 use std::path::Path;
 use std::sync::Arc;
