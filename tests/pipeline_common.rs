@@ -129,6 +129,7 @@ impl Drop for Proc {
 /// Removes what killed processes left in shared memory.
 pub fn cleanup_dead_nodes() {
     use iceoryx2::prelude::*;
+    set_log_level(LogLevel::Error);
     if let Ok(node) = NodeBuilder::new().create::<ipc::Service>() {
         let _ = node.try_cleanup_dead_nodes();
     }

@@ -10,7 +10,6 @@ use ipc_runner::estimators::{EvalOptions, FACTORIES};
 use ipc_runner::eval::{evaluate, RunConfig};
 
 const SEED: u64 = 7;
-const STEPS: u32 = 150;
 
 /// Two sensor nodes, bursty + i.i.d. loss: exercises multi-node instants.
 fn config() -> std::path::PathBuf {
@@ -19,33 +18,44 @@ fn config() -> std::path::PathBuf {
 
 #[test]
 fn demo_matches_in_process_eval_exactly_and_replays() {
+    let cfg = config();
+    let scenario = channel_sim::scenario::config::load(&cfg).unwrap();
+    check(&["--config", cfg.to_str().unwrap()], &scenario, 150);
+}
+
+/// The default scenario of the demo, with every real-time estimator that applies to it
+/// (including the seeded particle filter: estimators are built for the same seed and run).
+#[test]
+fn occlusion_demo_matches_in_process_eval_exactly() {
+    let scenario = channel_sim::scenario::preset("occlusion").unwrap();
+    check(&["--scenario", "occlusion"], scenario.as_ref(), 60);
+}
+
+fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u32) {
     let dir = scratch("demo");
     let prefix = common::prefix("demo");
     let out = dir.join("out");
-    let cfg = config();
-    let mut demo = Proc::start(
-        &dir,
-        "demo",
-        &[
-            "demo",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--steps",
-            &STEPS.to_string(),
-            "--rate",
-            "1000",
-            "--seed",
-            &SEED.to_string(),
-            "--wait",
-            "block",
-            "--out",
-            out.to_str().unwrap(),
-            "--prefix",
-            &prefix,
-            "--quiet",
-        ],
-    );
-    let status = demo.wait(120);
+    let mut args = vec!["demo"];
+    args.extend_from_slice(scenario_args);
+    let steps_s = steps.to_string();
+    let seed_s = SEED.to_string();
+    args.extend_from_slice(&[
+        "--steps",
+        &steps_s,
+        "--rate",
+        "1000",
+        "--seed",
+        &seed_s,
+        "--wait",
+        "block",
+        "--out",
+        out.to_str().unwrap(),
+        "--prefix",
+        &prefix,
+        "--quiet",
+    ]);
+    let mut demo = Proc::start(&dir, "demo", &args);
+    let status = demo.wait(300);
     assert!(status.success(), "demo failed: {status}\n{}", demo.err());
     let text = demo.out();
     for needle in ["MSE vs truth", "lost in IPC", "p99.9", "end to end"] {
@@ -53,7 +63,7 @@ fn demo_matches_in_process_eval_exactly_and_replays() {
     }
     let r = report(&out.join("report.json"));
     assert_eq!(r["ending"], "completed");
-    assert_eq!(r["counts"]["instants"], u64::from(STEPS));
+    assert_eq!(r["counts"]["instants"], u64::from(steps));
     assert_eq!(
         r["counts"]["lost_in_ipc"], 0,
         "precondition: no IPC loss {r}"
@@ -61,12 +71,11 @@ fn demo_matches_in_process_eval_exactly_and_replays() {
     assert_eq!(r["truth_missing"], 0);
 
     // The same experiment in-process, by `eval` (run 0 of seed SEED, one run).
-    let scenario = channel_sim::scenario::config::load(&cfg).unwrap();
-    let nx = channel_sim::Scenario::nx(&scenario);
+    let nx = scenario.nx();
     #[allow(clippy::needless_update)]
     let options = EvalOptions {
         runs: 1,
-        horizon: STEPS,
+        horizon: steps,
         seed: SEED,
         ..EvalOptions::default()
     };
@@ -74,11 +83,11 @@ fn demo_matches_in_process_eval_exactly_and_replays() {
         threads: Some(1),
         progress: false,
     };
-    let ev = evaluate(&scenario, &options, FACTORIES, &config).unwrap();
+    let ev = evaluate(scenario, &options, FACTORIES, &config).unwrap();
     let traj = &ev.trajectory;
 
     let (head, rows) = csv(&out.join("estimates.csv"));
-    assert_eq!(rows.len(), STEPS as usize);
+    assert_eq!(rows.len(), steps as usize);
     let reported = r["estimators"].as_array().unwrap();
     assert!(!reported.is_empty());
     for (e, rep) in reported.iter().enumerate() {
@@ -111,24 +120,14 @@ fn demo_matches_in_process_eval_exactly_and_replays() {
 
     // The slot log the demo wrote replays to the same estimates.
     let replayed = dir.join("replayed.csv");
-    let mut rp = Proc::start(
-        &dir,
-        "replay",
-        &[
-            "replay",
-            "--input",
-            out.join("slots.csv").to_str().unwrap(),
-            "--config",
-            cfg.to_str().unwrap(),
-            "--seed",
-            &SEED.to_string(),
-            "--output",
-            replayed.to_str().unwrap(),
-        ],
-    );
-    assert!(rp.wait(60).success(), "{}", rp.err());
+    let slots = out.join("slots.csv");
+    let mut rargs = vec!["replay", "--input", slots.to_str().unwrap()];
+    rargs.extend_from_slice(scenario_args);
+    rargs.extend_from_slice(&["--seed", &seed_s, "--output", replayed.to_str().unwrap()]);
+    let mut rp = Proc::start(&dir, "replay", &rargs);
+    assert!(rp.wait(300).success(), "{}", rp.err());
     let (rhead, rrows) = csv(&replayed);
-    assert_eq!(rrows.len(), STEPS as usize);
+    assert_eq!(rrows.len(), steps as usize);
     for (c, h) in rhead.iter().enumerate().skip(1) {
         let col = head.iter().position(|x| x == h).unwrap();
         for (i, row) in rrows.iter().enumerate() {

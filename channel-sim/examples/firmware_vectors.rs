@@ -6,36 +6,30 @@
 //! cargo run -p channel-sim --example firmware_vectors -- --check # verify it is reproduced
 //! ```
 //!
-//! `occlusion.bin` is one run of seed 001's Section IV example (DESIGN.md's reading): the plant
-//! x_{k+1} = A x_k + w_k, z_k = C x_k + v_k with Q = 0.3 I₃, R = 0.2 I₂, x₀ ~ N([5 5 5]ᵀ, 4 I₃);
-//! the packet of instant k is dropped iff u_k = x_{1,k} + n_k, n_k ~ N(0, 0.1), lies in one of
-//! the regions [20i − 5, 20i + 5], i = 1..4 (the label is that i). k = 1..=T, T = 100,
-//! simulation seed [`SEED`] (xoshiro256++, standard normals from rand_distr), computed in f64
-//! and stored as f32.
+//! `occlusion.bin` is run 0 of channel-sim's `occlusion` preset (seed 001's Section IV example,
+//! DESIGN.md's reading: x_{k+1} = A x_k + w_k, z_k = C x_k + v_k with Q = 0.3 I₃, R = 0.2 I₂,
+//! x₀ ~ N([5 5 5]ᵀ, 4 I₃); the packet of instant k is dropped iff u_k = x_{1,k} + n_k,
+//! n_k ~ N(0, 0.1), lies in one of the regions [20i − 5, 20i + 5], i = 1..4) with seed
+//! [`SEED`], k = 1..=T, T = 100, computed in f64 and stored as f32. The measurement stored on
+//! a dropped instant comes from the same run without its channel stage.
 //!
-//! `nn.bin` is one run of seed 003's Section IV example (DESIGN.md's reading, the plant of
-//! `estimator_core::filter::nn_system::Seed003Example`): x_{k+1} = A_k x_k + f(x_k) + B_k w_k,
-//! y_k = C_k x_k + D_k w_k with the same scalar w_k ~ N(0, 0.1), x₀ = [3.1 −2.65 4]ᵀ; the token
-//! bucket (a, b, S, z₀) = (2, 3, 10, 6) decides from k = 1 on whether y_k is transmitted
-//! (label 0 either way); k = 1..=T, T = 100, seed [`NN_SEED`].
+//! `nn.bin` is run 0 of channel-sim's `nn-token-bucket` preset (seed 003's Section IV example:
+//! x_{k+1} = A_k x_k + f(x_k) + B_k w_k, y_k = C_k x_k + D_k w_k with one scalar
+//! w_k ~ N(0, 0.1), x₀ = [3.1 −2.65 4]ᵀ, token bucket (a, b, S, z₀) = (2, 3, 10, 6)) with seed
+//! [`NN_SEED`], k = 1..=T, T = 100 (label 0 throughout).
 //!
-//! After regenerating, update `OCCLUSION_FNV1A64` / `NN_FNV1A64` in
+//! After regenerating, update the hashes of `OCCLUSION` / `NN` in
 //! `estimator-core/firmware/src/run.rs` to the hashes this prints.
 //!
 //! File format (little-endian): magic `EFV1`, version u32 = 1, seed u64, steps u32, nx u32 = 3,
 //! ny u32 = 2, record size u32 = 32; then per instant: k u32, delivered u8, label u8, 2 zero
-//! bytes, channel flags u32 (`FLAG_OCCLUDED` on a drop), z_k f32×2 (the sensor's measurement,
+//! bytes, channel flags u32 (channel-sim's `FLAG_*` bits), z_k f32×2 (the sensor's measurement,
 //! also on a drop), x_k f32×3.
 
 use std::path::PathBuf;
 
-use channel_sim::sim::{FLAG_OCCLUDED, FLAG_TOKEN_BLOCKED};
-use estimator_core::filter::nn_system::{CoupledNoiseSystem, DifferentiableMap, Seed003Example};
-use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
-use nalgebra::{SMatrix, Vector3};
-use rand_distr::{Distribution, StandardNormal};
-use rand_xoshiro::rand_core::SeedableRng;
-use rand_xoshiro::Xoshiro256PlusPlus;
+use channel_sim::scenario::ComposedScenario;
+use channel_sim::Simulation;
 
 /// Simulation seed of the embedded stream.
 const SEED: u64 = 0x5EED_0001_F1A5_0008;
@@ -50,38 +44,54 @@ fn fnv1a64(bytes: &[u8]) -> u64 {
     })
 }
 
-fn generate() -> Vec<u8> {
-    let a = [[1.01, 0.1, 0.0], [0.0, 1.01, 0.1], [0.0, 0.0, -1.02]];
-    let c = [[2.0, 3.0, 1.0], [1.0, 0.0, 0.98]];
-    let (q, r, psi, mu0, sigma0) = (0.3f64, 0.2f64, 0.1f64, 5.0f64, 4.0f64);
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(SEED);
-    let mut n = move || -> f64 { StandardNormal.sample(&mut rng) };
-
+fn generate() -> anyhow::Result<Vec<u8>> {
+    let preset = channel_sim::scenario::preset("occlusion")?;
+    let composed = preset
+        .as_any()
+        .downcast_ref::<ComposedScenario>()
+        .ok_or_else(|| anyhow::anyhow!("the occlusion preset is not a composed scenario"))?;
+    // The same run twice: with the channel (what the estimators see) and without it (the
+    // sensor's measurement on every instant, for the lossless KF); the plant's random streams
+    // do not depend on the channel, so truth and delivered measurements coincide.
+    let mut sim = composed.simulate(SEED, 0);
+    let mut lossless = composed.without_channel().simulate(SEED, 0);
     let mut out = header(SEED);
-
-    let mut x = [0.0f64; 3];
-    for xi in &mut x {
-        *xi = mu0 + sigma0.sqrt() * n();
-    }
     for k in 1..=T {
-        let w = [q.sqrt() * n(), q.sqrt() * n(), q.sqrt() * n()];
-        let mut next = [0.0; 3];
-        for i in 0..3 {
-            next[i] = (0..3).map(|j| a[i][j] * x[j]).sum::<f64>() + w[i];
-        }
-        x = next;
-        let v = [r.sqrt() * n(), r.sqrt() * n()];
-        let z: [f64; 2] =
-            std::array::from_fn(|i| (0..3).map(|j| c[i][j] * x[j]).sum::<f64>() + v[i]);
-        let u = x[0] + psi.sqrt() * n();
-        let label = (1..=4u8)
-            .find(|&i| (u - 20.0 * f64::from(i)).abs() <= 5.0)
-            .unwrap_or(0);
-        let delivered = label == 0;
-        let flags = if delivered { 0 } else { FLAG_OCCLUDED };
-        record(&mut out, k, delivered, label, flags, &z, &x);
+        let (inst, full) = (sim.next_instant(), lossless.next_instant());
+        anyhow::ensure!(
+            inst.k == k && full.k == k,
+            "instants out of step at k = {k}"
+        );
+        anyhow::ensure!(inst.truth == full.truth, "truth differs at k = {k}");
+        let (o, f) = (&inst.obs[0], &full.obs[0]);
+        anyhow::ensure!(
+            f.delivered && (!o.delivered || o.y == f.y),
+            "z differs at k = {k}"
+        );
+        let x: [f64; 3] = std::array::from_fn(|i| inst.truth[i]);
+        // u_k = x₁ + n_k is not exposed; on a dropout it lies in region i, and the regions are
+        // 20 apart, so the nearest centre is that region unless |n_k| > 5 (15.8 σ).
+        let label = if o.delivered {
+            0
+        } else {
+            (1..=4u8)
+                .min_by(|&a, &b| {
+                    let d = |i: u8| (x[0] - 20.0 * f64::from(i)).abs();
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap_or(0)
+        };
+        record(
+            &mut out,
+            k,
+            o.delivered,
+            label,
+            o.flags,
+            &[f.y[0], f.y[1]],
+            &x,
+        );
     }
-    out
+    Ok(out)
 }
 
 fn header(seed: u64) -> Vec<u8> {
@@ -112,44 +122,26 @@ fn record(
     }
 }
 
-fn generate_nn() -> Vec<u8> {
-    let sys = Seed003Example;
-    let w_sd = Seed003Example::W_VAR.sqrt();
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(NN_SEED);
-    let mut n = move || -> f64 { StandardNormal.sample(&mut rng) };
-    let mut tb = TokenBucket::new(TokenBucketConfig::new(2, 3, 10, 6).expect("valid bucket"));
+fn generate_nn() -> anyhow::Result<Vec<u8>> {
+    let preset = channel_sim::scenario::preset("nn-token-bucket")?;
+    let mut sim = preset.start(NN_SEED, 0);
     let mut out = header(NN_SEED);
-    let mut x: Vector3<f64> = Seed003Example::x0();
-    let mut w = w_sd * n();
     for k in 1..=T {
-        let km1 = (k - 1) as usize;
-        let b: SMatrix<f64, 3, 1> = CoupledNoiseSystem::<f64, 3, 1, 2>::b(&sys, km1);
-        x = CoupledNoiseSystem::<f64, 3, 1, 2>::a(&sys, km1) * x + sys.eval(&x) + b * w;
-        w = w_sd * n();
-        let c: SMatrix<f64, 2, 3> = CoupledNoiseSystem::<f64, 3, 1, 2>::c(&sys, k as usize);
-        let d: SMatrix<f64, 2, 1> = CoupledNoiseSystem::<f64, 3, 1, 2>::d(&sys, k as usize);
-        let y = c * x + d * w;
-        let sent = tb.step().transmit;
-        let flags = if sent { 0 } else { FLAG_TOKEN_BLOCKED };
-        record(
-            &mut out,
-            k,
-            sent,
-            0,
-            flags,
-            &[y[0], y[1]],
-            &[x[0], x[1], x[2]],
-        );
+        let inst = sim.next_instant();
+        anyhow::ensure!(inst.k == k, "instants out of step at k = {k}");
+        let o = &inst.obs[0];
+        let x: [f64; 3] = std::array::from_fn(|i| inst.truth[i]);
+        record(&mut out, k, o.delivered, 0, o.flags, &[o.y[0], o.y[1]], &x);
     }
-    out
+    Ok(out)
 }
 
 fn main() -> anyhow::Result<()> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../estimator-core/firmware/vectors");
     let check = std::env::args().any(|a| a == "--check");
     for (file, seed, bytes) in [
-        ("occlusion.bin", SEED, generate()),
-        ("nn.bin", NN_SEED, generate_nn()),
+        ("occlusion.bin", SEED, generate()?),
+        ("nn.bin", NN_SEED, generate_nn()?),
     ] {
         let path = dir.join(file);
         let hash = fnv1a64(&bytes);

@@ -94,6 +94,11 @@ pub trait LinearDescription: Send + Sync + Debug {
     fn c(&self, node: usize, k: usize) -> DMatrix<f64>;
     /// Effective measurement-noise covariance D_{m,k} R_m D_{m,k}ᵀ of node `node`.
     fn measurement_cov(&self, node: usize, k: usize) -> DMatrix<f64>;
+    /// `true` when no matrix depends on k, so a filter may convert them once and never
+    /// allocate per step.
+    fn time_invariant(&self) -> bool {
+        false
+    }
 }
 
 /// A matrix that is constant or a function of the time index k.
@@ -271,6 +276,15 @@ impl LinearDescription for LinearPlant {
         let s = &self.sensors[node];
         let d = s.d.at(k);
         symmetric(&*d * &s.r * d.transpose())
+    }
+    fn time_invariant(&self) -> bool {
+        let constant = |m: &TimeMatrix| matches!(m, TimeMatrix::Constant(_));
+        constant(&self.a)
+            && constant(&self.b)
+            && self
+                .sensors
+                .iter()
+                .all(|s| constant(&s.c) && constant(&s.d))
     }
 }
 

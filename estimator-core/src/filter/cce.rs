@@ -25,9 +25,9 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::filter::kalman::{kalman_update, CovarianceUpdate};
-use crate::gauss::{log_sum_exp, LN_SQRT_2PI};
+use crate::gauss::LN_SQRT_2PI;
 use crate::gsum::GaussSum;
-use crate::linalg::{check_finite, check_spd, cholesky, solve_spd_right, symmetrize};
+use crate::linalg::{check_finite, check_spd, cholesky, symmetrize};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
 use crate::{Error, Real, Result};
@@ -121,7 +121,8 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
     }
 
     /// `ln Σ_s ω_{ik}^s` for every region at the last dropout: the label's log-score
-    /// (eq. 16 times `N`).
+    /// (eq. 16 times `N`). Regions whose score provably lies below the winner's are not
+    /// summed and read −∞.
     #[inline]
     pub fn region_log_weights(&self) -> &[T; S] {
         &self.region_log_weights
@@ -183,8 +184,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         let ex = e * xp;
         let half = T::lit(0.5);
         let mut lnw = [[T::zero(); N]; S];
-        let mut lw = [T::zero(); S];
-        let mut best = 0usize;
+        let mut top = [T::zero(); S];
         for i in 0..S {
             // ln ω_{ik}^s = ln|R_i| + ln N(ũ^s; E x̂⁻, E P⁻ Eᵀ + Σ_i)   (eq. 15)
             let chol = cholesky(&symmetrize(&(epe + self.sigma[i])), "E P Eᵀ + Σ")?;
@@ -194,29 +194,60 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
                 half_ln_det += l[(j, j)].ln();
             }
             let c0 = self.ln_vol[i] - T::lit(NE as f64 * LN_SQRT_2PI) - half_ln_det;
+            top[i] = -T::one() / T::zero();
             for s in 0..N {
                 let d = self.means[i][s] - ex;
                 lnw[i][s] = c0 - half * d.dot(&chol.solve(&d));
+                if lnw[i][s] > top[i] {
+                    top[i] = lnw[i][s];
+                }
             }
-            lw[i] = log_sum_exp(&lnw[i]);
-            if !lw[i].finite() {
+            if !top[i].finite() {
                 return Err(Error::Numerical {
                     what: "region weight is not finite",
                 });
             }
-            // eq. (17): argmax over regions 1..=S (first on ties).
-            if lw[i] > lw[best] {
+        }
+        // eq. (17): ĥ = argmax over regions 1..=S of ln Σ_s ω^s (first on ties), log-sum-exp
+        // with the largest term factored out. A region whose largest term plus ln N is below
+        // the best score so far cannot win and is not summed (its score is reported as −∞).
+        let ln_n = T::lit(libm::log(N as f64));
+        let mut first = 0usize;
+        for i in 1..S {
+            if top[i] > top[first] {
+                first = i;
+            }
+        }
+        let mut lw = [-T::one() / T::zero(); S];
+        let mut expw = [T::zero(); N];
+        let mut best = first;
+        let mut best_sum = T::zero();
+        for i in core::iter::once(first).chain((0..S).filter(|&i| i != first)) {
+            if i != first && top[i] + ln_n < lw[best] {
+                continue;
+            }
+            let mut sum = T::zero();
+            let mut e_i = [T::zero(); N];
+            for s in 0..N {
+                e_i[s] = (lnw[i][s] - top[i]).exp();
+                sum += e_i[s];
+            }
+            lw[i] = top[i] + sum.ln();
+            if i == first || lw[i] > lw[best] || (lw[i] == lw[best] && i < best) {
                 best = i;
+                best_sum = sum;
+                expw = e_i;
             }
         }
         let i = best;
-        let s_i = symmetrize(&(epe + self.sigma[i]));
-        let gain = solve_spd_right(&pet, &s_i, "E P Eᵀ + Σ")?;
+        // K_i = P⁻ Eᵀ S_i⁻¹.
+        let chol = cholesky(&symmetrize(&(epe + self.sigma[i])), "E P Eᵀ + Σ")?;
+        let gain = chol.solve(&pet.transpose()).transpose();
         // α-weighted mean and covariance of the component means (eq. 21).
         let mut ubar = SVector::<T, NE>::zeros();
         let mut alpha = [T::zero(); N];
         for s in 0..N {
-            alpha[s] = (lnw[i][s] - lw[i]).exp();
+            alpha[s] = expw[s] / best_sum;
             ubar += self.means[i][s] * alpha[s];
         }
         let mut cu = SMatrix::<T, NE, NE>::zeros();

@@ -17,6 +17,7 @@ use std::sync::Arc;
 
 use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
+use channel_sim::sim::MAX_NODES;
 use channel_sim::{Observation, Scenario};
 use estimator_core::filter::KalmanFilter;
 use estimator_core::Error;
@@ -98,6 +99,33 @@ struct LinearKf<const NX: usize, const NY: usize> {
     full_information: bool,
     plant: Arc<dyn Plant>,
     kf: KalmanFilter<f64, NX>,
+    /// Fixed-size copies of a time-invariant model, so that a step allocates nothing.
+    cache: Option<Box<Cached<NX, NY>>>,
+}
+
+/// A, B Q Bᵀ and, per node, C and D R Dᵀ converted once.
+struct Cached<const NX: usize, const NY: usize> {
+    a: SMatrix<f64, NX, NX>,
+    q: SMatrix<f64, NX, NX>,
+    c: [SMatrix<f64, NY, NX>; MAX_NODES],
+    r: [SMatrix<f64, NY, NY>; MAX_NODES],
+}
+
+impl<const NX: usize, const NY: usize> Cached<NX, NY> {
+    fn of(model: &dyn LinearDescription, nodes: usize) -> Box<Self> {
+        let mut c = [SMatrix::zeros(); MAX_NODES];
+        let mut r = [SMatrix::identity(); MAX_NODES];
+        for m in 0..nodes.min(MAX_NODES) {
+            c[m] = fixed(&model.c(m, 0));
+            r[m] = fixed(&model.measurement_cov(m, 0));
+        }
+        Box::new(Self {
+            a: fixed(&model.a(0)),
+            q: fixed(&model.process_cov(0)),
+            c,
+            r,
+        })
+    }
 }
 
 fn fixed<const R: usize, const C: usize>(m: &DMatrix<f64>) -> SMatrix<f64, R, C> {
@@ -108,11 +136,17 @@ impl<const NX: usize, const NY: usize> LinearKf<NX, NY> {
     fn boxed(spec: Spec<'_>) -> anyhow::Result<Box<dyn Estimator>> {
         let kf = KalmanFilter::new(SVector::from_column_slice(spec.x0), fixed(spec.p0))
             .map_err(|e| anyhow::anyhow!("{}: initial.estimator_cov: {e}", spec.name))?;
+        let cache = spec
+            .plant
+            .linear()
+            .filter(|m| m.time_invariant())
+            .map(|m| Cached::of(m, spec.plant.nodes()));
         Ok(Box::new(Self {
             name: spec.name,
             full_information: spec.full_information,
             plant: spec.plant,
             kf,
+            cache,
         }))
     }
 
@@ -130,6 +164,24 @@ impl<const NX: usize, const NY: usize> Estimator for LinearKf<NX, NY> {
     }
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
+        if let Some(m) = &self.cache {
+            let mut kf = self.kf;
+            kf.predict_with(&m.a, &m.q)?;
+            for o in obs {
+                if let Some(y) = o.measurement() {
+                    let node = o.node as usize;
+                    if node >= self.plant.nodes() {
+                        return Err(Error::InvalidConfig {
+                            field: "node",
+                            reason: "observation from a node the model does not have",
+                        });
+                    }
+                    kf.update_with::<NY>(&m.c[node], &m.r[node], &SVector::from_column_slice(y))?;
+                }
+            }
+            self.kf = kf;
+            return Ok(());
+        }
         let model = self.model()?;
         let (k, prev) = (k as usize, k.saturating_sub(1) as usize);
         // Work on a copy and commit at the end: an error leaves the filter untouched.

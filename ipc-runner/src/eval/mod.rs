@@ -9,6 +9,19 @@
 //! A run is *diverged* for an estimator when its estimate becomes non-finite or a step returns
 //! an error (the estimator then no longer tracks instant k). Such runs are counted and left
 //! out of that estimator's means; the evaluation never stops for them.
+//!
+//! ```
+//! use ipc_runner::estimators::{EvalOptions, FACTORIES};
+//! use ipc_runner::eval::{evaluate, RunConfig};
+//!
+//! let scenario = channel_sim::scenario::preset("linear")?;
+//! let options = EvalOptions { runs: 20, horizon: 10, seed: 1, ..EvalOptions::default() };
+//! let result = evaluate(&*scenario, &options, FACTORIES, &RunConfig::default())?;
+//! let (name, kf) = &result.estimators[0];
+//! assert_eq!(name, "kf");
+//! assert_eq!(kf.mse.len(), 11);
+//! # Ok::<(), anyhow::Error>(())
+//! ```
 
 pub mod cli;
 pub mod report;
