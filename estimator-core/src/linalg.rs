@@ -68,6 +68,35 @@ pub fn cholesky<T: Real, const N: usize>(
     Ok(chol)
 }
 
+/// [`cholesky`] for a matrix the caller has just built symmetric (e.g. with [`symmetrize`]):
+/// skips the asymmetry test and the second symmetrisation, and checks finiteness and the
+/// scale in one pass. Same refusals otherwise (non-finite, not PD, numerically singular).
+pub fn cholesky_symmetric<T: Real, const N: usize>(
+    m: &SMatrix<T, N, N>,
+    what: &'static str,
+) -> Result<Cholesky<T, Const<N>>> {
+    let mut scale = T::zero();
+    for &v in m.iter() {
+        if !v.finite() {
+            return Err(Error::NonFinite { what });
+        }
+        let a = v.abs();
+        if a > scale {
+            scale = a;
+        }
+    }
+    let chol = m.cholesky().ok_or(Error::NotPositiveDefinite { what })?;
+    let l = chol.l_dirty();
+    let floor = (T::EPS * scale).sqrt();
+    for i in 0..N {
+        let d = l[(i, i)];
+        if !d.finite() || d <= floor {
+            return Err(Error::NotPositiveDefinite { what });
+        }
+    }
+    Ok(chol)
+}
+
 /// Validates that `m` is symmetric positive definite (see [`cholesky`]).
 pub fn check_spd<T: Real, const N: usize>(m: &SMatrix<T, N, N>, what: &'static str) -> Result<()> {
     cholesky(m, what).map(|_| ())
@@ -149,6 +178,28 @@ mod tests {
             Err(Error::NonFinite { what: "m" })
         );
         assert!(check_spd(&matrix![1.0, 0.0; 0.0, 0.0], "m").is_err());
+    }
+
+    #[test]
+    fn symmetric_fast_path_agrees_and_refuses_the_same() {
+        let a = matrix![4.0, 1.0; 1.0, 3.0];
+        let (f, s) = (
+            cholesky_symmetric(&a, "a").unwrap(),
+            cholesky(&a, "a").unwrap(),
+        );
+        assert_eq!(f.l(), s.l());
+        let bad = [
+            matrix![1.0, 2.0; 2.0, 1.0],
+            matrix![1.0, 0.0; 0.0, 0.0],
+            matrix![1.0, f64::NAN; f64::NAN, 1.0],
+        ];
+        for m in bad {
+            assert_eq!(
+                cholesky_symmetric(&m, "m").err(),
+                cholesky(&m, "m").err(),
+                "{m}"
+            );
+        }
     }
 
     #[test]

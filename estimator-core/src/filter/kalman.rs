@@ -3,7 +3,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::{check_finite, check_spd, cholesky, symmetrize};
+use crate::linalg::{check_finite, check_spd, cholesky_symmetric, symmetrize};
 use crate::model::LinearSystem;
 use crate::{Error, Real, Result};
 
@@ -186,7 +186,8 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
     let s = symmetrize(&(c * pct + r));
     // K = P Cᵀ S⁻¹ by a Cholesky solve; S not PD means R or P is broken. The factor is
     // computed once and reused for the NIS below (one factorisation per update).
-    let chol = cholesky(&s, "innovation covariance")?;
+    // S was symmetrised one line up: the fast path skips re-testing that.
+    let chol = cholesky_symmetric(&s, "innovation covariance")?;
     let k = chol.solve(&pct.transpose()).transpose();
     let nu = y - c * x;
     let x_new = x + k * nu;
