@@ -44,6 +44,7 @@ pub mod gsum;
 pub mod linalg;
 pub mod linalg_eig;
 pub mod linalg_kron;
+pub mod linalg_small;
 pub mod model;
 pub mod protocol;
 pub mod real;

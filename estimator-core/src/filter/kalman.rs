@@ -3,7 +3,8 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::{check_finite, check_spd, cholesky_symmetric, symmetrize};
+use crate::linalg::{check_finite, check_spd, symmetrize};
+use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
 use crate::{Error, Real, Result};
 
@@ -86,8 +87,9 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
     }
 
     /// Time update with explicit matrices `A` and effective process covariance `Q`.
+    /// `Q` is symmetrised first (the model path trusts [`LinearSystem`]'s symmetric `Q`).
     pub fn predict_with(&mut self, a: &SMatrix<T, NX, NX>, q: &SMatrix<T, NX, NX>) -> Result<()> {
-        let (x, p) = predict_raw(&self.x, &self.p, a, q);
+        let (x, p) = predict_raw(&self.x, &self.p, a, &symmetrize(q));
         check_predicted(&x, &p)?;
         self.x = x;
         self.p = p;
@@ -104,7 +106,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         self.update_with(&model.c(k), &model.measurement_cov(k), y)
     }
 
-    /// Measurement update with explicit `C` and effective measurement covariance `R`.
+    /// Measurement update with explicit `C` and effective measurement covariance `R`
+    /// (symmetrised first, like `Q` in [`KalmanFilter::predict_with`]).
     pub fn update_with<const NY: usize>(
         &mut self,
         c: &SMatrix<T, NY, NX>,
@@ -112,7 +115,7 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         y: &SVector<T, NY>,
     ) -> Result<()> {
         check_finite(y, "measurement")?;
-        let (x, p, nis) = kalman_update(&self.x, &self.p, c, r, y, self.form)?;
+        let (x, p, nis) = kalman_update(&self.x, &self.p, c, &symmetrize(r), y, self.form)?;
         self.x = x;
         self.p = p;
         self.nis = nis;
@@ -151,7 +154,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
     }
 }
 
-/// The time update on explicit arguments: `(A x, sym(A P Aᵀ + Q))`, unchecked.
+/// The time update on explicit arguments: `(A x, A P Aᵀ + Q)`, unchecked; exactly symmetric
+/// (upper triangle computed and mirrored; `Q`'s upper triangle is read).
 #[inline]
 fn predict_raw<T: Real, const NX: usize>(
     x: &SVector<T, NX>,
@@ -159,10 +163,11 @@ fn predict_raw<T: Real, const NX: usize>(
     a: &SMatrix<T, NX, NX>,
     q: &SMatrix<T, NX, NX>,
 ) -> (SVector<T, NX>, SMatrix<T, NX, NX>) {
-    (a * x, symmetrize(&(a * p * a.transpose() + q)))
+    (small::mul_vec(a, x), small::congruence_add(a, p, q))
 }
 
 /// The errors of a non-finite prediction.
+#[cold]
 fn check_predicted<T: Real, const NX: usize>(
     x: &SVector<T, NX>,
     p: &SMatrix<T, NX, NX>,
@@ -173,7 +178,11 @@ fn check_predicted<T: Real, const NX: usize>(
 
 /// The update equations on explicit arguments; returns `(x⁺, P⁺, NIS)`.
 ///
+/// `P` must be symmetric (only products of it are formed, and `S = C P Cᵀ + R` is built on its
+/// upper triangle, so `R`'s upper triangle is read). `P⁺` is exactly symmetric.
+///
 /// Shared by the estimators that run a Kalman update inside a larger step.
+#[inline(always)]
 pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
     x: &SVector<T, NX>,
     p: &SMatrix<T, NX, NX>,
@@ -182,31 +191,46 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
     y: &SVector<T, NY>,
     form: CovarianceUpdate,
 ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
-    let pct = p * c.transpose();
-    let s = symmetrize(&(c * pct + r));
-    // K = P Cᵀ S⁻¹ by a Cholesky solve; S not PD means R or P is broken. The factor is
-    // computed once and reused for the NIS below (one factorisation per update).
-    // S was symmetrised one line up: the fast path skips re-testing that.
-    let chol = cholesky_symmetric(&s, "innovation covariance")?;
-    let k = chol.solve(&pct.transpose()).transpose();
-    let nu = y - c * x;
-    let x_new = x + k * nu;
-    let i_kc = SMatrix::<T, NX, NX>::identity() - k * c;
+    // G = P Cᵀ, S = C G + R. K = G S⁻¹ by an L D Lᵀ solve; S not PD means R or P is broken.
+    // One factor serves the gain and the NIS.
+    let g = small::mul_t(p, c);
+    let s = small::sym_mul_t_add(c, &g.transpose(), r);
+    let chol = SmallLdl::new(&s, "innovation covariance")?;
+    let k = chol.solve_right(&g);
+    let nu = y - small::mul_vec(c, x);
+    let x_new = x + small::mul_vec(&k, &nu);
     let p_new = match form {
-        CovarianceUpdate::Joseph => i_kc * p * i_kc.transpose() + k * r * k.transpose(),
-        CovarianceUpdate::Standard => i_kc * p,
+        // (I − KC) P (I − KC)ᵀ + K R Kᵀ: a sum of two congruences, each PSD under rounding.
+        // (I − KC) P is formed as P − K (C P) = P − K Gᵀ: the same product, associated so
+        // that it costs NX²·NY multiplications instead of NX³.
+        CovarianceUpdate::Joseph => {
+            let i_kc = SMatrix::<T, NX, NX>::identity() - small::mul(&k, c);
+            let i_kc_p = p - small::mul_t(&k, &g);
+            small::sym_mul_t_add(&i_kc_p, &i_kc, &small::congruence(&k, r))
+        }
+        // P − K Gᵀ (= (I − KC) P); K Gᵀ = G S⁻¹ Gᵀ is symmetric for the optimal gain.
+        CovarianceUpdate::Standard => p - small::sym_mul_t(&k, &g),
     };
-    let p_new = symmetrize(&p_new);
-    check_finite(&x_new, "updated state")?;
-    check_finite(&p_new, "updated covariance")?;
     // NIS = νᵀ S⁻¹ ν with the same factor. A validated factor has pivots above the
     // singularity floor, so a non-finite K or NIS can only come from non-finite inputs and is
-    // caught by the checks on x⁺ and the NIS.
-    let nis = nu.dot(&chol.solve(&nu));
-    if !nis.finite() {
-        return Err(Error::NonFinite { what: "innovation" });
+    // caught by the checks on x⁺, P⁺ and the NIS.
+    let nis = chol.mahalanobis(&nu);
+    if !(small::all_finite_fast(&x_new) && small::all_finite_fast(&p_new) && nis.finite()) {
+        return Err(update_error(&x_new, &p_new));
     }
     Ok((x_new, p_new, nis))
+}
+
+#[cold]
+fn update_error<T: Real, const NX: usize>(x: &SVector<T, NX>, p: &SMatrix<T, NX, NX>) -> Error {
+    let what = if !x.iter().all(|v| v.finite()) {
+        "updated state"
+    } else if !p.iter().all(|v| v.finite()) {
+        "updated covariance"
+    } else {
+        "innovation"
+    };
+    Error::NonFinite { what }
 }
 
 #[cfg(test)]
