@@ -160,9 +160,10 @@ impl<T: Real, const N: usize> SmallLdl<T, N> {
                 ld[k] = l[(j, k)] * d[k];
                 dj -= ld[k] * l[(j, k)];
             }
-            // `!(dj > floor)` also catches NaN: any non-finite entry of the lower triangle
+            // `dj > floor` is false for NaN: any non-finite entry of the lower triangle
             // reaches a pivot as NaN or ±∞ (∞ − ∞, ∞ · 0, or −∞²).
-            if !(dj > floor) || !(scale.finite() && dj.finite()) {
+            let pivot_ok = dj > floor && dj.finite() && scale.finite();
+            if !pivot_ok {
                 return Err(Self::refusal(s, what));
             }
             d[j] = dj;
@@ -272,7 +273,10 @@ impl<T: Real, const N: usize> SmallLdl<T, N> {
 pub fn all_finite_fast<T: Real, const R: usize, const C: usize>(m: &SMatrix<T, R, C>) -> bool {
     let mut acc = [T::zero(); 4];
     for (i, v) in m.iter().enumerate() {
-        acc[i % 4] += *v - *v;
+        #[allow(clippy::eq_op)] // v − v is the test itself: 0 if finite, NaN otherwise
+        {
+            acc[i % 4] += *v - *v;
+        }
     }
     (acc[0] + acc[1]) + (acc[2] + acc[3]) == T::zero()
 }
