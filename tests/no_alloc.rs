@@ -47,31 +47,13 @@ fn estimator_steps_do_not_allocate() {
 /// Seed 001 (issue 4): CCE, ADF and KF-IO steps on the paper's example, arrivals, dropouts
 /// and error paths.
 fn occlusion_section() {
+    use estimator_core::examples::Seed001Example;
     use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
     use estimator_core::gsum::GaussSum;
-    use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
-    let m = LinearModel::<f64, 3, 3, 2, 2>::new(
-        matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
-        SMatrix::identity(),
-        matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
-        SMatrix::identity(),
-        SMatrix::identity() * 0.3,
-        SMatrix::identity() * 0.2,
-    )
-    .unwrap();
-    let occ = Occlusion::new(
-        matrix![1.0, 0.0, 0.0],
-        matrix![0.1],
-        OcclusionRegions::new(
-            [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
-            [5.0; 4],
-        )
-        .unwrap(),
-    )
-    .unwrap();
+    let m = Seed001Example::model::<f64>().unwrap();
+    let occ = Seed001Example::occlusion::<f64>().unwrap();
     let g = GaussSum::<f64, 1, 15>::uniform().unwrap();
-    let x0 = vector![5.0, 5.0, 5.0];
-    let p0 = SMatrix::<f64, 3, 3>::identity() * 4.0;
+    let (x0, p0) = (Seed001Example::x0(), Seed001Example::p0());
     let (n, ok) = ALLOC.count(|| {
         let mut ok = true;
         // Restart every 50 steps: the example's A is unstable.

@@ -1,8 +1,9 @@
-//! Instruction-count kernels of the papers' estimators: one step each, from a fixed state,
-//! with the same setups as the estimator helpers' criterion benches (`benches/benches/cce.rs`,
-//! `nn.rs`, `tobit.rs`), so the host instruction counts and the criterion medians describe the
-//! same work.
+//! One step of each of the papers' estimators, from a fixed state: the kernels that both the
+//! criterion bench (`benches/benches/steps.rs`) and the instruction counter (`icount`) run,
+//! so the host instruction counts and the criterion medians describe the same work under
+//! the same names.
 
+use estimator_core::examples::Seed001Example;
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation};
 use estimator_core::filter::nn_bound::{GainSolver, NnBoundConfig};
 use estimator_core::filter::nn_system::{Seed003Example, Tanh};
@@ -10,8 +11,8 @@ use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, TobitFusion};
 use estimator_core::gsum::GaussSum;
-use estimator_core::model::LinearModel;
-use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
+use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
+use estimator_core::protocol::shared_token_bucket::{SharedTokenBucket, TriggeredBucketScheduler};
 use estimator_core::{Real, Result};
 use nalgebra::{matrix, vector, SMatrix, SVector};
 use std::hint::black_box;
@@ -19,41 +20,10 @@ use std::hint::black_box;
 /// A step kernel: runs one step from the fixed state; `Ok` iff the step succeeded.
 pub type StepFn = Box<dyn Fn() -> Result<()>>;
 
-/// Seed 001's example model and occlusion regions (as in `benches/benches/cce.rs`).
-fn occlusion_paper<T: Real>() -> (LinearModel<T, 3, 3, 2, 2>, Occlusion<T, 3, 1, 4>) {
-    let l = T::lit;
-    let m = LinearModel::<f64, 3, 3, 2, 2>::new(
-        matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
-        SMatrix::identity(),
-        matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
-        SMatrix::identity(),
-        SMatrix::identity() * 0.3,
-        SMatrix::identity() * 0.2,
-    )
-    .expect("valid model")
-    .cast::<T>()
-    .expect("valid model");
-    let occ = Occlusion::new(
-        matrix![T::one(), T::zero(), T::zero()],
-        matrix![l(0.1)],
-        OcclusionRegions::new(
-            [
-                vector![l(20.0)],
-                vector![l(40.0)],
-                vector![l(60.0)],
-                vector![l(80.0)],
-            ],
-            [l(5.0); 4],
-        )
-        .expect("valid regions"),
-    )
-    .expect("valid occlusion");
-    (m, occ)
-}
-
 /// Seed 001 kernels: CCE dropout step (S = 4, N = 15), ADF dropout/arrival, KF-IO dropout.
 pub fn occlusion_kernels<T: Real>(tag: &str) -> Vec<(String, StepFn)> {
-    let (m, occ) = occlusion_paper::<T>();
+    let m = Seed001Example::model::<T>().expect("valid model");
+    let occ = Seed001Example::occlusion::<T>().expect("valid occlusion");
     // A state whose prediction sits on the edge of region 2, the typical dropout.
     let x0: SVector<T, 3> = vector![T::lit(35.0), T::lit(1.0), T::lit(0.5)];
     let p0 = SMatrix::<T, 3, 3>::identity() * T::lit(0.5);
@@ -193,10 +163,7 @@ pub fn tobit_kernel<T: Real>(tag: &str) -> (String, StepFn) {
     let r = [vector![0.5, 0.5]; 3];
     let tau = vector![0.0, 0.0];
     let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)].map(|(s, l)| {
-        estimator_core::protocol::event_trigger::EventTriggerConfig::new_allowing_paper_violation(
-            s, 5.0, l, 1.5,
-        )
-        .expect("valid")
+        EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5).expect("valid")
     });
     let cfgs = trig.map(|t| {
         TobitFilterConfig::new(tau, BoundScalars::paper_example(), t, 1.5, 2.0)
@@ -226,4 +193,41 @@ pub fn tobit_kernel<T: Real>(tag: &str) -> (String, StepFn) {
             Ok(())
         }),
     )
+}
+
+/// Seed 004's sensor side for one instant: three event triggers sharing one token bucket,
+/// from a fixed state (f64).
+pub fn tobit_protocol_kernel() -> (String, StepFn) {
+    let tau = vector![0.0, 0.0];
+    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)].map(|(s, l)| {
+        EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5).expect("valid")
+    });
+    let nodes = trig.map(|t| EventTrigger::new(t, tau).expect("valid"));
+    let sched = TriggeredBucketScheduler::new(
+        nodes,
+        SharedTokenBucket::<3>::new(10, 5, 30, [3, 3, 3]).expect("valid"),
+    );
+    let y = [vector![4.8, 0.2], vector![5.1, 0.0], vector![4.9, 0.3]];
+    (
+        "tobit_protocol_instant/l3_ny2_f64".into(),
+        Box::new(move || {
+            let mut s = black_box(sched);
+            s.step(black_box(&y))?;
+            black_box(s);
+            Ok(())
+        }),
+    )
+}
+
+/// Every kernel above, f64 and f32 where both exist.
+pub fn all_kernels() -> Vec<(String, StepFn)> {
+    let mut k = occlusion_kernels::<f64>("f64");
+    k.extend(occlusion_kernels::<f32>("f32"));
+    k.extend(nn_kernels::<f64>("f64"));
+    k.extend(nn_kernels::<f32>("f32"));
+    k.push(coupled_ekf_kernel());
+    k.push(tobit_kernel::<f64>("f64"));
+    k.push(tobit_kernel::<f32>("f32"));
+    k.push(tobit_protocol_kernel());
+    k
 }

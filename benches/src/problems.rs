@@ -1,5 +1,6 @@
 //! The benchmark problems: one Kalman step at the papers' dimensions, from a converged prior.
 
+use estimator_core::examples::Seed001Example;
 use estimator_core::filter::{IntermittentKalmanFilter, KalmanFilter};
 use estimator_core::model::{LinearModel, LinearSystem};
 use estimator_core::{Real, Result};
@@ -83,20 +84,11 @@ impl<T: Real, const NX: usize, const NY: usize> KfProblem<T, NX, NY> {
 /// Seed 001's numerical example (Section IV): 3 states, 2 measurements, f64.
 /// `A` and `C` as printed, `Q = 0.3 I₃`, `R = 0.2 I₂`, `x₀ = [5 5 5]ᵀ`, `Σ₀ = 4 I₃`.
 pub fn occlusion_3x2_f64() -> KfProblem<f64, 3, 2> {
-    let model = LinearModel::new(
-        matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
-        SMatrix::identity(),
-        matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
-        SMatrix::identity(),
-        SMatrix::identity() * 0.3,
-        SMatrix::identity() * 0.2,
-    )
-    .expect("valid model");
     KfProblem::converge(
         "3x2_f64",
-        model,
-        vector![5.0, 5.0, 5.0],
-        SMatrix::identity() * 4.0,
+        Seed001Example::model().expect("valid model"),
+        Seed001Example::x0(),
+        Seed001Example::p0(),
     )
 }
 

@@ -38,6 +38,7 @@
 extern crate std;
 
 pub mod error;
+pub mod examples;
 pub mod filter;
 pub mod gauss;
 pub mod gsum;

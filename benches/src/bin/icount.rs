@@ -95,14 +95,8 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
             repeat(move || black_box(&t32).ikf_dropout_step()),
         ),
     ]);
-    // The papers' estimators (setups as in their criterion benches).
-    let mut est = benches::estimators::occlusion_kernels::<f64>("f64");
-    est.extend(benches::estimators::occlusion_kernels::<f32>("f32"));
-    est.extend(benches::estimators::nn_kernels::<f64>("f64"));
-    est.extend(benches::estimators::nn_kernels::<f32>("f32"));
-    est.push(benches::estimators::coupled_ekf_kernel());
-    est.push(benches::estimators::tobit_kernel::<f64>("f64"));
-    est.push(benches::estimators::tobit_kernel::<f32>("f32"));
+    // The papers' estimators: the same kernels as the criterion bench `steps`.
+    let est = benches::estimators::all_kernels();
     for (name, f) in est {
         out.push((Box::leak(name.into_boxed_str()), repeat(f)));
     }

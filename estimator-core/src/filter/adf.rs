@@ -44,6 +44,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::filter::kalman::{kalman_update, CovarianceUpdate};
+use crate::filter::time_update::predict;
 use crate::gauss::{cdf, inv_mills, inv_mills_delta, ln_sf, log_sum_exp, pdf, sf};
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
@@ -129,12 +130,7 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         if let Some(y) = y {
             check_finite(y, "measurement")?;
         }
-        let km1 = k.saturating_sub(1);
-        let a = model.a(km1);
-        let xp = a * self.x;
-        let pp = symmetrize(&(a * self.p * a.transpose() + model.process_cov(km1)));
-        check_finite(&xp, "predicted state")?;
-        check_finite(&pp, "predicted covariance")?;
+        let (xp, pp) = predict(model, k, &self.x, &self.p)?;
         let inf = T::one() / T::zero();
         match y {
             Some(y) => {
@@ -318,8 +314,8 @@ pub(crate) fn truncated_std_normal<T: Real>(a: T, b: T) -> (T, T, T) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::examples::Seed001Example;
     use crate::model::LinearModel;
-    use crate::protocol::occlusion::OcclusionRegions;
     use nalgebra::{matrix, vector};
 
     /// Moments of a truncated standard normal by brute-force Simpson quadrature.
@@ -379,25 +375,8 @@ mod tests {
 
     fn paper() -> (LinearModel<f64, 3, 3, 2, 2>, Occlusion<f64, 3, 1, 4>) {
         (
-            LinearModel::new(
-                matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
-                SMatrix::identity(),
-                matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
-                SMatrix::identity(),
-                SMatrix::identity() * 0.3,
-                SMatrix::identity() * 0.2,
-            )
-            .unwrap(),
-            Occlusion::new(
-                matrix![1.0, 0.0, 0.0],
-                matrix![0.1],
-                OcclusionRegions::new(
-                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
-                    [5.0; 4],
-                )
-                .unwrap(),
-            )
-            .unwrap(),
+            Seed001Example::model().unwrap(),
+            Seed001Example::occlusion().unwrap(),
         )
     }
 
@@ -487,16 +466,7 @@ mod tests {
         let mut g = AssumedDensityFilter::<f32, 3, 4>::new(
             vector![30.0, 0.0, 0.0],
             SMatrix::identity(),
-            Occlusion::new(
-                matrix![1.0, 0.0, 0.0],
-                matrix![0.1],
-                OcclusionRegions::new(
-                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
-                    [5.0; 4],
-                )
-                .unwrap(),
-            )
-            .unwrap(),
+            Seed001Example::occlusion().unwrap(),
         )
         .unwrap();
         let m32 = m.cast::<f32>().unwrap();

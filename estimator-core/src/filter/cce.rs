@@ -25,6 +25,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::filter::kalman::{kalman_update, CovarianceUpdate};
+use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
 use crate::gsum::GaussSum;
 use crate::linalg::{check_finite, check_spd, cholesky, symmetrize};
@@ -140,12 +141,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         if let Some(y) = y {
             check_finite(y, "measurement")?;
         }
-        let km1 = k.saturating_sub(1);
-        let a = model.a(km1);
-        let xp = a * self.x;
-        let pp = symmetrize(&(a * self.p * a.transpose() + model.process_cov(km1)));
-        check_finite(&xp, "predicted state")?;
-        check_finite(&pp, "predicted covariance")?;
+        let (xp, pp) = predict(model, k, &self.x, &self.p)?;
         match y {
             Some(y) => {
                 let (x, p, _) = kalman_update(
@@ -268,6 +264,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::examples::Seed001Example;
     use crate::model::LinearModel;
     use crate::protocol::occlusion::OcclusionRegions;
     use nalgebra::{matrix, vector};
@@ -275,28 +272,11 @@ mod tests {
     type Cce = CrossCoupledEstimator<f64, 3, 1, 4, 15>;
 
     fn paper_model() -> LinearModel<f64, 3, 3, 2, 2> {
-        LinearModel::new(
-            matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
-            SMatrix::identity(),
-            matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
-            SMatrix::identity(),
-            SMatrix::identity() * 0.3,
-            SMatrix::identity() * 0.2,
-        )
-        .unwrap()
+        Seed001Example::model().unwrap()
     }
 
     fn paper_occlusion() -> Occlusion<f64, 3, 1, 4> {
-        Occlusion::new(
-            matrix![1.0, 0.0, 0.0],
-            matrix![0.1],
-            OcclusionRegions::new(
-                [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
-                [5.0; 4],
-            )
-            .unwrap(),
-        )
-        .unwrap()
+        Seed001Example::occlusion().unwrap()
     }
 
     fn cce(x0: SVector<f64, 3>, p0: SMatrix<f64, 3, 3>) -> Cce {

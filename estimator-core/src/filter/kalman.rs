@@ -3,6 +3,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::filter::time_update::{check_predicted, predict_raw};
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
@@ -152,28 +153,6 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         self.nis = nis;
         Ok(())
     }
-}
-
-/// The time update on explicit arguments: `(A x, A P Aᵀ + Q)`, unchecked; exactly symmetric
-/// (upper triangle computed and mirrored; `Q`'s upper triangle is read).
-#[inline]
-fn predict_raw<T: Real, const NX: usize>(
-    x: &SVector<T, NX>,
-    p: &SMatrix<T, NX, NX>,
-    a: &SMatrix<T, NX, NX>,
-    q: &SMatrix<T, NX, NX>,
-) -> (SVector<T, NX>, SMatrix<T, NX, NX>) {
-    (small::mul_vec(a, x), small::congruence_add(a, p, q))
-}
-
-/// The errors of a non-finite prediction.
-#[cold]
-fn check_predicted<T: Real, const NX: usize>(
-    x: &SVector<T, NX>,
-    p: &SMatrix<T, NX, NX>,
-) -> Result<()> {
-    check_finite(x, "predicted state")?;
-    check_finite(p, "predicted covariance")
 }
 
 /// The update equations on explicit arguments; returns `(x⁺, P⁺, NIS)`.
@@ -334,15 +313,7 @@ mod tests {
 
     #[test]
     fn fused_step_is_bit_identical_to_predict_then_update() {
-        let m = LinearModel::<f64, 3, 3, 2, 2>::new(
-            matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
-            SMatrix::identity(),
-            matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
-            SMatrix::identity(),
-            SMatrix::identity() * 0.3,
-            SMatrix::identity() * 0.2,
-        )
-        .unwrap();
+        let m = crate::examples::Seed001Example::model::<f64>().unwrap();
         let mut fused =
             KalmanFilter::new(vector![5.0, 5.0, 5.0], SMatrix::identity() * 4.0).unwrap();
         let mut split = fused;

@@ -21,6 +21,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob, log_sum_exp};
 use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
@@ -107,12 +108,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             }
             None => SVector::<T, NY>::zeros(),
         };
-        let km1 = k.saturating_sub(1);
-        let a = model.a(km1);
-        let xp = a * self.x;
-        let pp = symmetrize(&(a * self.p * a.transpose() + model.process_cov(km1)));
-        check_finite(&xp, "predicted state")?;
-        check_finite(&pp, "predicted covariance")?;
+        let (xp, pp) = predict(model, k, &self.x, &self.p)?;
         let e = &self.occ.e;
         let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
         let p = self.prob_outside((e * xp)[0], s2.sqrt());
@@ -143,32 +139,15 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::examples::Seed001Example;
     use crate::filter::KalmanFilter;
     use crate::model::LinearModel;
-    use crate::protocol::occlusion::OcclusionRegions;
     use nalgebra::{matrix, vector};
 
     fn setup() -> (LinearModel<f64, 3, 3, 2, 2>, Occlusion<f64, 3, 1, 4>) {
         (
-            LinearModel::new(
-                matrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
-                SMatrix::identity(),
-                matrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
-                SMatrix::identity(),
-                SMatrix::identity() * 0.3,
-                SMatrix::identity() * 0.2,
-            )
-            .unwrap(),
-            Occlusion::new(
-                matrix![1.0, 0.0, 0.0],
-                matrix![0.1],
-                OcclusionRegions::new(
-                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
-                    [5.0; 4],
-                )
-                .unwrap(),
-            )
-            .unwrap(),
+            Seed001Example::model().unwrap(),
+            Seed001Example::occlusion().unwrap(),
         )
     }
 

@@ -3,6 +3,7 @@
 
 pub mod intermittent;
 pub mod kalman;
+pub mod time_update;
 
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::{CovarianceUpdate, KalmanFilter};
