@@ -12,7 +12,7 @@ use core::ptr::{addr_of, read_volatile, write_volatile};
 
 use cortex_m_semihosting::hio;
 
-use run::{Stream, Summary, Vectors};
+use run::{Source, Summary, Vectors};
 
 /// Exit status: run completed (estimator errors, if any, are in the result line).
 pub const EXIT_OK: u32 = 0;
@@ -127,8 +127,8 @@ pub fn stack_peak() -> (usize, bool) {
 /// instants and exits silently, so that the instruction count of two runs differs only by the
 /// estimator steps; otherwise it runs the whole stream with the stack painted and prints
 /// `RESULT <summary>` and `STACK <name> peak=<bytes>`.
-pub fn main_with(vectors: Vectors, driver: fn(&Stream<'_>, usize) -> Summary) -> ! {
-    let stream = match vectors.stream() {
+pub fn main_with<S: Source>(vectors: Vectors, driver: fn(&S, usize) -> Summary) -> ! {
+    let stream = match S::open(&vectors) {
         Ok(s) => s,
         Err(e) => {
             out!("ERROR {e}\n");
