@@ -128,13 +128,7 @@ pub fn stack_peak() -> (usize, bool) {
 /// estimator steps; otherwise it runs the whole stream with the stack painted and prints
 /// `RESULT <summary>` and `STACK <name> peak=<bytes>`.
 pub fn main_with<S: Source>(vectors: Vectors, driver: fn(&S, usize) -> Summary) -> ! {
-    let stream = match S::open(&vectors) {
-        Ok(s) => s,
-        Err(e) => {
-            out!("ERROR {e}\n");
-            exit(EXIT_BAD_VECTORS);
-        }
-    };
+    let stream = open_or_exit(&vectors);
     if let Some(n) = cmdline_steps() {
         let s = driver(&stream, n);
         core::hint::black_box(s);
@@ -142,7 +136,28 @@ pub fn main_with<S: Source>(vectors: Vectors, driver: fn(&S, usize) -> Summary) 
     }
     paint_stack();
     let s = driver(&stream, usize::MAX);
-    let (peak, overflow) = stack_peak();
+    report(&s, stack_peak());
+    exit(EXIT_OK);
+}
+
+// The two helpers below are not inlined so that their formatting temporaries are not part of
+// `main_with`'s frame, which stays on the stack under the whole run.
+
+/// The embedded stream, or exit with [`EXIT_BAD_VECTORS`].
+#[inline(never)]
+fn open_or_exit<S: Source>(vectors: &Vectors) -> S {
+    match S::open(vectors) {
+        Ok(s) => s,
+        Err(e) => {
+            out!("ERROR {e}\n");
+            exit(EXIT_BAD_VECTORS);
+        }
+    }
+}
+
+/// Prints the result and the stack lines.
+#[inline(never)]
+fn report(s: &Summary, (peak, overflow): (usize, bool)) {
     out!("RESULT {s}\n");
     out!(
         "STACK {} peak={}{}\n",
@@ -150,7 +165,6 @@ pub fn main_with<S: Source>(vectors: Vectors, driver: fn(&S, usize) -> Summary) 
         peak,
         if overflow { " (window overrun)" } else { "" }
     );
-    exit(EXIT_OK);
 }
 
 #[panic_handler]

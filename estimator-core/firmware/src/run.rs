@@ -506,6 +506,15 @@ pub trait Driven<const L: usize> {
     fn x(&self) -> &[f32];
 }
 
+/// Runs the estimator's constructor in a frame of its own, and [`step_all`] the steps in
+/// another: the constructor's temporaries (model and region validation, Gaussian-sum tables)
+/// and the steps' then share the same stack instead of being laid out side by side in one
+/// frame of the driver (stack coloring does not overlap them once everything is inlined).
+#[inline(never)]
+fn construct<E>(build: impl FnOnce() -> Result<E, Error>) -> Result<E, Error> {
+    build()
+}
+
 /// The one driver: builds the estimator, steps it over the first `steps` instants (all of them
 /// if `steps` exceeds the stream), and digests after every instant the label byte and the
 /// estimate. Counts arrivals and dropouts per node slot, and the refused steps.
@@ -516,13 +525,31 @@ pub fn drive<const L: usize, E: Driven<L>>(
     build: impl FnOnce() -> Result<E, Error>,
 ) -> Summary {
     let mut s = Summary::new(name);
-    let mut h = Fnv1a64::default();
-    let Ok(mut est) = build() else {
+    // Borrowed in place: moving the estimator out of the `Result` would be a second copy of
+    // it on the stack.
+    let mut built = construct(build);
+    let Ok(est) = &mut built else {
         s.errors = 1;
-        s.digest = h.0;
         return s;
     };
-    for inst in instants.take(steps) {
+    s.digest = step_all(&mut s, est, instants.take(steps));
+    let x = est.x();
+    s.nx = x.len().min(MAX_NX);
+    for (b, v) in s.x_bits.iter_mut().zip(x) {
+        *b = v.to_bits();
+    }
+    s
+}
+
+/// The loop of [`drive`], in a frame of its own (see [`construct`]). Returns the digest.
+#[inline(never)]
+fn step_all<const L: usize, E: Driven<L>>(
+    s: &mut Summary,
+    est: &mut E,
+    instants: impl Iterator<Item = Instant<L>>,
+) -> u64 {
+    let mut h = Fnv1a64::default();
+    for inst in instants {
         s.steps += 1;
         for y in &inst.y {
             if y.is_some() {
@@ -541,13 +568,7 @@ pub fn drive<const L: usize, E: Driven<L>>(
         h.bytes(&[if E::LABELS { label.min(255) as u8 } else { 0 }]);
         est.digest(&mut h);
     }
-    let x = est.x();
-    s.digest = h.0;
-    s.nx = x.len().min(MAX_NX);
-    for (b, v) in s.x_bits.iter_mut().zip(x) {
-        *b = v.to_bits();
-    }
-    s
+    h.0
 }
 
 /// Seed 001 Section IV in `f32`: A, C as printed, B = I₃, D = I₂ (DESIGN.md), Q = 0.3 I₃,
@@ -604,6 +625,9 @@ impl<E: OcclusionEstimator> OnModel<E> {
 
 impl<E: OcclusionEstimator> Driven<1> for OnModel<E> {
     const LABELS: bool = true;
+    // Not inlined into the driver's loop: the step's temporaries then live only while it
+    // runs (measured: adf 4 152 -> 4 048 B peak stack, the others equal or lower).
+    #[inline(never)]
     fn step(&mut self, k: usize, [y]: [Option<&Vector2<f32>>; 1]) -> Result<usize, Error> {
         self.est.step(&self.model, k, y)
     }
