@@ -30,7 +30,7 @@ fn estimator_steps_do_not_allocate() {
         for k in 1..=10_000usize {
             let y = vector![(k as f64 * 0.01).sin(), (k as f64 * 0.02).cos()];
             ok &= kf.step(&m, k, &y).is_ok();
-            let y_opt = if k % 3 == 0 { None } else { Some(&y) };
+            let y_opt = if k.is_multiple_of(3) { None } else { Some(&y) };
             ok &= ikf.step(&m, k, y_opt).is_ok();
             // Error paths must not allocate either.
             ok &= kf.step(&m, k, &vector![f64::NAN, 0.0]).is_err();
@@ -82,7 +82,7 @@ fn occlusion_section() {
             for k in 1..=50usize {
                 let t = (block * 50 + k) as f64;
                 let y = vector![30.0 + (t * 0.1).sin(), 10.0 + (t * 0.3).cos()];
-                let y_opt = if k % 3 == 0 { None } else { Some(&y) };
+                let y_opt = if k.is_multiple_of(3) { None } else { Some(&y) };
                 ok &= cce.step(&m, k, y_opt).is_ok();
                 ok &= adf.step(&m, k, y_opt).is_ok();
                 ok &= kfio.step(&m, k, y_opt).is_ok();

@@ -214,7 +214,7 @@ pub fn run(args: &PublisherArgs, resolve: ScenarioResolver) -> Result<PublisherR
                 report.interrupted = true;
                 break;
             }
-        } else if i % 256 == 0 && wait(&node, Duration::ZERO).is_err() {
+        } else if i.is_multiple_of(256) && wait(&node, Duration::ZERO).is_err() {
             report.interrupted = true;
             break;
         }
@@ -257,7 +257,7 @@ pub fn run(args: &PublisherArgs, resolve: ScenarioResolver) -> Result<PublisherR
             if obs.delivered {
                 delivered_count += 1;
                 if let Some(n) = args.debug_nan_every {
-                    if n > 0 && delivered_count % n == 0 && usize::from(obs.ny) <= MAX_NY {
+                    if n > 0 && delivered_count.is_multiple_of(n) && usize::from(obs.ny) <= MAX_NY {
                         slot.y[0] = f64::NAN;
                     }
                 }

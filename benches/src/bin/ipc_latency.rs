@@ -283,7 +283,7 @@ fn iox_recv(
         match ws {
             None => {
                 polls = polls.wrapping_add(1);
-                if polls % 4096 == 0 && start.elapsed() > idle {
+                if polls.is_multiple_of(4096) && start.elapsed() > idle {
                     return Ok(None);
                 }
                 std::hint::spin_loop();

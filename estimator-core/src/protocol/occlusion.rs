@@ -133,7 +133,11 @@ impl<T: Real, const S: usize> OcclusionRegions<T, 1, S> {
 
 /// Volume of the unit ball in `d` dimensions, `V_d = V_{d−2} · 2π/d`.
 fn unit_ball_volume<T: Real>(d: usize) -> T {
-    let (mut v, mut k) = if d % 2 == 0 { (1.0, 0) } else { (2.0, 1) };
+    let (mut v, mut k) = if d.is_multiple_of(2) {
+        (1.0, 0)
+    } else {
+        (2.0, 1)
+    };
     while k < d {
         k += 2;
         v *= 2.0 * core::f64::consts::PI / k as f64;

@@ -10,7 +10,7 @@
 use std::sync::Arc;
 
 use channel_sim::occlusion::OcclusionSpec;
-use channel_sim::plant::Plant;
+use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::{Observation, Scenario};
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
@@ -97,24 +97,9 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
     let kfio = KfIo::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("kf-io: {e}"))?;
     let adf = AssumedDensityFilter::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("adf: {e}"))?;
     Ok(vec![
-        Box::new(Wrapped::<NX, NY, _> {
-            name: "cce",
-            plant: Arc::clone(&plant),
-            f: cce,
-            label: 0,
-        }),
-        Box::new(Wrapped::<NX, NY, _> {
-            name: "kf-io",
-            plant: Arc::clone(&plant),
-            f: kfio,
-            label: 0,
-        }),
-        Box::new(Wrapped::<NX, NY, _> {
-            name: "adf",
-            plant,
-            f: adf,
-            label: 0,
-        }),
+        Box::new(Wrapped::<NX, NY, _>::new("cce", Arc::clone(&plant), cce)),
+        Box::new(Wrapped::<NX, NY, _>::new("kf-io", Arc::clone(&plant), kfio)),
+        Box::new(Wrapped::<NX, NY, _>::new("adf", plant, adf)),
     ])
 }
 
@@ -155,68 +140,70 @@ trait OcclusionFilter<const NX: usize, const NY: usize>: Send {
     fn p(&self) -> &SMatrix<f64, NX, NX>;
 }
 
-impl<const NX: usize, const NY: usize, const S: usize, const N: usize> OcclusionFilter<NX, NY>
-    for CrossCoupledEstimator<f64, NX, 1, S, N>
-{
-    fn step_core(
-        &mut self,
-        m: &Snapshot<NX, NY>,
-        k: usize,
-        y: Option<&SVector<f64, NY>>,
-    ) -> Result<Option<usize>, Error> {
-        self.step(m, k, y).map(Some)
-    }
-    fn x(&self) -> &SVector<f64, NX> {
-        self.state()
-    }
-    fn p(&self) -> &SMatrix<f64, NX, NX> {
-        self.covariance()
-    }
+/// The three core filters share `state`/`covariance` accessors and a `step` of the same
+/// shape; only `cce` and `adf` return a region label.
+macro_rules! occlusion_filter {
+    ($ty:ty, [$($g:tt)*], $label:expr) => {
+        impl<const NX: usize, const NY: usize, $($g)*> OcclusionFilter<NX, NY> for $ty {
+            fn step_core(
+                &mut self,
+                m: &Snapshot<NX, NY>,
+                k: usize,
+                y: Option<&SVector<f64, NY>>,
+            ) -> Result<Option<usize>, Error> {
+                self.step(m, k, y).map($label)
+            }
+            fn x(&self) -> &SVector<f64, NX> {
+                self.state()
+            }
+            fn p(&self) -> &SMatrix<f64, NX, NX> {
+                self.covariance()
+            }
+        }
+    };
 }
-
-impl<const NX: usize, const NY: usize, const S: usize> OcclusionFilter<NX, NY>
-    for AssumedDensityFilter<f64, NX, S>
-{
-    fn step_core(
-        &mut self,
-        m: &Snapshot<NX, NY>,
-        k: usize,
-        y: Option<&SVector<f64, NY>>,
-    ) -> Result<Option<usize>, Error> {
-        self.step(m, k, y).map(Some)
-    }
-    fn x(&self) -> &SVector<f64, NX> {
-        self.state()
-    }
-    fn p(&self) -> &SMatrix<f64, NX, NX> {
-        self.covariance()
-    }
-}
-
-impl<const NX: usize, const NY: usize, const S: usize> OcclusionFilter<NX, NY>
-    for KfIo<f64, NX, S>
-{
-    fn step_core(
-        &mut self,
-        m: &Snapshot<NX, NY>,
-        k: usize,
-        y: Option<&SVector<f64, NY>>,
-    ) -> Result<Option<usize>, Error> {
-        self.step(m, k, y).map(|()| None)
-    }
-    fn x(&self) -> &SVector<f64, NX> {
-        self.state()
-    }
-    fn p(&self) -> &SMatrix<f64, NX, NX> {
-        self.covariance()
-    }
-}
+occlusion_filter!(CrossCoupledEstimator<f64, NX, 1, S, N>, [const S: usize, const N: usize], Some);
+occlusion_filter!(AssumedDensityFilter<f64, NX, S>, [const S: usize], Some);
+occlusion_filter!(KfIo<f64, NX, S>, [const S: usize], |()| None);
 
 struct Wrapped<const NX: usize, const NY: usize, F> {
     name: &'static str,
     plant: Arc<dyn Plant>,
+    /// The model converted once when the plant is time invariant (no allocation per step).
+    cached: Option<Snapshot<NX, NY>>,
     f: F,
     label: usize,
+}
+
+impl<const NX: usize, const NY: usize, F> Wrapped<NX, NY, F> {
+    fn new(name: &'static str, plant: Arc<dyn Plant>, f: F) -> Self {
+        let cached = plant
+            .linear()
+            .filter(|m| m.time_invariant())
+            .map(|m| snapshot(m, 1));
+        Self {
+            name,
+            plant,
+            cached,
+            f,
+            label: 0,
+        }
+    }
+}
+
+/// The matrices of instant `k` (`A`, `BQBᵀ` of `k − 1`; `C`, `DRDᵀ` of `k`), converted to
+/// fixed size (allocates: nalgebra's dynamic matrices).
+fn snapshot<const NX: usize, const NY: usize>(
+    model: &dyn LinearDescription,
+    k: usize,
+) -> Snapshot<NX, NY> {
+    let prev = k.saturating_sub(1);
+    Snapshot {
+        a: fixed(&model.a(prev)),
+        q: fixed(&model.process_cov(prev)),
+        c: fixed(&model.c(0, k)),
+        r: fixed(&model.measurement_cov(0, k)),
+    }
 }
 
 impl<const NX: usize, const NY: usize, F: OcclusionFilter<NX, NY>> Estimator
@@ -227,23 +214,25 @@ impl<const NX: usize, const NY: usize, F: OcclusionFilter<NX, NY>> Estimator
     }
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let model = self.plant.linear().ok_or(Error::InvalidConfig {
-            field: "plant",
-            reason: "has no linear description",
-        })?;
-        let (k, prev) = (k as usize, k.saturating_sub(1) as usize);
-        let snap = Snapshot::<NX, NY> {
-            a: fixed(&model.a(prev)),
-            q: fixed(&model.process_cov(prev)),
-            c: fixed(&model.c(0, k)),
-            r: fixed(&model.measurement_cov(0, k)),
+        let k = k as usize;
+        let fresh;
+        let snap = match &self.cached {
+            Some(m) => m,
+            None => {
+                let model = self.plant.linear().ok_or(Error::InvalidConfig {
+                    field: "plant",
+                    reason: "has no linear description",
+                })?;
+                fresh = snapshot::<NX, NY>(model, k);
+                &fresh
+            }
         };
         let y = obs
             .first()
             .and_then(|o| o.measurement())
             .map(SVector::<f64, NY>::from_column_slice);
         // A missing slot (no observation at all) counts as a dropout, as DESIGN.md says.
-        let label = self.f.step_core(&snap, k, y.as_ref())?;
+        let label = self.f.step_core(snap, k, y.as_ref())?;
         self.label = label.unwrap_or(0);
         Ok(())
     }

@@ -20,12 +20,13 @@
 use std::sync::Arc;
 
 use channel_sim::occlusion::OcclusionSpec;
-use channel_sim::plant::{splitmix64, Plant};
+use channel_sim::plant::{splitmix64, LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
+use channel_sim::sim::{MAX_NX, MAX_NY};
 use channel_sim::{Observation, Scenario};
 use estimator_core::gauss::{ln_interval_prob, log_sum_exp};
 use estimator_core::Error;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 use super::EvalOptions;
 use crate::Estimator;
@@ -136,8 +137,32 @@ struct ParticleFilter {
     x: Vec<f64>,
     lw: Vec<f64>,
     scratch: Vec<f64>,
+    /// Log-weights being computed (committed by swapping with `lw`).
+    lw_scratch: Vec<f64>,
     mean: Vec<f64>,
+    /// The model's factors, computed once for a time-invariant plant (no allocation per step).
+    cached: Option<PfModel>,
     rng: Rng,
+}
+
+/// `A`, `L_Q` (lower Cholesky factor of `BQBᵀ`), `C`, `L_R` of one instant.
+struct PfModel {
+    a: DMatrix<f64>,
+    lq: DMatrix<f64>,
+    c: DMatrix<f64>,
+    lr: DMatrix<f64>,
+}
+
+impl PfModel {
+    fn at(model: &dyn LinearDescription, k: usize) -> Result<Self, Error> {
+        let prev = k.saturating_sub(1);
+        Ok(Self {
+            a: model.a(prev),
+            lq: lower_cholesky(&model.process_cov(prev), "process covariance")?,
+            c: model.c(0, k),
+            lr: lower_cholesky(&model.measurement_cov(0, k), "measurement covariance")?,
+        })
+    }
 }
 
 fn lower_cholesky(m: &DMatrix<f64>, what: &'static str) -> Result<DMatrix<f64>, Error> {
@@ -197,7 +222,14 @@ impl ParticleFilter {
             x,
             lw: vec![-(n as f64).ln(); n],
             scratch: vec![0.0; n * nx],
+            lw_scratch: vec![0.0; n],
             mean: init.estimator_mean.as_slice().to_vec(),
+            cached: composed
+                .plant()
+                .linear()
+                .filter(|m| m.time_invariant())
+                .map(|m| PfModel::at(m, 1))
+                .transpose()?,
             rng,
         })
     }
@@ -238,21 +270,26 @@ impl Estimator for ParticleFilter {
     }
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let model = self.plant.linear().ok_or(Error::InvalidConfig {
-            field: "plant",
-            reason: "has no linear description",
-        })?;
-        let (k, prev) = (k as usize, k.saturating_sub(1) as usize);
+        let fresh;
+        let m = match &self.cached {
+            Some(m) => m,
+            None => {
+                let model = self.plant.linear().ok_or(Error::InvalidConfig {
+                    field: "plant",
+                    reason: "has no linear description",
+                })?;
+                fresh = PfModel::at(model, k as usize)?;
+                &fresh
+            }
+        };
+        let (a, lq, c, lr) = (&m.a, &m.lq, &m.c, &m.lr);
         let (nx, ny) = (self.nx, self.ny);
-        let a = model.a(prev);
-        let lq = lower_cholesky(&model.process_cov(prev), "process covariance")?;
-        let c = model.c(0, k);
-        let lr = lower_cholesky(&model.measurement_cov(0, k), "measurement covariance")?;
-        let y = obs
-            .first()
-            .and_then(|o| o.measurement())
-            .map(DVector::from_column_slice);
-        if let Some(y) = &y {
+        let mut y_buf = [0.0; MAX_NY];
+        let y = obs.first().and_then(|o| o.measurement()).map(|y| {
+            y_buf[..ny].copy_from_slice(&y[..ny]);
+            &y_buf[..ny]
+        });
+        if let Some(y) = y {
             if y.iter().any(|v| !v.is_finite()) {
                 return Err(Error::NonFinite {
                     what: "measurement",
@@ -260,11 +297,12 @@ impl Estimator for ParticleFilter {
             }
         }
         // Propagate and weight into scratch space; commit only if the weights are usable.
-        let mut lw = self.lw.clone();
-        let mut xi = vec![0.0; nx];
-        let mut resid = vec![0.0; ny];
+        let mut lw = std::mem::take(&mut self.lw_scratch);
+        lw.copy_from_slice(&self.lw);
+        let mut xi = [0.0; MAX_NX];
+        let mut resid = [0.0; MAX_NY];
         for p in 0..self.n {
-            for v in xi.iter_mut() {
+            for v in xi[..nx].iter_mut() {
                 *v = self.rng.normal();
             }
             let old = &self.x[p * nx..(p + 1) * nx];
@@ -280,7 +318,7 @@ impl Estimator for ParticleFilter {
                 new[i] = acc;
             }
             let ex: f64 = self.e.iter().zip(new.iter()).map(|(e, x)| e * x).sum();
-            let ll = match &y {
+            let ll = match y {
                 None => self.ln_prob(&self.regions, ex),
                 Some(y) => {
                     // −½‖L⁻¹(y − Cx)‖² by forward substitution.
@@ -303,11 +341,12 @@ impl Estimator for ParticleFilter {
         }
         let total = log_sum_exp(&lw);
         if !total.is_finite() {
+            self.lw_scratch = lw;
             return Err(Error::Numerical {
                 what: "every particle has zero likelihood",
             });
         }
-        let mut mean = vec![0.0; nx];
+        let mut mean = [0.0; MAX_NX];
         let mut sum_w2 = 0.0;
         for p in 0..self.n {
             lw[p] -= total;
@@ -318,8 +357,8 @@ impl Estimator for ParticleFilter {
             }
         }
         std::mem::swap(&mut self.x, &mut self.scratch);
-        self.lw = lw;
-        self.mean = mean;
+        self.lw_scratch = std::mem::replace(&mut self.lw, lw);
+        self.mean.copy_from_slice(&mean[..nx]);
         if 1.0 / sum_w2 < 0.5 * self.n as f64 {
             self.resample();
         }

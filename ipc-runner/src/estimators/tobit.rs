@@ -156,13 +156,14 @@ pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
 }
 
 /// One instant of the fusion filter from the observations (all-or-nothing).
-pub fn step_fusion<const NX: usize, const NY: usize, const L: usize>(
+fn step_fusion<const NX: usize, const NY: usize, const L: usize>(
     fusion: &mut TobitFusion<f64, NX, NY, L>,
     model: &dyn LinearDescription,
+    cached: Option<&TobitModel<NX, NY, L>>,
     k: u32,
     obs: &[Observation],
 ) -> Result<(), Error> {
-    let (k, prev) = (k as usize, k.saturating_sub(1) as usize);
+    let k = k as usize;
     let mut received = [None::<SVector<f64, NY>>; L];
     for o in obs {
         if let (Some(y), Some(slot)) = (o.measurement(), received.get_mut(o.node as usize)) {
@@ -171,26 +172,55 @@ pub fn step_fusion<const NX: usize, const NY: usize, const L: usize>(
             *slot = Some(y);
         }
     }
-    let c: [SMatrix<f64, NY, NX>; L] = core::array::from_fn(|m| fixed(&model.c(m, k)));
-    let mut r = [SVector::<f64, NY>::zeros(); L];
-    for m in 0..L {
-        r[m] = estimator_core::filter::tobit::diagonal_variances(&fixed(
-            &model.measurement_cov(m, k),
-        ))?;
-    }
+    let m = match cached {
+        Some(m) => *m,
+        None => TobitModel::at(model, k)?,
+    };
     let rec: [Option<&SVector<f64, NY>>; L] = core::array::from_fn(|m| received[m].as_ref());
-    fusion.step(
-        &fixed(&model.a(prev)),
-        &fixed(&model.process_cov(prev)),
-        &c,
-        &r,
-        rec,
-    )
+    fusion.step(&m.a, &m.q, &m.c, &m.r, rec)
+}
+
+/// The plant's matrices for instant `k` (`A`, `BQBᵀ` of `k − 1`; every node's `C` and
+/// measurement variances of `k`) at fixed size. Converting allocates (nalgebra's dynamic
+/// matrices), so a time-invariant plant is converted once, at construction.
+#[derive(Clone, Copy)]
+struct TobitModel<const NX: usize, const NY: usize, const L: usize> {
+    a: SMatrix<f64, NX, NX>,
+    q: SMatrix<f64, NX, NX>,
+    c: [SMatrix<f64, NY, NX>; L],
+    r: [SVector<f64, NY>; L],
+}
+
+impl<const NX: usize, const NY: usize, const L: usize> TobitModel<NX, NY, L> {
+    fn at(model: &dyn LinearDescription, k: usize) -> Result<Self, Error> {
+        let prev = k.saturating_sub(1);
+        let mut r = [SVector::<f64, NY>::zeros(); L];
+        for (m, r) in r.iter_mut().enumerate() {
+            *r = estimator_core::filter::tobit::diagonal_variances(&fixed(
+                &model.measurement_cov(m, k),
+            ))?;
+        }
+        Ok(Self {
+            a: fixed(&model.a(prev)),
+            q: fixed(&model.process_cov(prev)),
+            c: core::array::from_fn(|m| fixed(&model.c(m, k))),
+            r,
+        })
+    }
+
+    /// The converted model when the plant is time invariant.
+    fn cached(model: &dyn LinearDescription) -> Option<Self> {
+        model
+            .time_invariant()
+            .then(|| Self::at(model, 1).ok())
+            .flatten()
+    }
 }
 
 struct Shared<const NX: usize, const NY: usize, const L: usize> {
     fusion: TobitFusion<f64, NX, NY, L>,
     plant: Arc<dyn Plant>,
+    cached: Option<TobitModel<NX, NY, L>>,
     done_k: u32,
     last: Result<(), Error>,
 }
@@ -207,6 +237,7 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
     let shared = Arc::new(Mutex::new(Shared {
         fusion: fusion_for::<NX, NY, L>(parts)?,
         plant: Arc::clone(&parts.plant),
+        cached: parts.plant.linear().and_then(TobitModel::cached),
         done_k: 0,
         last: Ok(()),
     }));
@@ -239,7 +270,8 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
                 field: "plant",
                 reason: "has no linear description",
             })?;
-            s.last = step_fusion(&mut s.fusion, model, k, obs);
+            let cached = s.cached;
+            s.last = step_fusion(&mut s.fusion, model, cached.as_ref(), k, obs);
             s.done_k = k;
         }
         s.last
@@ -323,7 +355,14 @@ mod tests {
             for e in v.iter_mut() {
                 e.step(k, &inst.obs).unwrap();
             }
-            step_fusion(&mut alone, parts.plant.linear().unwrap(), k, &inst.obs).unwrap();
+            step_fusion(
+                &mut alone,
+                parts.plant.linear().unwrap(),
+                None,
+                k,
+                &inst.obs,
+            )
+            .unwrap();
             let mut out = [0.0; 2];
             v[3].estimate(&mut out);
             assert_eq!(out, [alone.state()[0], alone.state()[1]]);
