@@ -28,21 +28,60 @@ use nalgebra::{matrix, vector, Matrix3, SMatrix, Vector3};
 #[path = "../estimator-core/firmware/src/run.rs"]
 mod run;
 
-use run::{Stream, Summary, Vectors};
+use run::{Driven, Stream, Summary};
 
-/// The firmware binaries, their host-side drivers and budgets (flash bytes, stack bytes).
+/// The whole run of one firmware binary, on the host (the same driver over the same bytes).
+type HostRun = fn() -> Summary;
+
+/// The firmware binaries, their host-side runs and budgets (flash bytes, stack bytes).
 /// The issue's budget (≤ 32 KiB flash, ≤ 4 KiB stack) is stated for the cross-coupled
 /// estimator; the others have no stated budget and are held to 32 KiB / 8 KiB only as a guard
-/// against regressions. The NN estimator (seed 003) needs more flash than that (its Kronecker gain solve and bound
-/// recursions); it is held to 48 KiB / 8 KiB, again only as a regression guard.
-type Driver = fn(&Stream<'_>, usize) -> Summary;
-const BINS: &[(&str, Vectors, Driver, usize, usize)] = &[
-    ("kf", run::OCCLUSION, run::run_kf, 32 * 1024, 8 * 1024),
-    ("ikf", run::OCCLUSION, run::run_ikf, 32 * 1024, 8 * 1024),
-    ("cce", run::OCCLUSION, run::run_cce, 32 * 1024, 4 * 1024),
-    ("adf", run::OCCLUSION, run::run_adf, 32 * 1024, 8 * 1024),
-    ("kf-io", run::OCCLUSION, run::run_kf_io, 32 * 1024, 8 * 1024),
-    ("nn", run::NN, run::run_nn, 48 * 1024, 8 * 1024),
+/// against regressions. The NN estimator (seed 003) needs more flash than that (its Kronecker
+/// gain solve and bound recursions), and the Tobit fusion binary embeds a 12 KB stream (200
+/// instants × 3 nodes); both are held to 48 KiB / 8 KiB, again only as a regression guard.
+const BINS: &[(&str, HostRun, usize, usize)] = &[
+    (
+        "kf",
+        || run::run_kf(&stream(), usize::MAX),
+        32 * 1024,
+        8 * 1024,
+    ),
+    (
+        "ikf",
+        || run::run_ikf(&stream(), usize::MAX),
+        32 * 1024,
+        8 * 1024,
+    ),
+    (
+        "cce",
+        || run::run_cce(&stream(), usize::MAX),
+        32 * 1024,
+        4 * 1024,
+    ),
+    (
+        "adf",
+        || run::run_adf(&stream(), usize::MAX),
+        32 * 1024,
+        8 * 1024,
+    ),
+    (
+        "kf-io",
+        || run::run_kf_io(&stream(), usize::MAX),
+        32 * 1024,
+        8 * 1024,
+    ),
+    (
+        "nn",
+        || run::run_nn(&nn_stream(), usize::MAX),
+        48 * 1024,
+        8 * 1024,
+    ),
+    (
+        "tobit",
+        || run::run_tobit(&tobit_stream(), usize::MAX),
+        48 * 1024,
+        8 * 1024,
+    ),
 ];
 
 fn firmware_dir() -> PathBuf {
@@ -51,6 +90,16 @@ fn firmware_dir() -> PathBuf {
 
 fn stream() -> Stream<'static> {
     run::OCCLUSION.stream().expect("embedded vectors are valid")
+}
+
+fn nn_stream() -> Stream<'static> {
+    run::NN.stream().expect("embedded NN vectors are valid")
+}
+
+fn tobit_stream() -> run::NodeStream<'static> {
+    run::TOBIT
+        .node_stream()
+        .expect("embedded Tobit vectors are valid")
 }
 
 #[test]
@@ -88,7 +137,7 @@ fn vectors_are_the_documented_stream() {
 
     // The token-bucket stream: the bucket (a, b, S, z₀) = (2, 3, 10, 6) transmits a data-
     // independent pattern, recomputed here by hand from eq. (2).
-    let nn = run::NN.stream().expect("embedded NN vectors are valid");
+    let nn = nn_stream();
     assert_eq!((nn.steps, nn.seed), (100, 0x5EED_0003_F1A5_0008));
     let mut z = 6u32;
     for (i, r) in nn.records().enumerate() {
@@ -100,6 +149,204 @@ fn vectors_are_the_documented_stream() {
         assert_eq!(r.flags & 0x2 != 0, !sent);
     }
 }
+
+/// The three-node Tobit stream is what the firmware README documents: 200 instants of the
+/// `tobit-fusion` preset, and every slot obeys seed 004's protocol. The shared bucket (eqs.
+/// 16-18, (ξ₀, g, b, c_m) = (10, 5, 30, 3), 3 nodes) is recomputed here by hand: a node may send
+/// iff 3 c_m ≤ ξ (β), it sends iff it triggered and may (α β), a triggered node that may not
+/// is flagged blocked, and ξ ← min(ξ + 5 − 3·(nodes sent), 30).
+#[test]
+fn tobit_vectors_follow_the_protocol() {
+    let s = tobit_stream();
+    assert_eq!((s.steps, s.seed), (200, 0x5EED_0004_F1A5_0008));
+    let (triggered, blocked, censored, sent) = (0x1, 0x2, 0x4, 0x7);
+    let mut level = 10u32;
+    let mut counts = [0u32; 4];
+    for (i, r) in s.records().enumerate() {
+        assert_eq!(r.k as usize, i + 1);
+        let grant = 3 * 3 <= level;
+        let mut n_sent = 0;
+        for (m, slot) in r.nodes.iter().enumerate() {
+            let fired = slot.flags & triggered != 0;
+            assert_eq!(slot.delivered, fired && grant, "k = {} node {m}", r.k);
+            assert_eq!(
+                slot.flags & blocked != 0,
+                fired && !grant,
+                "k = {} node {m}",
+                r.k
+            );
+            if slot.delivered {
+                // Censored at τ = 0 (eq. 2): delivered values are ≥ 0, and exactly 0 where
+                // the censoring flag says a component was cut.
+                assert!(slot.y.iter().all(|&v| v >= 0.0), "k = {} node {m}", r.k);
+                assert_eq!(
+                    slot.flags & censored != 0,
+                    slot.y.contains(&0.0),
+                    "k = {} node {m}",
+                    r.k
+                );
+                n_sent += 1;
+            } else {
+                assert_eq!(slot.y, [0.0, 0.0], "nothing sent, nothing on the wire");
+            }
+            for (bit, c) in [triggered, blocked, censored, sent].iter().zip(&mut counts) {
+                *c += u32::from(if *bit == sent {
+                    slot.delivered
+                } else {
+                    slot.flags & bit != 0
+                });
+            }
+        }
+        level = (level + 5 - 3 * n_sent).min(30);
+    }
+    println!(
+        "tobit stream: of 600 node slots {} triggered, {} blocked, {} censored, {} sent",
+        counts[0], counts[1], counts[2], counts[3]
+    );
+    // Every branch of the filter is exercised: transmissions, held measurements after a
+    // blocked or untriggered slot, and censored components.
+    assert!(counts.iter().all(|&c| c > 10), "{counts:?}");
+    assert!(counts[3] < 590, "{counts:?}");
+    let bytes = run::TOBIT.bytes;
+    let mut corrupt = bytes.to_vec();
+    corrupt[100] ^= 1;
+    assert_eq!(
+        run::NodeStream::parse_checked(&corrupt, run::TOBIT.fnv1a64).map(|_| ()),
+        Err(run::StreamError::BadHash)
+    );
+    // The version-1 parser refuses the version-2 file and vice versa.
+    assert_eq!(
+        Stream::parse(bytes).map(|_| ()),
+        Err(run::StreamError::BadFormat)
+    );
+    assert_eq!(
+        run::NodeStream::parse(run::OCCLUSION.bytes).map(|_| ()),
+        Err(run::StreamError::BadFormat)
+    );
+}
+
+/// The f32 Tobit fusion filter the firmware runs is seed 004's filter as the product's
+/// pipeline runs it: its hand-written f32 model equals the `tobit-fusion` preset's (to f32
+/// rounding), and over the embedded stream it tracks, instant by instant, the f64 `fused`
+/// estimator that ipc-runner builds from the preset (x̂^g and P^g through its public
+/// `Estimator` interface).
+#[test]
+fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
+    use channel_sim::scenario::ComposedScenario;
+    use channel_sim::Observation;
+    use ipc_runner::estimators::{tobit, EvalOptions};
+
+    let scenario = channel_sim::scenario::preset("tobit-fusion").unwrap();
+    let plant = scenario
+        .as_any()
+        .downcast_ref::<ComposedScenario>()
+        .unwrap()
+        .plant_arc();
+    let lin = plant.linear().unwrap();
+
+    // The firmware's model is the preset's, rounded to f32.
+    let m32 = run::TobitModel::paper_example();
+    let close = |a: f32, b: f64| (f64::from(a) - b).abs() <= 1e-7 * b.abs().max(1e-3);
+    for i in 0..2 {
+        for j in 0..2 {
+            assert!(close(m32.a[(i, j)], lin.a(0)[(i, j)]), "A[{i},{j}]");
+            assert!(
+                close(m32.bqb[(i, j)], lin.process_cov(0)[(i, j)]),
+                "BQBᵀ[{i},{j}]"
+            );
+            for m in 0..3 {
+                assert!(
+                    close(m32.c[m][(i, j)], lin.c(m, 0)[(i, j)]),
+                    "C_{m}[{i},{j}]"
+                );
+                let r = lin.measurement_cov(m, 0)[(i, j)];
+                if i == j {
+                    assert!(close(m32.r[m][i], r), "R_{m}[{i}]");
+                } else {
+                    assert_eq!(r, 0.0);
+                }
+            }
+        }
+    }
+
+    let mut views = tobit::build(&*scenario, &EvalOptions::default(), 0, 0).unwrap();
+    assert_eq!(views.last().unwrap().name(), tobit::FUSED_NAME);
+    let s = tobit_stream();
+    let mut f32_run = run::Tobit::paper_example().unwrap();
+    let (mut worst_x, mut worst_p, mut nees_sum, mut inside) = (0.0f64, 0.0f64, 0.0, 0);
+    for r in s.records() {
+        let obs: Vec<Observation> = r
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(m, slot)| Observation {
+                k: r.k,
+                node: m as u8,
+                delivered: slot.delivered,
+                ny: 2,
+                y: [f64::from(slot.y[0]), f64::from(slot.y[1]), 0.0, 0.0],
+                flags: slot.flags,
+            })
+            .collect();
+        for v in views.iter_mut() {
+            v.step(r.k, &obs).unwrap();
+        }
+        let fused = views.last().unwrap();
+        let mut x64 = [0.0; 2];
+        fused.estimate(&mut x64);
+        let mut p = [0.0; 3];
+        fused.diagnostics(&mut |name, v| match name {
+            "p11" => p[0] = v,
+            "p12" => p[1] = v,
+            "p22" => p[2] = v,
+            _ => {}
+        });
+        let p64 = nalgebra::Matrix2::new(p[0], p[1], p[1], p[2]);
+        let x64 = nalgebra::Vector2::from(x64);
+
+        let y: [Option<nalgebra::Vector2<f32>>; 3] = r
+            .nodes
+            .map(|slot| slot.delivered.then(|| nalgebra::Vector2::from(slot.y)));
+        Driven::step(&mut f32_run, r.k as usize, y.each_ref().map(Option::as_ref)).unwrap();
+        let (x32, p32) = (f32_run.fusion.state(), f32_run.fusion.covariance());
+        worst_x = worst_x.max((x32.map(f64::from) - x64).norm() / x64.norm().max(1.0));
+        worst_p = worst_p.max((p32.map(f64::from) - p64).norm() / p64.norm());
+
+        // Theorem 5: P^g bounds the error covariance; NEES against the stream's truth.
+        let e = nalgebra::Vector2::from(r.truth.map(f64::from)) - x64;
+        let nees = e.dot(&p64.cholesky().unwrap().solve(&e));
+        nees_sum += nees;
+        inside += usize::from(nees <= tobit::CHI2_95[1]);
+    }
+    let mean_nees = nees_sum / f64::from(s.steps);
+    println!(
+        "tobit: f32 vs f64 fused, worst relative difference x̂ {worst_x:.2e}, P {worst_p:.2e}; \
+         f64 fused mean NEES {mean_nees:.3} (≤ 2 iff the bound holds on average), {inside} of \
+         {} instants inside the 95 % ellipse of P^g",
+        s.steps
+    );
+    assert!(
+        worst_x <= TOL_TOBIT,
+        "fused x̂ differs by {worst_x:.2e} relative"
+    );
+    assert!(
+        worst_p <= TOL_TOBIT,
+        "fused P differs by {worst_p:.2e} relative"
+    );
+    // The whole-stream driver is this very computation.
+    let full = run::run_tobit(&s, usize::MAX);
+    assert_eq!((full.errors, full.steps), (0, 200));
+    assert_eq!(&full.x()[..2], f32_run.fusion.state().as_slice());
+    assert_eq!(full.arrivals + full.dropouts, 600);
+    // P^g is an upper bound (Theorem 5), so the mean NEES of one run of 200 correlated
+    // instants should not exceed n_x = 2 by much; 3 allows for the spread of one run and
+    // still fails if the bound is violated systematically.
+    assert!(mean_nees <= 3.0, "mean NEES {mean_nees}");
+}
+
+/// f32 carries 24 bits; 1e-4 relative to the state's or the bound's scale is a few hundred
+/// ulps, far below any real difference between filters.
+const TOL_TOBIT: f64 = 1e-4;
 
 /// Seed 001's model in f64, written out here independently of the firmware's `run::model`.
 fn model_f64() -> LinearModel<f64, 3, 3, 2, 2> {
@@ -223,7 +470,7 @@ fn host_f32_occlusion_estimators_match_f64() {
 /// meaningless gain; the error is counted and the estimate kept. The f64 run goes through.
 #[test]
 fn host_f32_nn_matches_f64_until_f32_refuses() {
-    let s = run::NN.stream().unwrap();
+    let s = nn_stream();
     let mut nn = NnTbcpEstimator::<f64, 3, 1, 2, 3, 6, Tanh>::new(
         NnBoundConfig::seed003_example(),
         Tanh,
@@ -395,12 +642,11 @@ fn firmware_on_qemu_is_bit_exact_with_host() {
         "{:<5} {:>10} {:>8} {:>8} {:>8} {:>11}  result",
         "bin", "code+vt", "rodata", "data", "flash", "stack peak"
     );
-    for &(name, vectors, driver, flash_budget, stack_budget) in BINS {
-        let s = vectors.stream().expect("embedded vectors are valid");
+    for &(name, host_run, flash_budget, stack_budget) in BINS {
         let elf = bin_dir.join(name);
         let out = bin_dir.join(format!("{name}.qemu.txt"));
         let (code, text) = run_qemu(&elf, &out);
-        let host = format!("{}", driver(&s, usize::MAX));
+        let host = format!("{}", host_run());
         let target = text
             .lines()
             .find_map(|l| l.strip_prefix("RESULT "))

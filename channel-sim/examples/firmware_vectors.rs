@@ -1,5 +1,5 @@
 //! Writes the measurement streams the Cortex-M firmware embeds
-//! (`estimator-core/firmware/vectors/occlusion.bin` and `nn.bin`).
+//! (`estimator-core/firmware/vectors/occlusion.bin`, `nn.bin` and `tobit.bin`).
 //!
 //! ```text
 //! cargo run -p channel-sim --example firmware_vectors            # (re)write the file
@@ -18,13 +18,27 @@
 //! w_k ~ N(0, 0.1), x₀ = [3.1 −2.65 4]ᵀ, token bucket (a, b, S, z₀) = (2, 3, 10, 6)) with seed
 //! [`NN_SEED`], k = 1..=T, T = 100 (label 0 throughout).
 //!
-//! After regenerating, update the hashes of `OCCLUSION` / `NN` in
+//! `tobit.bin` is run 0 of channel-sim's `tobit-fusion` preset (seed 004's section 4 example:
+//! the oscillator x_{t+1} = [cos w  sin w; −sin w  cos w] x_t + [0.16; 0.18] ω_t, w = 0.052π,
+//! ω_t ~ N(0, 0.05), three nodes z_{m,t} = x_t + v_{m,t}, v ~ N(0, 0.5 I₂), censored at τ = 0,
+//! dynamic event triggers sharing one token bucket) with seed [`TOBIT_SEED`], t = 1..=200
+//! (the paper's T): per instant and node what the channel delivered.
+//!
+//! After regenerating, update the hashes of `OCCLUSION` / `NN` / `TOBIT` in
 //! `estimator-core/firmware/src/run.rs` to the hashes this prints.
 //!
-//! File format (little-endian): magic `EFV1`, version u32 = 1, seed u64, steps u32, nx u32 = 3,
-//! ny u32 = 2, record size u32 = 32; then per instant: k u32, delivered u8, label u8, 2 zero
-//! bytes, channel flags u32 (channel-sim's `FLAG_*` bits), z_k f32×2 (the sensor's measurement,
-//! also on a drop), x_k f32×3.
+//! File format, version 1 (`occlusion.bin`, `nn.bin`; little-endian): magic `EFV1`, version
+//! u32 = 1, seed u64, steps u32, nx u32 = 3, ny u32 = 2, record size u32 = 32; then per
+//! instant: k u32, delivered u8, label u8, 2 zero bytes, channel flags u32 (channel-sim's
+//! `FLAG_*` bits), z_k f32×2 (the sensor's measurement, also on a drop), x_k f32×3.
+//!
+//! File format, version 2 (`tobit.bin`, one slot per instant and node; little-endian): magic
+//! `EFV1`, version u32 = 2, seed u64, steps u32, nx u32 = 2, ny u32 = 2, record size u32 = 60
+//! (bytes per instant), nodes u32 = 3, 4 zero bytes; then per instant: k u32, x_k f32×2, and
+//! per node m = 1..3 in order: delivered u8 (1: the node transmitted, α β = 1), 3 zero bytes,
+//! channel flags u32 (`FLAG_TRIGGERED` α = 1, `FLAG_TOKEN_BLOCKED` triggered but no token,
+//! `FLAG_CENSORED` some component was censored at τ), y f32×2 (the measurement as delivered,
+//! censored components equal to τ; 0 when nothing was sent, as on the wire).
 
 use std::path::PathBuf;
 
@@ -37,6 +51,14 @@ const SEED: u64 = 0x5EED_0001_F1A5_0008;
 const T: u32 = 100;
 /// Simulation seed of the seed-003 stream.
 const NN_SEED: u64 = 0x5EED_0003_F1A5_0008;
+/// Simulation seed of the seed-004 stream.
+const TOBIT_SEED: u64 = 0x5EED_0004_F1A5_0008;
+/// Instants of the seed-004 stream (the paper's T).
+const TOBIT_T: u32 = 200;
+/// Nodes of the seed-004 stream.
+const TOBIT_NODES: u32 = 3;
+/// Bytes per instant of the seed-004 stream: k, x_k f32×2, per node (status, flags, y f32×2).
+const TOBIT_RECORD: u32 = 4 + 4 * 2 + TOBIT_NODES * (8 + 4 * 2);
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
@@ -136,16 +158,68 @@ fn generate_nn() -> anyhow::Result<Vec<u8>> {
     Ok(out)
 }
 
+fn generate_tobit() -> anyhow::Result<Vec<u8>> {
+    let preset = channel_sim::scenario::preset("tobit-fusion")?;
+    anyhow::ensure!(
+        (preset.nx(), preset.ny(), preset.nodes()) == (2, 2, TOBIT_NODES as usize),
+        "the tobit-fusion preset changed shape"
+    );
+    let mut sim = preset.start(TOBIT_SEED, 0);
+    let mut out = Vec::new();
+    out.extend_from_slice(b"EFV1");
+    out.extend_from_slice(&2u32.to_le_bytes()); // format version 2: one slot per node
+    out.extend_from_slice(&TOBIT_SEED.to_le_bytes());
+    for w in [TOBIT_T, 2, 2, TOBIT_RECORD, TOBIT_NODES, 0] {
+        out.extend_from_slice(&w.to_le_bytes());
+    }
+    for k in 1..=TOBIT_T {
+        let inst = sim.next_instant();
+        anyhow::ensure!(inst.k == k, "instants out of step at k = {k}");
+        anyhow::ensure!(
+            inst.obs.len() == TOBIT_NODES as usize,
+            "node count at k = {k}"
+        );
+        out.extend_from_slice(&k.to_le_bytes());
+        for v in &inst.truth[..2] {
+            out.extend_from_slice(&(*v as f32).to_le_bytes());
+        }
+        for (m, o) in inst.obs.iter().enumerate() {
+            anyhow::ensure!(o.node as usize == m && o.ny == 2, "node {m} at k = {k}");
+            out.extend_from_slice(&[u8::from(o.delivered), 0, 0, 0]);
+            out.extend_from_slice(&o.flags.to_le_bytes());
+            for v in &o.y[..2] {
+                out.extend_from_slice(&(*v as f32).to_le_bytes());
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Slots without a transmission: instants of a version-1 file, node slots of a version-2 one.
+fn not_delivered(bytes: &[u8]) -> usize {
+    if bytes[4] == 1 {
+        bytes[32..].chunks(32).filter(|r| r[4] == 0).count()
+    } else {
+        let nodes = TOBIT_NODES as usize;
+        bytes[40..]
+            .chunks(TOBIT_RECORD as usize)
+            .flat_map(|r| (0..nodes).map(move |m| r[12 + 16 * m]))
+            .filter(|&d| d == 0)
+            .count()
+    }
+}
+
 fn main() -> anyhow::Result<()> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../estimator-core/firmware/vectors");
     let check = std::env::args().any(|a| a == "--check");
-    for (file, seed, bytes) in [
-        ("occlusion.bin", SEED, generate()?),
-        ("nn.bin", NN_SEED, generate_nn()?),
+    for (file, seed, steps, bytes) in [
+        ("occlusion.bin", SEED, T, generate()?),
+        ("nn.bin", NN_SEED, T, generate_nn()?),
+        ("tobit.bin", TOBIT_SEED, TOBIT_T, generate_tobit()?),
     ] {
         let path = dir.join(file);
         let hash = fnv1a64(&bytes);
-        let drops = bytes[32..].chunks(32).filter(|r| r[4] == 0).count();
+        let drops = not_delivered(&bytes);
         if check {
             let on_disk = std::fs::read(&path)?;
             anyhow::ensure!(
@@ -158,7 +232,9 @@ fn main() -> anyhow::Result<()> {
             std::fs::write(&path, &bytes)?;
             println!("wrote {} ({} bytes)", path.display(), bytes.len());
         }
-        println!("{file}: steps={T} dropouts={drops} seed={seed:#018x} fnv1a64={hash:#018x}");
+        println!(
+            "{file}: steps={steps} not delivered={drops} seed={seed:#018x} fnv1a64={hash:#018x}"
+        );
     }
     Ok(())
 }

@@ -12,7 +12,7 @@ use core::ptr::{addr_of, read_volatile, write_volatile};
 
 use cortex_m_semihosting::hio;
 
-use run::{Stream, Summary, Vectors};
+use run::{Source, Summary, Vectors};
 
 /// Exit status: run completed (estimator errors, if any, are in the result line).
 pub const EXIT_OK: u32 = 0;
@@ -127,14 +127,8 @@ pub fn stack_peak() -> (usize, bool) {
 /// instants and exits silently, so that the instruction count of two runs differs only by the
 /// estimator steps; otherwise it runs the whole stream with the stack painted and prints
 /// `RESULT <summary>` and `STACK <name> peak=<bytes>`.
-pub fn main_with(vectors: Vectors, driver: fn(&Stream<'_>, usize) -> Summary) -> ! {
-    let stream = match vectors.stream() {
-        Ok(s) => s,
-        Err(e) => {
-            out!("ERROR {e}\n");
-            exit(EXIT_BAD_VECTORS);
-        }
-    };
+pub fn main_with<S: Source>(vectors: Vectors, driver: fn(&S, usize) -> Summary) -> ! {
+    let stream = open_or_exit(&vectors);
     if let Some(n) = cmdline_steps() {
         let s = driver(&stream, n);
         core::hint::black_box(s);
@@ -142,7 +136,28 @@ pub fn main_with(vectors: Vectors, driver: fn(&Stream<'_>, usize) -> Summary) ->
     }
     paint_stack();
     let s = driver(&stream, usize::MAX);
-    let (peak, overflow) = stack_peak();
+    report(&s, stack_peak());
+    exit(EXIT_OK);
+}
+
+// The two helpers below are not inlined so that their formatting temporaries are not part of
+// `main_with`'s frame, which stays on the stack under the whole run.
+
+/// The embedded stream, or exit with [`EXIT_BAD_VECTORS`].
+#[inline(never)]
+fn open_or_exit<S: Source>(vectors: &Vectors) -> S {
+    match S::open(vectors) {
+        Ok(s) => s,
+        Err(e) => {
+            out!("ERROR {e}\n");
+            exit(EXIT_BAD_VECTORS);
+        }
+    }
+}
+
+/// Prints the result and the stack lines.
+#[inline(never)]
+fn report(s: &Summary, (peak, overflow): (usize, bool)) {
     out!("RESULT {s}\n");
     out!(
         "STACK {} peak={}{}\n",
@@ -150,7 +165,6 @@ pub fn main_with(vectors: Vectors, driver: fn(&Stream<'_>, usize) -> Summary) ->
         peak,
         if overflow { " (window overrun)" } else { "" }
     );
-    exit(EXIT_OK);
 }
 
 #[panic_handler]
