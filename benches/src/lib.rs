@@ -10,5 +10,4 @@
 
 pub mod ads;
 pub mod estimators;
-pub mod latency;
 pub mod problems;

@@ -31,7 +31,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use benches::latency::{monotonic_ns, Percentiles};
+use channel_sim::wire::monotonic_ns;
+use ipc_runner::latency::Percentiles;
 
 /// The message of every mode: 128 bytes, fixed layout.
 #[derive(Clone, Copy, Debug, ZeroCopySend)]
@@ -555,8 +556,8 @@ fn run() -> Result<()> {
         for (i, (m, ow, rt)) in rows.iter().enumerate() {
             s.push_str(&format!(
                 "  \"{m}\": {{\"one_way\": {}, \"round_trip\": {}}}{}\n",
-                ow.json(),
-                rt.json(),
+                serde_json::to_string(ow)?,
+                serde_json::to_string(rt)?,
                 if i + 1 < rows.len() { "," } else { "" }
             ));
         }
