@@ -348,20 +348,32 @@ fn explain_open<E: core::fmt::Debug>(what: &str, prefix: &str, e: E) -> anyhow::
     }
 }
 
-/// Opens (or creates) the slot service with the QoS both sides agree on.
-pub fn slot_service(
+/// Opens (or creates) the publish-subscribe service `{prefix}/{what}` with the QoS both sides
+/// agree on: one publisher, no history, a bounded buffer that overwrites the oldest sample
+/// (a slow reader sees gaps in `seq`, never blocks the writer).
+fn pubsub_service<T: ZeroCopySend + core::fmt::Debug + 'static>(
     node: &Node<ipc::Service>,
     prefix: &str,
-) -> anyhow::Result<publish_subscribe::PortFactory<ipc::Service, Slot, ()>> {
-    node.service_builder(&service_name(prefix, "slots")?)
-        .publish_subscribe::<Slot>()
+    what: &str,
+    max_subscribers: usize,
+) -> anyhow::Result<publish_subscribe::PortFactory<ipc::Service, T, ()>> {
+    node.service_builder(&service_name(prefix, what)?)
+        .publish_subscribe::<T>()
         .max_publishers(1)
-        .max_subscribers(4)
+        .max_subscribers(max_subscribers)
         .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
         .history_size(0)
         .enable_safe_overflow(true)
         .open_or_create()
-        .map_err(|e| explain_open("slots", prefix, e))
+        .map_err(|e| explain_open(what, prefix, e))
+}
+
+/// Opens (or creates) the slot service.
+pub fn slot_service(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+) -> anyhow::Result<publish_subscribe::PortFactory<ipc::Service, Slot, ()>> {
+    pubsub_service(node, prefix, "slots", 4)
 }
 
 /// Opens (or creates) the truth service.
@@ -369,15 +381,7 @@ pub fn truth_service(
     node: &Node<ipc::Service>,
     prefix: &str,
 ) -> anyhow::Result<publish_subscribe::PortFactory<ipc::Service, Truth, ()>> {
-    node.service_builder(&service_name(prefix, "truth")?)
-        .publish_subscribe::<Truth>()
-        .max_publishers(1)
-        .max_subscribers(4)
-        .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
-        .history_size(0)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| explain_open("truth", prefix, e))
+    pubsub_service(node, prefix, "truth", 4)
 }
 
 /// Opens (or creates) the estimate service.
@@ -385,15 +389,7 @@ pub fn estimate_service(
     node: &Node<ipc::Service>,
     prefix: &str,
 ) -> anyhow::Result<publish_subscribe::PortFactory<ipc::Service, Estimate, ()>> {
-    node.service_builder(&service_name(prefix, "estimates")?)
-        .publish_subscribe::<Estimate>()
-        .max_publishers(1)
-        .max_subscribers(8)
-        .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
-        .history_size(0)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| explain_open("estimates", prefix, e))
+    pubsub_service(node, prefix, "estimates", 8)
 }
 
 /// Opens (or creates) the event service notified after each published instant.

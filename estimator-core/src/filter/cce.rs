@@ -28,7 +28,8 @@ use crate::filter::kalman::{kalman_update, CovarianceUpdate};
 use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
 use crate::gsum::GaussSum;
-use crate::linalg::{check_finite, check_spd, cholesky, symmetrize};
+use crate::linalg::{check_finite, check_spd, symmetrize};
+use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
 use crate::{Error, Real, Result};
@@ -181,19 +182,15 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         let half = T::lit(0.5);
         let mut lnw = [[T::zero(); N]; S];
         let mut top = [T::zero(); S];
+        let mut factors = [None; S];
         for i in 0..S {
             // ln ω_{ik}^s = ln|R_i| + ln N(ũ^s; E x̂⁻, E P⁻ Eᵀ + Σ_i)   (eq. 15)
-            let chol = cholesky(&symmetrize(&(epe + self.sigma[i])), "E P Eᵀ + Σ")?;
-            let l = chol.l_dirty();
-            let mut half_ln_det = T::zero();
-            for j in 0..NE {
-                half_ln_det += l[(j, j)].ln();
-            }
-            let c0 = self.ln_vol[i] - T::lit(NE as f64 * LN_SQRT_2PI) - half_ln_det;
+            let f = SmallLdl::new(&(epe + self.sigma[i]), "E P Eᵀ + Σ")?;
+            let c0 = self.ln_vol[i] - T::lit(NE as f64 * LN_SQRT_2PI) - half * f.ln_det();
             top[i] = -T::one() / T::zero();
             for s in 0..N {
                 let d = self.means[i][s] - ex;
-                lnw[i][s] = c0 - half * d.dot(&chol.solve(&d));
+                lnw[i][s] = c0 - half * f.mahalanobis(&d);
                 if lnw[i][s] > top[i] {
                     top[i] = lnw[i][s];
                 }
@@ -203,6 +200,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
                     what: "region weight is not finite",
                 });
             }
+            factors[i] = Some(f);
         }
         // eq. (17): ĥ = argmax over regions 1..=S of ln Σ_s ω^s (first on ties), log-sum-exp
         // with the largest term factored out. A region whose largest term plus ln N is below
@@ -236,9 +234,11 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             }
         }
         let i = best;
-        // K_i = P⁻ Eᵀ S_i⁻¹.
-        let chol = cholesky(&symmetrize(&(epe + self.sigma[i])), "E P Eᵀ + Σ")?;
-        let gain = chol.solve(&pet.transpose()).transpose();
+        // K_i = P⁻ Eᵀ S_i⁻¹, with the factor of the weights above.
+        let f = factors[i].ok_or(Error::Numerical {
+            what: "no factor for the chosen region",
+        })?;
+        let gain = f.solve_right(&pet);
         // α-weighted mean and covariance of the component means (eq. 21).
         let mut ubar = SVector::<T, NE>::zeros();
         let mut alpha = [T::zero(); N];
@@ -251,10 +251,11 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             let du = self.means[i][s] - ubar;
             cu += du * du.transpose() * alpha[s];
         }
-        let x = xp + gain * (ubar - ex);
-        let i_ke = SMatrix::<T, NX, NX>::identity() - gain * e;
-        let theta = i_ke * pp * i_ke.transpose() + gain * self.sigma[i] * gain.transpose();
-        let p = symmetrize(&(theta + gain * cu * gain.transpose()));
+        let x = xp + small::mul_vec(&gain, &(ubar - ex));
+        // Θ = (I − K E) P⁻ (I − K E)ᵀ + K Σ_i Kᵀ (Joseph form), plus K C_u Kᵀ of (21).
+        let i_ke = SMatrix::<T, NX, NX>::identity() - small::mul(&gain, e);
+        let k_sig_cu = small::congruence(&gain, &(self.sigma[i] + cu));
+        let p = small::congruence_add(&i_ke, pp, &k_sig_cu);
         check_finite(&x, "updated state")?;
         check_finite(&p, "updated covariance")?;
         Ok((x, p, i + 1, lw))
