@@ -5,8 +5,9 @@
 //!
 //! Finding: iceoryx2 0.10's `Publisher::loan_uninit` allocates one 48-byte `Rc` per loaned
 //! sample (`ChunkMutSharedState::new`), inside the library. Receiving allocates nothing. So
-//! the loop is allocation-free when it does not publish estimates, and allocates exactly one
-//! block per published estimate when it does; the WaitSet (`--wait block`) adds its own
+//! the loop is allocation-free when it does not publish estimates or publishes them on the
+//! latest-estimate blackboard (`--latest-estimates`), and allocates exactly one block per
+//! published estimate on the `estimates` queue; the WaitSet (`--wait block`) adds its own
 //! per-wake-up vectors, which `--wait listener` avoids.
 //!
 //! The estimators are measured separately, in this process, over the very same instants
@@ -72,7 +73,9 @@ fn estimator_allocations(name: &str) -> usize {
     per.iter().sum()
 }
 
-fn run_mode(mode: WaitMode, publish: bool) -> Outcome {
+/// `publish`: `None` = no estimates published, `Some(false)` = the `estimates` queue,
+/// `Some(true)` = the latest-estimate blackboard.
+fn run_mode(mode: WaitMode, publish: Option<bool>) -> Outcome {
     let dir = scratch("alloc");
     let p = prefix("alloc");
     let (scenario, _) = select::scenario(S, None).unwrap();
@@ -89,7 +92,8 @@ fn run_mode(mode: WaitMode, publish: bool) -> Outcome {
     args.steps = STEPS;
     // Room for the whole stream: an IPC loss would change what the estimators compute.
     args.buffer = 4096;
-    args.no_publish_estimates = !publish;
+    args.no_publish_estimates = publish.is_none();
+    args.latest_estimates = publish == Some(true);
     let mut publ = Proc::start(
         &dir,
         "pub",
@@ -148,15 +152,22 @@ fn steady_state_does_not_allocate_per_slot() {
         WARMUP + 1
     )];
     for (mode, publish) in [
-        (WaitMode::Spin, false),
-        (WaitMode::Listener, false),
-        (WaitMode::Spin, true),
-        (WaitMode::Listener, true),
-        (WaitMode::Block, false),
+        (WaitMode::Spin, None),
+        (WaitMode::Listener, None),
+        (WaitMode::Spin, Some(false)),
+        (WaitMode::Listener, Some(false)),
+        (WaitMode::Spin, Some(true)),
+        (WaitMode::Listener, Some(true)),
+        (WaitMode::Block, None),
     ] {
         let o = run_mode(mode, publish);
+        let sink = match publish {
+            None => "none",
+            Some(false) => "queue",
+            Some(true) => "latest",
+        };
         lines.push(format!(
-            "{:<8} publish={publish:<5}: {} allocations over {} slots, {} estimates published",
+            "{:<8} estimates={sink:<6}: {} allocations over {} slots, {} estimates published",
             mode.as_str(),
             o.allocations,
             o.slots,
@@ -166,12 +177,15 @@ fn steady_state_does_not_allocate_per_slot() {
         assert!(o.slots > 350, "{last}");
         match (mode, publish) {
             (WaitMode::Block, _) => {} // WaitSet internals: measured and reported only
-            (_, false) => assert_eq!(o.allocations, est, "the loop allocated: {last}"),
-            (_, true) => assert_eq!(
+            (_, None | Some(true)) => assert_eq!(o.allocations, est, "the loop allocated: {last}"),
+            (_, Some(false)) => assert_eq!(
                 (o.allocations - est) as u64,
                 o.published,
                 "expected exactly iceoryx2's one Rc per loaned sample: {last}"
             ),
+        }
+        if publish.is_some() {
+            assert!(o.published > 0, "{last}");
         }
     }
     eprintln!("{}", lines.join("\n"));

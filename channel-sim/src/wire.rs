@@ -19,7 +19,7 @@
 use crate::sim::{Observation, MAX_NODES, MAX_NX, MAX_NY};
 use iceoryx2::port::event_id::EventId;
 use iceoryx2::prelude::*;
-use iceoryx2::service::port_factory::{event, publish_subscribe};
+use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
 
 /// Version of the payload layouts below. Bump on any change to a field's meaning or layout.
 pub const WIRE_VERSION: u32 = 1;
@@ -296,6 +296,26 @@ impl Truth {
 }
 
 impl Estimate {
+    /// The placeholder of a latest-estimate board entry before the estimator's first step:
+    /// `k = 0`, `seq = u64::MAX`, `status = 2` (no estimate yet), `x` zero.
+    pub fn none_yet(estimator: u32, name: [u8; 16]) -> Self {
+        Self {
+            version: WIRE_VERSION,
+            k: 0,
+            stream_id: 0,
+            seq: u64::MAX,
+            estimator,
+            nx: 0,
+            name,
+            status: 2,
+            reserved: 0,
+            x: [0.0; MAX_NX],
+            slot_send_ns: 0,
+            receive_ns: 0,
+            step_done_ns: 0,
+        }
+    }
+
     /// Encodes an estimator name into the fixed 16-byte field (truncated on a char boundary).
     pub fn encode_name(name: &str) -> [u8; 16] {
         let mut out = [0u8; 16];
@@ -391,6 +411,32 @@ pub fn estimate_service(
 ) -> anyhow::Result<publish_subscribe::PortFactory<ipc::Service, Estimate, ()>> {
     pubsub_service(node, prefix, "estimates", 8)
 }
+
+/// Creates the latest-estimate blackboard `{prefix}/estimates-latest`: one entry per
+/// estimator, key = its index in the runner's list, value = its newest [`Estimate`]. Unlike
+/// the `estimates` queue it keeps no history (a reader gets the newest value and sees skipped
+/// ones as jumps in `seq`), and writing an entry allocates nothing — publish-subscribe in
+/// iceoryx2 0.10 allocates a reference count per loaned sample. Created by the runner (it
+/// knows the estimators); readers open it with `blackboard_opener::<u32>()`.
+pub fn latest_estimates_board(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+    names: &[[u8; 16]],
+) -> anyhow::Result<blackboard::PortFactory<ipc::Service, u32>> {
+    let mut b = node
+        .service_builder(&service_name(prefix, LATEST_ESTIMATES)?)
+        .blackboard_creator::<u32>()
+        .max_readers(8);
+    for (i, name) in names.iter().enumerate() {
+        let i = i as u32;
+        b = b.add(i, Estimate::none_yet(i, *name));
+    }
+    b.create()
+        .map_err(|e| explain_open(LATEST_ESTIMATES, prefix, e))
+}
+
+/// Service name (under the prefix) of [`latest_estimates_board`].
+pub const LATEST_ESTIMATES: &str = "estimates-latest";
 
 /// Opens (or creates) the event service notified after each published instant.
 pub fn ready_event_service(

@@ -65,6 +65,10 @@ pub struct DemoArgs {
     /// Pin the loop to this CPU (best effort).
     #[arg(long)]
     pub cpu: Option<usize>,
+    /// Publish estimates on the latest-estimate blackboard instead of the queue (see
+    /// `run --latest-estimates`: no allocation per slot).
+    #[arg(long)]
+    pub latest_estimates: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -166,6 +170,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.estimators = args.estimators.clone();
     rargs.wait = args.wait;
     rargs.cpu = args.cpu;
+    rargs.latest_estimates = args.latest_estimates;
     rargs.quiet = true;
     rargs.connect_timeout = 30.0;
     rargs.steps = steps;

@@ -291,9 +291,11 @@ triangle and mirrored (exactly symmetric, no symmetrisation pass), `(I − KC) P
 `P − K (C P)`, a square-root-free `L D Lᵀ` factorisation of S with reciprocal pivots (the \
 factor-and-solve chain is about half as long as `L Lᵀ`'s: no square root and one division \
 per pivot), and a one-pass branch-free finiteness test.\n\n\
-| instructions / step | first | 1 | 1 + 2 | 1 + 2 + 3 | adskalman |\n|---|---:|---:|---:|---:|---:|\n\
+| instructions / step (binaries of the time) | first | 1 | 1 + 2 | 1 + 2 + 3 | adskalman |\n|---|---:|---:|---:|---:|---:|\n\
 | kf 3x2 f64 | 1404 | 1119 | 1054 | 770 | 678 |\n\
 | kf 4x2 f32 | 1432 | 1258 | 1247 | 1143 | 814 |\n\n\
+Counts depend on inlining, which changes with the binary: the current ones are in the table \
+above (same method).\n\n\
 The time ratio fell more than the instruction ratio (the shorter dependency chain of \
 `L D Lᵀ` matters more than the instruction count at these sizes), but the ≤ 0.8× target is \
 not met: adskalman's unvalidated nalgebra code vectorises the 4×4 f32 products into full \
@@ -775,13 +777,33 @@ fn run() -> Result<()> {
         }
     );
     let _ = writeln!(md, "| duration | {:.0} s |\n", t0.elapsed().as_secs_f64());
-    md.push_str(
-        "**Noise.** This machine is shared: while these figures were taken, other engineers \
-         were building and testing on the same 2 cores (see the load average above). \
-         Absolute times are therefore noisy, tails (p99.9, max) of the latency tables mostly \
-         measure preemption by other processes, and spin modes suffer most (a spinning \
-         process needs a core of its own). Read the **ratios measured in the same run** and \
-         the **instruction counts** (deterministic) rather than single absolute times.\n\n",
+    // The 1-minute load average at the start, against the core count: above ~1 per core,
+    // other processes competed for the cores while the figures were taken.
+    let load_start: f64 = load0
+        .split_whitespace()
+        .next()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(f64::NAN);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
+    let busy = !(load_start < cores);
+    let _ = write!(
+        md,
+        "**Noise.** {} Tails (p99.9, max) of the latency tables measure preemption more than \
+         the IPC, and spin modes suffer most (a spinning process needs a core of its own; a \
+         spinning runner and a publisher share {cores:.0} cores here, with nothing pinned). \
+         Read the **ratios measured in the same run** and the **instruction counts** \
+         (deterministic) rather than single absolute times.\n\n",
+        if busy {
+            format!(
+                "The machine was busy (1-minute load average {load_start:.1} on {cores:.0} \
+                 cores at the start): absolute times are inflated and noisy."
+            )
+        } else {
+            format!(
+                "The machine was otherwise idle (1-minute load average {load_start:.1} on \
+                 {cores:.0} cores at the start; the run itself keeps one to two cores busy)."
+            )
+        }
     );
     md.push_str(&body);
     if !failures.is_empty() {

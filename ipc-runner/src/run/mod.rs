@@ -28,7 +28,9 @@ use assemble::{Assembler, Counts, Pushed};
 use channel_sim::sim::MAX_NX;
 use channel_sim::wire::{self, Estimate, WIRE_VERSION};
 use channel_sim::Observation;
+use iceoryx2::port::writer::{EntryHandleMut, Writer};
 use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::blackboard;
 use iceoryx2::waitset::WaitSetRunResult;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -123,6 +125,12 @@ pub struct RunArgs {
     /// reference count per loaned sample; without publishing the loop allocates nothing).
     #[arg(long)]
     pub no_publish_estimates: bool,
+    /// Publish estimates on the blackboard `<prefix>/estimates-latest` (the newest estimate
+    /// per estimator; readers see skipped ones as jumps in `seq`) instead of the
+    /// `<prefix>/estimates` queue. Writing a blackboard entry allocates nothing, so the whole
+    /// slot path is allocation-free while publishing.
+    #[arg(long, conflicts_with = "no_publish_estimates")]
+    pub latest_estimates: bool,
     /// Test hook: sleep this many µs after each slot (a deliberately slow consumer).
     #[arg(long, hide = true)]
     pub debug_slow_us: Option<u64>,
@@ -153,6 +161,7 @@ impl RunArgs {
             slots_csv: None,
             json: None,
             no_publish_estimates: false,
+            latest_estimates: false,
             debug_slow_us: None,
             quiet: false,
         }
@@ -281,6 +290,8 @@ struct State {
     record_slots: bool,
     record_cap: usize,
     publish: bool,
+    /// The latest-estimate board, when estimates go there instead of the queue.
+    board: Option<LatestBoard>,
     /// Estimates published (after warm-up, for the allocation accounting).
     published: u64,
     // set per slot by the receive path
@@ -289,6 +300,36 @@ struct State {
     last_k: u32,
     stream_id: u64,
     err: Option<anyhow::Error>,
+}
+
+/// The writer side of `channel_sim::wire::latest_estimates_board`, one entry handle per
+/// estimator (created once; updating an entry writes in place and allocates nothing).
+struct LatestBoard {
+    entries: Vec<EntryHandleMut<ipc::Service, u32, Estimate>>,
+    _writer: Writer<ipc::Service, u32>,
+    _service: blackboard::PortFactory<ipc::Service, u32>,
+}
+
+impl LatestBoard {
+    fn create(t: &Transport, prefix: &str, names: &[[u8; 16]]) -> Result<Self> {
+        let service = wire::latest_estimates_board(&t.node, prefix, names)?;
+        let writer = service
+            .writer_builder()
+            .create()
+            .map_err(|e| anyhow!("cannot write {prefix}/{}: {e:?}", wire::LATEST_ESTIMATES))?;
+        let entries = (0..names.len() as u32)
+            .map(|i| {
+                writer
+                    .entry::<Estimate>(&i)
+                    .map_err(|e| anyhow!("estimate board entry {i}: {e:?}"))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            entries,
+            _writer: writer,
+            _service: service,
+        })
+    }
 }
 
 impl State {
@@ -361,6 +402,10 @@ impl State {
                 continue;
             }
             self.published += 1;
+            if let Some(b) = &self.board {
+                b.entries[e].update_with_copy(msg);
+                continue;
+            }
             let sent = t
                 .estimate_pub
                 .loan_uninit()
@@ -453,6 +498,7 @@ pub fn run_loop(
         record_slots: args.slots_csv.is_some(),
         record_cap,
         publish: !args.no_publish_estimates,
+        board: None,
         published: 0,
         last_send_ns: 0,
         last_recv_ns: 0,
@@ -460,6 +506,9 @@ pub fn run_loop(
         stream_id: 0,
         err: None,
     };
+    if args.latest_estimates {
+        st.board = Some(LatestBoard::create(&t, &args.prefix, &st.names)?);
+    }
     let mut asm = Assembler::new(nodes, ny);
     asm.set_subscribed_ns(t.subscribed_ns);
     let deadline_ns = (args.deadline_ms * 1e6) as u64;
