@@ -785,7 +785,7 @@ fn run() -> Result<()> {
         .and_then(|v| v.parse().ok())
         .unwrap_or(f64::NAN);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
-    let busy = !(load_start < cores);
+    let busy = load_start.is_nan() || load_start >= cores;
     let _ = write!(
         md,
         "**Noise.** {} Tails (p99.9, max) of the latency tables measure preemption more than \
