@@ -27,7 +27,7 @@
 //! `μ_j, v_j` the mean and variance of the `j`-th truncated standard normal,
 //!
 //! ```text
-//! w_j = Z_j / Σ Z_l                    (log domain: gauss::ln_interval_prob, log_sum_exp)
+//! w_j = Z_j / Σ Z_l                    (log domain, accumulated in one pass: `Mixture`)
 //! μ̄  = Σ w_j μ_j,   v̄ = Σ w_j (v_j + (μ_j − μ̄)²)
 //! x̂  = m_x + K s μ̄
 //! P̂  = (P − P Eᵀ E P / s²) + v̄ · P Eᵀ E P / s²
@@ -45,7 +45,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::filter::kalman::{kalman_update, CovarianceUpdate};
 use crate::filter::time_update::predict;
-use crate::gauss::{cdf, inv_mills, inv_mills_delta, ln_sf, log_sum_exp, pdf, sf};
+use crate::gauss::{cdf, inv_mills, inv_mills_delta, ln_sf, pdf, sf};
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
@@ -143,21 +143,13 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
                     self.form,
                 )?;
                 let (x, p) = if self.truncate_on_arrival {
-                    // Gaps between sorted regions, half-lines included.
-                    let mut ivs = [(T::zero(), T::zero()); 64];
-                    let n = S + 1;
-                    if n > ivs.len() {
-                        return Err(Error::InvalidConfig {
-                            field: "S",
-                            reason: "adf supports at most 63 regions",
-                        });
-                    }
-                    for j in 0..n {
+                    // The gaps between the sorted regions, half-lines included.
+                    let gap = |j: usize| {
                         let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
                         let hi = if j == S { inf } else { self.sorted[j].0 };
-                        ivs[j] = (lo, hi);
-                    }
-                    let (x, p, _, _) = self.truncate(&x1, &p1, &ivs[..n])?;
+                        (lo, hi)
+                    };
+                    let (x, p, _) = self.truncate(&x1, &p1, S + 1, gap, |_, _| {})?;
                     (x, p)
                 } else {
                     (x1, p1)
@@ -167,21 +159,13 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
                 self.label = 0;
             }
             None => {
-                let mut ivs = [(T::zero(), T::zero()); 64];
-                if S > ivs.len() {
-                    return Err(Error::InvalidConfig {
-                        field: "S",
-                        reason: "adf supports at most 64 regions",
-                    });
-                }
-                for i in 0..S {
+                let region = |i: usize| {
                     let c = self.occ.regions.centre(i)[0];
                     let r = self.occ.regions.radius(i);
-                    ivs[i] = (c - r, c + r);
-                }
-                let (x, p, best, lz) = self.truncate(&xp, &pp, &ivs[..S])?;
-                let mut lp = [T::zero(); S];
-                lp.copy_from_slice(&lz[..S]);
+                    (c - r, c + r)
+                };
+                let mut lp = [-inf; S];
+                let (x, p, best) = self.truncate(&xp, &pp, S, region, |i, l| lp[i] = l)?;
                 self.x = x;
                 self.p = p;
                 self.label = best + 1;
@@ -191,15 +175,18 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         Ok(self.label)
     }
 
-    /// Moments of `N(mx, p)` conditioned on `u = E x + n ∈ ∪ ivs`. Returns the moments, the
-    /// index of the most probable interval and `ln Z_j` per interval.
-    #[allow(clippy::type_complexity)]
+    /// Moments of `N(mx, p)` conditioned on `u = E x + n` lying in one of the `n` disjoint
+    /// intervals `interval(0..n)`. Returns the moments and the index of the most probable
+    /// interval, and reports `ln Z_j` of every interval to `ln_z`. One pass, no per-interval
+    /// storage: the stack stays small whatever the number of regions.
     fn truncate(
         &self,
         mx: &SVector<T, NX>,
         p: &SMatrix<T, NX, NX>,
-        ivs: &[(T, T)],
-    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, usize, [T; 64])> {
+        n: usize,
+        interval: impl Fn(usize) -> (T, T),
+        mut ln_z: impl FnMut(usize, T),
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, usize)> {
         let e = &self.occ.e;
         let pet = p * e.transpose();
         let s2 = (e * pet)[(0, 0)] + self.occ.psi[(0, 0)];
@@ -210,46 +197,87 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         }
         let s = s2.sqrt();
         let m = (e * mx)[0];
-        let mut lz = [-T::one() / T::zero(); 64];
-        let mut mu = [T::zero(); 64];
-        let mut var = [T::zero(); 64];
-        let mut best = 0usize;
-        for (j, &(lo, hi)) in ivs.iter().enumerate() {
+        let mut mix = Mixture::new();
+        let (mut best, mut best_lz) = (0usize, -T::one() / T::zero());
+        for j in 0..n {
+            let (lo, hi) = interval(j);
             let (l, mj, vj) = truncated_std_normal((lo - m) / s, (hi - m) / s);
-            lz[j] = l;
-            mu[j] = mj;
-            var[j] = vj;
-            if l > lz[best] {
-                best = j;
+            ln_z(j, l);
+            mix.push(l, mj, vj);
+            if l > best_lz {
+                (best, best_lz) = (j, l);
             }
         }
-        let total = log_sum_exp(&lz[..ivs.len()]);
-        if !total.finite() {
+        if !mix.ln_total().finite() {
             return Err(Error::Numerical {
                 what: "occlusion event has zero probability under the prior",
             });
         }
-        let mut mbar = T::zero();
-        let mut w = [T::zero(); 64];
-        for j in 0..ivs.len() {
-            w[j] = (lz[j] - total).exp();
-            if w[j] > T::zero() {
-                mbar += w[j] * mu[j];
-            }
-        }
-        let mut vbar = T::zero();
-        for j in 0..ivs.len() {
-            if w[j] > T::zero() {
-                let d = mu[j] - mbar;
-                vbar += w[j] * (var[j] + d * d);
-            }
-        }
+        // In standard units u = m + s·z: E[z] = mbar, Var[z] = vbar.
+        let (mbar, vbar) = (mix.mean, mix.variance());
         let x = mx + pet * (mbar / s);
         let pe_ep = pet * pet.transpose() / s2;
         let p_new = symmetrize(&((p - pe_ep) + pe_ep * vbar));
         check_finite(&x, "updated state")?;
         check_finite(&p_new, "updated covariance")?;
-        Ok((x, p_new, best, lz))
+        Ok((x, p_new, best))
+    }
+}
+
+/// Mean and variance of a mixture whose components arrive one at a time with log-domain
+/// weights: a weighted Welford update with the largest weight so far factored out, so no
+/// weight overflows and a mixture far in a tail does not underflow to 0/0.
+struct Mixture<T: Real> {
+    /// Largest log-weight so far.
+    top: T,
+    /// Σ exp(l_j − top).
+    w: T,
+    mean: T,
+    /// Σ w_j (var_j + (mu_j − mean)²), scaled like `w`.
+    m2: T,
+}
+
+impl<T: Real> Mixture<T> {
+    fn new() -> Self {
+        Self {
+            top: -T::one() / T::zero(),
+            w: T::zero(),
+            mean: T::zero(),
+            m2: T::zero(),
+        }
+    }
+
+    /// Adds a component with weight `exp(l)`, mean `mu` and variance `var`. Zero weights are
+    /// skipped; a NaN weight poisons the total (reported by the caller).
+    fn push(&mut self, l: T, mu: T, var: T) {
+        if l == -T::one() / T::zero() {
+            return;
+        }
+        if l > self.top {
+            let r = (self.top - l).exp();
+            self.w *= r;
+            self.m2 *= r;
+            self.top = l;
+        }
+        let wj = (l - self.top).exp();
+        if wj == T::zero() {
+            return;
+        }
+        let w_new = self.w + wj;
+        let d = mu - self.mean;
+        let mean_new = self.mean + d * (wj / w_new);
+        self.m2 += wj * var + wj * d * (mu - mean_new);
+        self.mean = mean_new;
+        self.w = w_new;
+    }
+
+    /// `ln Σ exp(l_j)`.
+    fn ln_total(&self) -> T {
+        self.top + self.w.ln()
+    }
+
+    fn variance(&self) -> T {
+        (self.m2 / self.w).max(T::zero())
     }
 }
 
@@ -339,6 +367,43 @@ mod tests {
         }
         let mean = m1 / z;
         ((z * h / 3.0).ln(), mean, m2 / z - mean * mean)
+    }
+
+    #[test]
+    fn streaming_mixture_matches_two_pass_moments() {
+        // Log-weights near −1000 (exp underflows to 0 without the shift), an empty interval
+        // and one negligible far component.
+        let comps = [
+            (-1000.0f64, 2.0, 0.5),
+            (-1001.5, -3.0, 0.1),
+            (-999.2, 0.7, 1.3),
+            (f64::NEG_INFINITY, 5.0, 9.0),
+            (-1040.0, 100.0, 0.0),
+        ];
+        let mut mix = Mixture::new();
+        for &(l, mu, v) in &comps {
+            mix.push(l, mu, v);
+        }
+        let top = -999.2f64;
+        let w: std::vec::Vec<f64> = comps.iter().map(|c| (c.0 - top).exp()).collect();
+        let wt: f64 = w.iter().sum();
+        let mean: f64 = comps.iter().zip(&w).map(|(c, w)| w * c.1).sum::<f64>() / wt;
+        let var: f64 = comps
+            .iter()
+            .zip(&w)
+            .map(|(c, w)| w * (c.2 + (c.1 - mean) * (c.1 - mean)))
+            .sum::<f64>()
+            / wt;
+        assert!((mix.ln_total() - (top + wt.ln())).abs() < 1e-12);
+        assert!((mix.mean - mean).abs() < 1e-12, "{} vs {mean}", mix.mean);
+        assert!(
+            (mix.variance() - var).abs() < 1e-12,
+            "{} vs {var}",
+            mix.variance()
+        );
+        let mut empty = Mixture::<f64>::new();
+        empty.push(f64::NEG_INFINITY, 1.0, 1.0);
+        assert!(!empty.ln_total().finite());
     }
 
     #[test]
