@@ -137,6 +137,54 @@ pub fn ln_interval_prob<T: Real>(a: T, b: T) -> T {
     }
 }
 
+/// [`log_sum_exp`] of terms that arrive one at a time, without storing them: the largest term
+/// so far is factored out and the running sum rescaled when a larger one arrives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LogSumExp<T: Real> {
+    top: T,
+    sum: T,
+}
+
+impl<T: Real> Default for LogSumExp<T> {
+    fn default() -> Self {
+        Self {
+            top: -T::one() / T::zero(),
+            sum: T::zero(),
+        }
+    }
+}
+
+impl<T: Real> LogSumExp<T> {
+    /// Adds the term `exp(x)`; −∞ adds nothing, NaN poisons the result.
+    pub fn push(&mut self, x: T) {
+        if x.partial_cmp(&x).is_none() {
+            self.top = x;
+            return;
+        }
+        if x == -T::one() / T::zero() || self.top.partial_cmp(&self.top).is_none() {
+            return;
+        }
+        if x > self.top {
+            self.sum *= (self.top - x).exp();
+            self.top = x;
+        }
+        self.sum += (x - self.top).exp();
+    }
+
+    /// `ln Σ exp(xᵢ)` so far (−∞ before any finite term).
+    #[must_use]
+    pub fn value(&self) -> T {
+        if self.sum == T::zero() {
+            return if self.top.partial_cmp(&self.top).is_none() {
+                self.top
+            } else {
+                -T::one() / T::zero()
+            };
+        }
+        self.top + self.sum.ln()
+    }
+}
+
 /// `ln Σ exp(xᵢ)`, shifted by the maximum so that no term overflows and at least one is 1.
 /// Returns −∞ for an empty slice or when every term is −∞; NaN propagates.
 #[must_use]
@@ -297,6 +345,22 @@ mod tests {
         let z = 60.0f64;
         let approx = -0.5 * z * z - (z * (2.0 * core::f64::consts::PI).sqrt()).ln();
         assert!((ln_sf(z) - approx).abs() < 1e-3);
+    }
+
+    #[test]
+    fn streaming_log_sum_exp_matches_the_slice_version() {
+        let xs = [-1000.0f64, f64::NEG_INFINITY, -999.0, -1003.5, -998.25];
+        let mut acc = LogSumExp::default();
+        for &x in &xs {
+            acc.push(x);
+        }
+        assert!((acc.value() - log_sum_exp(&xs)).abs() < 1e-12);
+        assert_eq!(LogSumExp::<f64>::default().value(), f64::NEG_INFINITY);
+        let mut nan = LogSumExp::default();
+        nan.push(1.0f64);
+        nan.push(f64::NAN);
+        nan.push(2.0);
+        assert!(nan.value().is_nan());
     }
 
     #[test]

@@ -22,7 +22,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::filter::time_update::predict;
-use crate::gauss::{ln_interval_prob, log_sum_exp};
+use crate::gauss::{ln_interval_prob, LogSumExp};
 use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
@@ -77,14 +77,13 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
     /// `P(u in no region)` for `u ~ N(m, s²)`.
     fn prob_outside(&self, m: T, s: T) -> T {
         let inf = T::one() / T::zero();
-        let mut lp = [T::zero(); 65];
-        let n = (S + 1).min(lp.len());
-        for (j, slot) in lp.iter_mut().enumerate().take(n) {
+        let mut total = LogSumExp::default();
+        for j in 0..=S {
             let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
             let hi = if j == S { inf } else { self.sorted[j].0 };
-            *slot = ln_interval_prob((lo - m) / s, (hi - m) / s);
+            total.push(ln_interval_prob((lo - m) / s, (hi - m) / s));
         }
-        log_sum_exp(&lp[..n]).exp().min(T::one())
+        total.value().exp().min(T::one())
     }
 
     /// One instant `k ≥ 1`: predict, then the linear MMSE update with `ỹ = z_k` (arrival) or
@@ -95,12 +94,6 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         k: usize,
         y: Option<&SVector<T, NY>>,
     ) -> Result<()> {
-        if S > 64 {
-            return Err(Error::InvalidConfig {
-                field: "S",
-                reason: "kf-io supports at most 64 regions",
-            });
-        }
         let y_tilde = match y {
             Some(y) => {
                 check_finite(y, "measurement")?;
