@@ -17,7 +17,7 @@
 #[path = "pipeline_common.rs"]
 mod common;
 
-use common::{prefix, scratch, Proc};
+use common::{prefix, scratch, start_channel_sim};
 use e2e_tests::CountingAllocator;
 use ipc_runner::run::{run_loop, select, Hooks, RunArgs, WaitMode};
 
@@ -94,21 +94,7 @@ fn run_mode(mode: WaitMode, publish: Option<bool>) -> Outcome {
     args.buffer = 4096;
     args.no_publish_estimates = publish.is_none();
     args.latest_estimates = publish == Some(true);
-    let mut publ = Proc::start(
-        &dir,
-        "pub",
-        &[
-            "channel-sim",
-            "--scenario",
-            S,
-            "--prefix",
-            &p,
-            "--rate",
-            "2000",
-            "--steps",
-            "400",
-        ],
-    );
+    let mut publ = start_channel_sim(&dir, &p, S, STEPS, 2000);
     let (r, _) = run_loop(
         &args,
         nx,

@@ -167,3 +167,24 @@ pub fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
         .collect();
     (head, rows)
 }
+
+/// Starts `channel-sim` publishing preset `scenario` under `prefix`: `steps` instants at
+/// `rate` Hz.
+pub fn start_channel_sim(dir: &Path, prefix: &str, scenario: &str, steps: u32, rate: u32) -> Proc {
+    let (steps, rate) = (steps.to_string(), rate.to_string());
+    Proc::start(
+        dir,
+        "pub",
+        &[
+            "channel-sim",
+            "--scenario",
+            scenario,
+            "--prefix",
+            prefix,
+            "--rate",
+            &rate,
+            "--steps",
+            &steps,
+        ],
+    )
+}

@@ -7,7 +7,7 @@
 mod common;
 
 use channel_sim::wire::{self, Estimate, WIRE_VERSION};
-use common::{prefix, scratch, Proc};
+use common::{prefix, scratch, start_channel_sim};
 use iceoryx2::prelude::*;
 use ipc_runner::run::{run_loop, select, Hooks, RunArgs};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -78,22 +78,7 @@ fn a_reader_sees_every_estimators_latest_estimate() {
         let (p, stop) = (p.clone(), Arc::clone(&stop));
         std::thread::spawn(move || read_board(&p, &stop))
     };
-    let steps = STEPS.to_string();
-    let mut publ = Proc::start(
-        &dir,
-        "pub",
-        &[
-            "channel-sim",
-            "--scenario",
-            S,
-            "--prefix",
-            &p,
-            "--rate",
-            "2000",
-            "--steps",
-            &steps,
-        ],
-    );
+    let mut publ = start_channel_sim(&dir, &p, S, STEPS, 2000);
     let (r, traj) = run_loop(&args, nx, nodes, ny, &make, Hooks::default()).unwrap();
     stop.store(true, Ordering::Relaxed);
     let (last, monotone) = reader.join().unwrap();

@@ -151,10 +151,7 @@ impl<const NX: usize, const NY: usize> LinearKf<NX, NY> {
     }
 
     fn model(&self) -> Result<&dyn LinearDescription, Error> {
-        self.plant.linear().ok_or(Error::InvalidConfig {
-            field: "plant",
-            reason: "has no linear description",
-        })
+        super::linear_of(&*self.plant)
     }
 }
 

@@ -10,9 +10,36 @@ pub mod occlusion;
 pub mod pf;
 pub mod tobit;
 
+use std::borrow::Cow;
+
+use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::Scenario;
+use estimator_core::Error;
 
 use crate::Estimator;
+
+/// The plant's linear description, or the error every linear adapter reports without one.
+pub(crate) fn linear_of(plant: &dyn Plant) -> Result<&dyn LinearDescription, Error> {
+    plant.linear().ok_or(Error::InvalidConfig {
+        field: "plant",
+        reason: "has no linear description",
+    })
+}
+
+/// An adapter's fixed-size model of instant `k`: `cached` when the plant is time invariant
+/// (converted once, at construction), otherwise converted now by `at` (converting nalgebra's
+/// dynamic matrices allocates, so only time-varying plants pay it per step).
+pub(crate) fn model_at<'a, M: Clone>(
+    cached: &'a Option<M>,
+    plant: &dyn Plant,
+    k: usize,
+    at: impl FnOnce(&dyn LinearDescription, usize) -> Result<M, Error>,
+) -> Result<Cow<'a, M>, Error> {
+    match cached {
+        Some(m) => Ok(Cow::Borrowed(m)),
+        None => at(linear_of(plant)?, k).map(Cow::Owned),
+    }
+}
 
 /// Options of an evaluation that estimators may need. Families add their own fields (with a
 /// default in [`Default`]) and the matching CLI flag.

@@ -105,6 +105,7 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
 
 /// The plant's matrices of one step as a core [`LinearSystem`] (`A`, `BQBᵀ` of `k − 1`;
 /// `C`, `DRDᵀ` of `k`).
+#[derive(Clone)]
 struct Snapshot<const NX: usize, const NY: usize> {
     a: SMatrix<f64, NX, NX>,
     q: SMatrix<f64, NX, NX>,
@@ -215,24 +216,13 @@ impl<const NX: usize, const NY: usize, F: OcclusionFilter<NX, NY>> Estimator
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
         let k = k as usize;
-        let fresh;
-        let snap = match &self.cached {
-            Some(m) => m,
-            None => {
-                let model = self.plant.linear().ok_or(Error::InvalidConfig {
-                    field: "plant",
-                    reason: "has no linear description",
-                })?;
-                fresh = snapshot::<NX, NY>(model, k);
-                &fresh
-            }
-        };
+        let snap = super::model_at(&self.cached, &*self.plant, k, |m, k| Ok(snapshot(m, k)))?;
         let y = obs
             .first()
             .and_then(|o| o.measurement())
             .map(SVector::<f64, NY>::from_column_slice);
         // A missing slot (no observation at all) counts as a dropout, as DESIGN.md says.
-        let label = self.f.step_core(snap, k, y.as_ref())?;
+        let label = self.f.step_core(&snap, k, y.as_ref())?;
         self.label = label.unwrap_or(0);
         Ok(())
     }

@@ -146,6 +146,7 @@ struct ParticleFilter {
 }
 
 /// `A`, `L_Q` (lower Cholesky factor of `BQBᵀ`), `C`, `L_R` of one instant.
+#[derive(Clone)]
 struct PfModel {
     a: DMatrix<f64>,
     lq: DMatrix<f64>,
@@ -270,18 +271,7 @@ impl Estimator for ParticleFilter {
     }
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let fresh;
-        let m = match &self.cached {
-            Some(m) => m,
-            None => {
-                let model = self.plant.linear().ok_or(Error::InvalidConfig {
-                    field: "plant",
-                    reason: "has no linear description",
-                })?;
-                fresh = PfModel::at(model, k as usize)?;
-                &fresh
-            }
-        };
+        let m = super::model_at(&self.cached, &*self.plant, k as usize, PfModel::at)?;
         let (a, lq, c, lr) = (&m.a, &m.lq, &m.c, &m.lr);
         let (nx, ny) = (self.nx, self.ny);
         let mut y_buf = [0.0; MAX_NY];

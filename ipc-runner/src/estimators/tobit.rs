@@ -266,10 +266,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         if s.done_k != k {
             let plant = Arc::clone(&s.plant);
-            let model = plant.linear().ok_or(Error::InvalidConfig {
-                field: "plant",
-                reason: "has no linear description",
-            })?;
+            let model = super::linear_of(&*plant)?;
             let cached = s.cached;
             s.last = step_fusion(&mut s.fusion, model, cached.as_ref(), k, obs);
             s.done_k = k;
