@@ -17,9 +17,9 @@
 #[path = "pipeline_common.rs"]
 mod common;
 
-use common::{prefix, scratch, start_channel_sim};
+use common::{loop_setup, prefix, scratch, start_channel_sim, LoopSetup};
 use e2e_tests::CountingAllocator;
-use ipc_runner::run::{run_loop, select, Hooks, RunArgs, WaitMode};
+use ipc_runner::run::{run_loop, select, Hooks, WaitMode};
 
 #[global_allocator]
 static ALLOC: CountingAllocator = CountingAllocator::new();
@@ -78,20 +78,14 @@ fn estimator_allocations(name: &str) -> usize {
 fn run_mode(mode: WaitMode, publish: Option<bool>) -> Outcome {
     let dir = scratch("alloc");
     let p = prefix("alloc");
-    let (scenario, _) = select::scenario(S, None).unwrap();
-    let (nx, nodes, ny) = (scenario.nx(), scenario.nodes() as u8, scenario.ny() as u8);
-    let exp = select::Experiment {
-        seed: 0,
-        run: 0,
-        horizon: STEPS,
-    };
-    let make = select::estimators(scenario.into(), &[], exp).unwrap();
-    let mut args = RunArgs::new(S, &p);
+    let LoopSetup {
+        mut args,
+        nx,
+        nodes,
+        ny,
+        make,
+    } = loop_setup(S, &p, STEPS);
     args.wait = mode;
-    args.quiet = true;
-    args.steps = STEPS;
-    // Room for the whole stream: an IPC loss would change what the estimators compute.
-    args.buffer = 4096;
     args.no_publish_estimates = publish.is_none();
     args.latest_estimates = publish == Some(true);
     let mut publ = start_channel_sim(&dir, &p, S, STEPS, 2000);

@@ -188,3 +188,37 @@ pub fn start_channel_sim(dir: &Path, prefix: &str, scenario: &str, steps: u32, r
         ],
     )
 }
+
+/// What `run_loop` needs for preset `scenario` over `steps` instants (seed 0, run 0).
+pub struct LoopSetup {
+    /// Quiet arguments on the prefix, with a slot queue long enough for the whole stream
+    /// (an IPC loss would change what the estimators compute).
+    pub args: ipc_runner::run::RunArgs,
+    pub nx: usize,
+    pub nodes: u8,
+    pub ny: u8,
+    pub make: ipc_runner::run::select::EstimatorFactory,
+}
+
+pub fn loop_setup(scenario: &str, prefix: &str, steps: u32) -> LoopSetup {
+    use ipc_runner::run::select;
+    let (sc, _) = select::scenario(scenario, None).unwrap();
+    let (nx, nodes, ny) = (sc.nx(), sc.nodes() as u8, sc.ny() as u8);
+    let exp = select::Experiment {
+        seed: 0,
+        run: 0,
+        horizon: steps,
+    };
+    let make = select::estimators(sc.into(), &[], exp).unwrap();
+    let mut args = ipc_runner::run::RunArgs::new(scenario, prefix);
+    args.quiet = true;
+    args.steps = steps;
+    args.buffer = 4096;
+    LoopSetup {
+        args,
+        nx,
+        nodes,
+        ny,
+        make,
+    }
+}

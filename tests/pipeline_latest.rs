@@ -7,9 +7,9 @@
 mod common;
 
 use channel_sim::wire::{self, Estimate, WIRE_VERSION};
-use common::{prefix, scratch, start_channel_sim};
+use common::{loop_setup, prefix, scratch, start_channel_sim, LoopSetup};
 use iceoryx2::prelude::*;
-use ipc_runner::run::{run_loop, select, Hooks, RunArgs};
+use ipc_runner::run::{run_loop, Hooks};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -60,18 +60,13 @@ fn read_board(p: &str, stop: &AtomicBool) -> (Vec<Estimate>, bool) {
 fn a_reader_sees_every_estimators_latest_estimate() {
     let dir = scratch("latest");
     let p = prefix("latest");
-    let (scenario, _) = select::scenario(S, None).unwrap();
-    let (nx, nodes, ny) = (scenario.nx(), scenario.nodes() as u8, scenario.ny() as u8);
-    let exp = select::Experiment {
-        seed: 0,
-        run: 0,
-        horizon: STEPS,
-    };
-    let make = select::estimators(scenario.into(), &[], exp).unwrap();
-    let mut args = RunArgs::new(S, &p);
-    args.quiet = true;
-    args.steps = STEPS;
-    args.buffer = 4096;
+    let LoopSetup {
+        mut args,
+        nx,
+        nodes,
+        ny,
+        make,
+    } = loop_setup(S, &p, STEPS);
     args.latest_estimates = true;
     let stop = Arc::new(AtomicBool::new(false));
     let reader = {
