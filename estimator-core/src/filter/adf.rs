@@ -44,9 +44,10 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::filter::kalman::{kalman_update, CovarianceUpdate};
+use crate::filter::prior;
 use crate::filter::time_update::predict;
 use crate::gauss::{cdf, inv_mills, inv_mills_delta, ln_sf, pdf, sf};
-use crate::linalg::{check_finite, check_spd, symmetrize};
+use crate::linalg::{check_finite, symmetrize};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
 use crate::{Error, Real, Result};
@@ -72,11 +73,10 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         p0: SMatrix<T, NX, NX>,
         occ: Occlusion<T, NX, 1, S>,
     ) -> Result<Self> {
-        check_finite(&x0, "x0")?;
-        check_spd(&p0, "P0")?;
+        let (x, p) = prior::validated(x0, p0)?;
         Ok(Self {
-            x: x0,
-            p: symmetrize(&p0),
+            x,
+            p,
             sorted: occ.regions.sorted_intervals(),
             occ,
             label: 0,

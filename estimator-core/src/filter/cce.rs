@@ -25,10 +25,11 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::filter::kalman::{kalman_update, CovarianceUpdate};
+use crate::filter::prior;
 use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
 use crate::gsum::GaussSum;
-use crate::linalg::{check_finite, check_spd, symmetrize};
+use crate::linalg::{check_finite, symmetrize};
 use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
@@ -70,8 +71,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         occ: Occlusion<T, NX, NE, S>,
         gsum: &GaussSum<T, NE, N>,
     ) -> Result<Self> {
-        check_finite(&x0, "x0")?;
-        check_spd(&p0, "P0")?;
+        let (x, p) = prior::validated(x0, p0)?;
         let mut means = [[SVector::<T, NE>::zeros(); N]; S];
         let mut sigma = [SMatrix::<T, NE, NE>::zeros(); S];
         let mut ln_vol = [T::zero(); S];
@@ -85,8 +85,8 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             ln_vol[i] = occ.regions.volume(i).ln();
         }
         Ok(Self {
-            x: x0,
-            p: symmetrize(&p0),
+            x,
+            p,
             label: 0,
             occ,
             means,

@@ -3,8 +3,9 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::filter::prior;
 use crate::filter::time_update::{check_predicted, predict_raw};
-use crate::linalg::{check_finite, check_spd, symmetrize};
+use crate::linalg::{check_finite, symmetrize};
 use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
 use crate::{Error, Real, Result};
@@ -36,11 +37,10 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
     /// Starts from the estimate `x0` with covariance `p0` (finite, symmetric positive
     /// definite).
     pub fn new(x0: SVector<T, NX>, p0: SMatrix<T, NX, NX>) -> Result<Self> {
-        check_finite(&x0, "x0")?;
-        check_spd(&p0, "P0")?;
+        let (x, p) = prior::validated(x0, p0)?;
         Ok(Self {
-            x: x0,
-            p: symmetrize(&p0),
+            x,
+            p,
             form: CovarianceUpdate::Joseph,
             nis: T::zero(),
         })

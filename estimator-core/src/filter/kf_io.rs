@@ -21,9 +21,10 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::filter::prior;
 use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob, LogSumExp};
-use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
+use crate::linalg::{check_finite, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
 use crate::{Error, Real, Result};
@@ -45,11 +46,10 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         p0: SMatrix<T, NX, NX>,
         occ: Occlusion<T, NX, 1, S>,
     ) -> Result<Self> {
-        check_finite(&x0, "x0")?;
-        check_spd(&p0, "P0")?;
+        let (x, p) = prior::validated(x0, p0)?;
         Ok(Self {
-            x: x0,
-            p: symmetrize(&p0),
+            x,
+            p,
             sorted: occ.regions.sorted_intervals(),
             occ,
             arrival_prob: T::one(),

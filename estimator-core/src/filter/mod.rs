@@ -3,6 +3,7 @@
 
 pub mod intermittent;
 pub mod kalman;
+pub mod prior;
 pub mod time_update;
 
 pub use intermittent::IntermittentKalmanFilter;
