@@ -11,7 +11,8 @@ use plotters::prelude::*;
 
 use crate::eval::EvalResult;
 
-const FONT: &str = "sans-serif";
+/// The font family every plot uses (registered from the embedded DejaVu Sans).
+pub(crate) const FONT: &str = "sans-serif";
 const WIDTH: u32 = 1100;
 const MSE_HEIGHT: u32 = 460;
 const STATE_HEIGHT: u32 = 260;
@@ -32,7 +33,9 @@ fn extension(path: &Path) -> Option<String> {
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
 }
 
-fn register_font() {
+/// Registers the embedded font once per process (PNG text needs it; SVG names the family).
+/// The font is embedded here only, for every plot module.
+pub(crate) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // The embedded font is valid; a failure would only lose the PNG's text.

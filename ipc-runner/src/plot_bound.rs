@@ -10,19 +10,7 @@ use plotters::prelude::*;
 
 use crate::eval::EvalResult;
 
-const FONT: &str = "sans-serif";
-
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // Same embedded font as plot.rs; registering a name twice only replaces it.
-        let _ = plotters::style::register_font(
-            FONT,
-            FontStyle::Normal,
-            include_bytes!("../assets/DejaVuSans.ttf"),
-        );
-    });
-}
+use crate::plot::{register_font, FONT};
 
 /// Writes the bound-versus-empirical plot of the `nn` entry of `result` to `path` (`.png` or
 /// `.svg`). Errors if `result` has no `nn` entry with `bound_trace`.

@@ -16,7 +16,7 @@ use channel_sim::{Scenario, Simulation};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-const FONT: &str = "sans-serif";
+use crate::plot::{register_font, FONT};
 
 /// One run's protocol record.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -125,11 +125,7 @@ pub fn plot_for(
 
 /// Draws a trace to `path` (`.png` or `.svg`).
 pub fn draw_file(t: &TokenTrace, path: &Path, title: &str) -> anyhow::Result<()> {
-    let _ = plotters::style::register_font(
-        FONT,
-        FontStyle::Normal,
-        include_bytes!("../assets/DejaVuSans.ttf"),
-    );
+    register_font();
     let size = (1100, 380 + 60 * t.sent.len() as u32 + 120);
     let png = path
         .extension()
