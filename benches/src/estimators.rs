@@ -125,20 +125,20 @@ pub fn nn_kernels<T: Real>(tag: &str) -> Vec<(String, StepFn)> {
     out
 }
 
-/// The correlated-noise EKF of seed 003's comparison, f64.
-pub fn coupled_ekf_kernel() -> (String, StepFn) {
-    let kf = CoupledNoiseKf::<f64, 3, 1, 2>::new(
+/// The correlated-noise EKF of seed 003's comparison.
+pub fn coupled_ekf_kernel<T: Real>(tag: &str) -> (String, StepFn) {
+    let kf = CoupledNoiseKf::<T, 3, 1, 2>::new(
         Seed003Example::xhat0(),
         Seed003Example::p0(),
-        matrix![0.1],
+        SMatrix::<T, 1, 1>::new(T::lit(0.1)),
         Linearisation::PaperJacobian,
     )
     .expect("valid")
-    .with_initial_measurement(vector![0.3, -0.2])
+    .with_initial_measurement(SVector::<T, 2>::new(T::lit(0.3), T::lit(-0.2)))
     .expect("finite");
-    let y = vector![0.3, -0.2];
+    let y = SVector::<T, 2>::new(T::lit(0.3), T::lit(-0.2));
     (
-        "coupled_ekf_step/3x2_f64".into(),
+        format!("coupled_ekf_step/3x2_{tag}"),
         Box::new(move || {
             let mut e = black_box(kf);
             e.step(
@@ -196,20 +196,22 @@ pub fn tobit_kernel<T: Real>(tag: &str) -> (String, StepFn) {
 }
 
 /// Seed 004's sensor side for one instant: three event triggers sharing one token bucket,
-/// from a fixed state (f64).
-pub fn tobit_protocol_kernel() -> (String, StepFn) {
-    let tau = vector![0.0, 0.0];
-    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)].map(|(s, l)| {
-        EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5).expect("valid")
+/// from a fixed state.
+pub fn tobit_protocol_kernel<T: Real>(tag: &str) -> (String, StepFn) {
+    let l = T::lit;
+    let tau = SVector::<T, 2>::zeros();
+    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)].map(|(s, lam)| {
+        EventTriggerConfig::new_allowing_paper_violation(l(s), l(5.0), l(lam), l(1.5))
+            .expect("valid")
     });
     let nodes = trig.map(|t| EventTrigger::new(t, tau).expect("valid"));
     let sched = TriggeredBucketScheduler::new(
         nodes,
         SharedTokenBucket::<3>::new(10, 5, 30, [3, 3, 3]).expect("valid"),
     );
-    let y = [vector![4.8, 0.2], vector![5.1, 0.0], vector![4.9, 0.3]];
+    let y = [(4.8, 0.2), (5.1, 0.0), (4.9, 0.3)].map(|(a, b)| SVector::<T, 2>::new(l(a), l(b)));
     (
-        "tobit_protocol_instant/l3_ny2_f64".into(),
+        format!("tobit_protocol_instant/l3_ny2_{tag}"),
         Box::new(move || {
             let mut s = black_box(sched);
             s.step(black_box(&y))?;
@@ -225,9 +227,11 @@ pub fn all_kernels() -> Vec<(String, StepFn)> {
     k.extend(occlusion_kernels::<f32>("f32"));
     k.extend(nn_kernels::<f64>("f64"));
     k.extend(nn_kernels::<f32>("f32"));
-    k.push(coupled_ekf_kernel());
+    k.push(coupled_ekf_kernel::<f64>("f64"));
+    k.push(coupled_ekf_kernel::<f32>("f32"));
     k.push(tobit_kernel::<f64>("f64"));
     k.push(tobit_kernel::<f32>("f32"));
-    k.push(tobit_protocol_kernel());
+    k.push(tobit_protocol_kernel::<f64>("f64"));
+    k.push(tobit_protocol_kernel::<f32>("f32"));
     k
 }
