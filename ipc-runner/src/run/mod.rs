@@ -274,7 +274,8 @@ const TRUTH_RING: usize = 1024;
 struct State {
     estimators: Vec<Box<dyn Estimator>>,
     nx: usize,
-    xhat: [f64; MAX_NX],
+    /// The latest estimate of every estimator.
+    xhat: Vec<[f64; MAX_NX]>,
     truth_k: Box<[u32; TRUTH_RING]>,
     truth_x: Box<[[f64; MAX_NX]; TRUTH_RING]>,
     truth_stream: u64,
@@ -346,21 +347,9 @@ impl State {
         }
     }
 
+    /// Steps every estimator on instant `k` and publishes the estimates; the evaluation
+    /// against truth (MSE, recording) runs after publishing, off the latency path.
     fn on_instant(&mut self, t: &Transport, k: u32, obs: &[Observation]) {
-        self.drain_truth(t);
-        let i = k as usize % TRUTH_RING;
-        let truth = (self.truth_k[i] == k && self.truth_stream == self.stream_id)
-            .then_some(self.truth_x[i]);
-        if truth.is_none() {
-            self.truth_missing += 1;
-        }
-        let record = self.traj.keys.len() < self.record_cap;
-        if record {
-            self.traj.keys.push((self.session, k));
-            for j in 0..self.nx {
-                self.traj.truth.push(truth.map_or(f64::NAN, |x| x[j]));
-            }
-        }
         let nx = self.nx;
         for (e, est) in self.estimators.iter_mut().enumerate() {
             let t0 = wire::monotonic_ns();
@@ -371,17 +360,10 @@ impl State {
                     1
                 }
             };
-            est.estimate(&mut self.xhat[..nx]);
+            let xhat = &mut self.xhat[e];
+            est.estimate(&mut xhat[..nx]);
             let t1 = wire::monotonic_ns();
             Latency::record(&mut self.latency.step, t0, t1);
-            if let Some(x) = truth {
-                let d: f64 = (0..nx).map(|j| (x[j] - self.xhat[j]).powi(2)).sum();
-                self.sq_err[e] += d;
-                self.err_n[e] += 1;
-            }
-            if record {
-                self.traj.estimates.extend_from_slice(&self.xhat[..nx]);
-            }
             let msg = Estimate {
                 version: WIRE_VERSION,
                 k,
@@ -392,7 +374,7 @@ impl State {
                 name: self.names[e],
                 status,
                 reserved: 0,
-                x: self.xhat,
+                x: *xhat,
                 slot_send_ns: self.last_send_ns,
                 receive_ns: self.last_recv_ns,
                 step_done_ns: t1,
@@ -425,6 +407,36 @@ impl State {
             wire::monotonic_ns(),
         );
         self.last_k = k;
+        self.evaluate(t, k);
+    }
+
+    /// Errors against truth and the recorded trajectories of instant `k`.
+    fn evaluate(&mut self, t: &Transport, k: u32) {
+        self.drain_truth(t);
+        let i = k as usize % TRUTH_RING;
+        let truth = (self.truth_k[i] == k && self.truth_stream == self.stream_id)
+            .then_some(self.truth_x[i]);
+        if truth.is_none() {
+            self.truth_missing += 1;
+        }
+        let nx = self.nx;
+        let record = self.traj.keys.len() < self.record_cap;
+        if record {
+            self.traj.keys.push((self.session, k));
+            for j in 0..nx {
+                self.traj.truth.push(truth.map_or(f64::NAN, |x| x[j]));
+            }
+        }
+        for (e, xhat) in self.xhat.iter().enumerate() {
+            if let Some(x) = truth {
+                let d: f64 = (0..nx).map(|j| (x[j] - xhat[j]).powi(2)).sum();
+                self.sq_err[e] += d;
+                self.err_n[e] += 1;
+            }
+            if record {
+                self.traj.estimates.extend_from_slice(&xhat[..nx]);
+            }
+        }
     }
 }
 
@@ -484,7 +496,7 @@ pub fn run_loop(
         },
         estimators,
         nx,
-        xhat: [0.0; MAX_NX],
+        xhat: vec![[0.0; MAX_NX]; n_est],
         truth_k: Box::new([u32::MAX; TRUTH_RING]),
         truth_x: Box::new([[0.0; MAX_NX]; TRUTH_RING]),
         truth_stream: 0,
