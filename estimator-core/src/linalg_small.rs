@@ -10,6 +10,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::linalg::all_finite;
 use crate::{Error, Real, Result};
 
 /// `M v`.
@@ -42,19 +43,38 @@ pub fn mul<T: Real, const R: usize, const K: usize, const C: usize>(
     })
 }
 
-/// `A Bᵀ`.
+/// `A Bᵀ` (the transpose is a register shuffle once inlined; the products are [`mul`]'s).
 #[inline]
 pub fn mul_t<T: Real, const R: usize, const K: usize, const C: usize>(
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, C, K>,
 ) -> SMatrix<T, R, C> {
-    SMatrix::from_fn(|i, j| {
-        let mut acc = a[(i, 0)] * b[(j, 0)];
-        for k in 1..K {
-            acc += a[(i, k)] * b[(j, k)];
+    mul(a, &b.transpose())
+}
+
+/// `A Bᵀ (+ Z)` for a product known to be symmetric: the upper triangle computed once and
+/// mirrored, `Z`'s upper triangle added.
+#[inline]
+fn sym_upper<T: Real, const R: usize, const K: usize>(
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, R, K>,
+    z: Option<&SMatrix<T, R, R>>,
+) -> SMatrix<T, R, R> {
+    let mut out = SMatrix::<T, R, R>::zeros();
+    for i in 0..R {
+        for j in i..R {
+            let mut acc = a[(i, 0)] * b[(j, 0)];
+            for k in 1..K {
+                acc += a[(i, k)] * b[(j, k)];
+            }
+            if let Some(z) = z {
+                acc += z[(i, j)];
+            }
+            out[(i, j)] = acc;
+            out[(j, i)] = acc;
         }
-        acc
-    })
+    }
+    out
 }
 
 /// `A Bᵀ` for a product known to be symmetric (e.g. `M Σ · Mᵀ`), computed on the upper
@@ -64,18 +84,7 @@ pub fn sym_mul_t<T: Real, const R: usize, const K: usize>(
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, R, K>,
 ) -> SMatrix<T, R, R> {
-    let mut out = SMatrix::<T, R, R>::zeros();
-    for i in 0..R {
-        for j in i..R {
-            let mut acc = a[(i, 0)] * b[(j, 0)];
-            for k in 1..K {
-                acc += a[(i, k)] * b[(j, k)];
-            }
-            out[(i, j)] = acc;
-            out[(j, i)] = acc;
-        }
-    }
-    out
+    sym_upper(a, b, None)
 }
 
 /// [`sym_mul_t`] plus a symmetric `Z`, of which only the upper triangle is read.
@@ -85,18 +94,7 @@ pub fn sym_mul_t_add<T: Real, const R: usize, const K: usize>(
     b: &SMatrix<T, R, K>,
     z: &SMatrix<T, R, R>,
 ) -> SMatrix<T, R, R> {
-    let mut out = SMatrix::<T, R, R>::zeros();
-    for i in 0..R {
-        for j in i..R {
-            let mut acc = a[(i, 0)] * b[(j, 0)];
-            for k in 1..K {
-                acc += a[(i, k)] * b[(j, k)];
-            }
-            out[(i, j)] = acc + z[(i, j)];
-            out[(j, i)] = out[(i, j)];
-        }
-    }
-    out
+    sym_upper(a, b, Some(z))
 }
 
 /// `M Σ Mᵀ` for symmetric `Σ` (exactly symmetric result).
@@ -181,7 +179,7 @@ impl<T: Real, const N: usize> SmallLdl<T, N> {
 
     #[cold]
     fn refusal(s: &SMatrix<T, N, N>, what: &'static str) -> Error {
-        if s.iter().all(|v| v.finite()) {
+        if all_finite(s) {
             Error::NotPositiveDefinite { what }
         } else {
             Error::NonFinite { what }
@@ -266,21 +264,6 @@ impl<T: Real, const N: usize> SmallLdl<T, N> {
     }
 }
 
-/// `true` when every entry is finite, in one pass without branches: `v − v` is `0` for a
-/// finite `v` and NaN otherwise, and NaN survives the sums. Four partial sums keep the
-/// dependency chain short (float adds cannot be reassociated by the compiler).
-#[inline]
-pub fn all_finite_fast<T: Real, const R: usize, const C: usize>(m: &SMatrix<T, R, C>) -> bool {
-    let mut acc = [T::zero(); 4];
-    for (i, v) in m.iter().enumerate() {
-        #[allow(clippy::eq_op)] // v − v is the test itself: 0 if finite, NaN otherwise
-        {
-            acc[i % 4] += *v - *v;
-        }
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) == T::zero()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -337,13 +320,5 @@ mod tests {
         ] {
             assert_eq!(SmallLdl::new(&m, "m").err(), cholesky(&m, "m").err(), "{m}");
         }
-    }
-
-    #[test]
-    fn finiteness_in_one_pass() {
-        assert!(all_finite_fast(&matrix![1.0, -2.0; 1e308, 0.0]));
-        assert!(!all_finite_fast(&matrix![1.0, f64::NAN; 0.0, 0.0]));
-        assert!(!all_finite_fast(&matrix![1.0, 0.0; f64::NEG_INFINITY, 0.0]));
-        assert!(!all_finite_fast(&matrix![1.0f32, 0.0; f32::INFINITY, 0.0]));
     }
 }

@@ -284,7 +284,8 @@ step against adskalman's 704 (criterion ratio 1.98). What brought it down, each 
 measured by the same icount method:\n\n\
 1. one factorisation of S per update, shared by the gain and the NIS; `step` predicts and \
 updates into locals and commits once (no saved copy, no rollback);\n\
-2. `linalg::cholesky_symmetric`: no asymmetry test on a matrix symmetrised one line earlier;\n\
+2. a Cholesky entry point without the asymmetry test, for a matrix symmetrised one line \
+earlier (since replaced by 3's `L D Lᵀ`);\n\
 3. `linalg_small` (`estimator-core/src/linalg_small.rs`): products as plain loops over const \
 dimensions (fully unrolled at these sizes), each symmetric result computed on its upper \
 triangle and mirrored (exactly symmetric, no symmetrisation pass), `(I − KC) P` associated as \

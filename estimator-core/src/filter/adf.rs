@@ -385,7 +385,7 @@ mod tests {
             mix.push(l, mu, v);
         }
         let top = -999.2f64;
-        let w: std::vec::Vec<f64> = comps.iter().map(|c| (c.0 - top).exp()).collect();
+        let w = comps.map(|c| (c.0 - top).exp());
         let wt: f64 = w.iter().sum();
         let mean: f64 = comps.iter().zip(&w).map(|(c, w)| w * c.1).sum::<f64>() / wt;
         let var: f64 = comps

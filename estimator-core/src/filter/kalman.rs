@@ -5,7 +5,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::filter::prior;
 use crate::filter::time_update::{check_predicted, predict_raw};
-use crate::linalg::{check_finite, symmetrize};
+use crate::linalg::{all_finite, check_finite, symmetrize};
 use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
 use crate::{Error, Real, Result};
@@ -194,7 +194,7 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
     // singularity floor, so a non-finite K or NIS can only come from non-finite inputs and is
     // caught by the checks on x⁺, P⁺ and the NIS.
     let nis = chol.mahalanobis(&nu);
-    if !(small::all_finite_fast(&x_new) && small::all_finite_fast(&p_new) && nis.finite()) {
+    if !(all_finite(&x_new) && all_finite(&p_new) && nis.finite()) {
         return Err(update_error(&x_new, &p_new));
     }
     Ok((x_new, p_new, nis))
@@ -202,9 +202,9 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
 
 #[cold]
 fn update_error<T: Real, const NX: usize>(x: &SVector<T, NX>, p: &SMatrix<T, NX, NX>) -> Error {
-    let what = if !x.iter().all(|v| v.finite()) {
+    let what = if !all_finite(x) {
         "updated state"
-    } else if !p.iter().all(|v| v.finite()) {
+    } else if !all_finite(p) {
         "updated covariance"
     } else {
         "innovation"

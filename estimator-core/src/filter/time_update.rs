@@ -3,7 +3,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::check_finite;
+use crate::linalg::{all_finite, check_finite};
 use crate::linalg_small as small;
 use crate::model::LinearSystem;
 use crate::{Real, Result};
@@ -31,7 +31,7 @@ pub fn predict<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX,
 ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>)> {
     let km1 = k.saturating_sub(1);
     let (xp, pp) = predict_raw(x, p, &model.a(km1), &model.process_cov(km1));
-    if !(small::all_finite_fast(&xp) && small::all_finite_fast(&pp)) {
+    if !(all_finite(&xp) && all_finite(&pp)) {
         check_predicted(&xp, &pp)?;
     }
     Ok((xp, pp))

@@ -364,11 +364,17 @@ impl State {
             est.estimate(&mut xhat[..nx]);
             let t1 = wire::monotonic_ns();
             Latency::record(&mut self.latency.step, t0, t1);
+            let seq = self.est_seq;
+            self.est_seq += 1;
+            if !self.publish {
+                continue;
+            }
+            self.published += 1;
             let msg = Estimate {
                 version: WIRE_VERSION,
                 k,
                 stream_id: self.stream_id,
-                seq: self.est_seq,
+                seq,
                 estimator: e as u32,
                 nx: nx as u32,
                 name: self.names[e],
@@ -379,11 +385,6 @@ impl State {
                 receive_ns: self.last_recv_ns,
                 step_done_ns: t1,
             };
-            self.est_seq += 1;
-            if !self.publish {
-                continue;
-            }
-            self.published += 1;
             if let Some(b) = &self.board {
                 b.entries[e].update_with_copy(msg);
                 continue;
