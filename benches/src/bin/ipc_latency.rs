@@ -15,7 +15,7 @@
 //! removed at the end (the socket file also on error).
 //!
 //! ```text
-//! ipc_latency [--samples N] [--warmup N] [--modes iox-spin,uds-block,…] [--json FILE]
+//! ipc_latency [--samples N] [--warmup N] [--rate HZ] [--modes iox-spin,uds-block,…] [--json FILE]
 //! ```
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -104,6 +104,23 @@ struct Opts {
     warmup: u64,
     modes: Vec<String>,
     json: Option<PathBuf>,
+    /// Pings per second; 0 = back to back (the next ping as soon as the pong is in).
+    rate: f64,
+}
+
+impl Opts {
+    /// Paced like `channel-sim --rate`: sleeps until ping `i`'s due time `t0 + i / rate`.
+    /// Back to back, a run of 10⁵ rounds lasts ~0.1 s and rarely meets a timer tick or
+    /// another process; paced, it is exposed to the same disturbances as the pipeline.
+    fn pace(&self, t0: Instant, i: u64) {
+        if self.rate > 0.0 {
+            let due = t0 + Duration::from_secs_f64(i as f64 / self.rate);
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
+    }
 }
 
 fn parse_args(args: &[String]) -> Result<Opts> {
@@ -112,6 +129,7 @@ fn parse_args(args: &[String]) -> Result<Opts> {
         warmup: 5_000,
         modes: MODES.iter().map(|s| s.to_string()).collect(),
         json: None,
+        rate: 0.0,
     };
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -121,9 +139,10 @@ fn parse_args(args: &[String]) -> Result<Opts> {
             "--warmup" => o.warmup = val()?.parse().context("--warmup")?,
             "--modes" => o.modes = val()?.split(',').map(str::to_string).collect(),
             "--json" => o.json = Some(PathBuf::from(val()?)),
+            "--rate" => o.rate = val()?.parse().context("--rate")?,
             "-h" | "--help" => {
                 println!(
-                    "ipc_latency [--samples N] [--warmup N] [--modes {}] [--json FILE]",
+                    "ipc_latency [--samples N] [--warmup N] [--rate HZ] [--modes {}] [--json FILE]",
                     MODES.join(",")
                 );
                 std::process::exit(0);
@@ -138,6 +157,9 @@ fn parse_args(args: &[String]) -> Result<Opts> {
     }
     if o.samples == 0 {
         bail!("--samples must be positive");
+    }
+    if !(o.rate >= 0.0 && o.rate.is_finite()) {
+        bail!("--rate must be ≥ 0 (0 = back to back), got {}", o.rate);
     }
     Ok(o)
 }
@@ -336,7 +358,9 @@ fn iox_parent(block: bool, o: &Opts) -> Result<Stats> {
         None => None,
     };
     let mut st = Stats::new()?;
+    let t0 = Instant::now();
     for i in 0..o.warmup + o.samples {
+        o.pace(t0, i);
         let ping = Ping::new(i);
         iox_send(&p, ping, block)?;
         let pong = iox_recv(&p, ws.as_ref(), Duration::from_secs(5))?
@@ -473,7 +497,9 @@ fn uds_parent(spin: bool, o: &Opts) -> Result<Stats> {
         Some(Duration::from_secs(5))
     })?;
     let mut st = Stats::new()?;
+    let t0 = Instant::now();
     for i in 0..o.warmup + o.samples {
+        o.pace(t0, i);
         let ping = Ping::new(i);
         uds_write(&mut s, &ping)?;
         let pong = uds_read(&mut s, spin, Duration::from_secs(5))?

@@ -382,13 +382,27 @@ impl Pct {
 const PCT_HEAD: &str =
     "| path | samples | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs |\n|---|---:|---:|---:|---:|---:|---:|\n";
 
-fn ipc(o: &Opts, md: &mut String) -> Result<BTreeMap<String, (Pct, Pct)>> {
+/// The rate of the pipeline runs, and of the paced raw runs they are compared with.
+const PIPELINE_RATE: f64 = 10_000.0;
+
+/// Runs `ipc_latency` and returns `(one-way, round trip)` per mode.
+fn ipc_latency(
+    o: &Opts,
+    samples: u32,
+    rate: f64,
+    modes: &str,
+) -> Result<BTreeMap<String, (Pct, Pct)>> {
     let bin = o.target.join("release/ipc_latency");
-    let json = std::env::temp_dir().join(format!("benches-report-ipc-{}.json", std::process::id()));
-    let samples = if o.quick { "10000" } else { "30000" };
-    say(&format!("ipc_latency --samples {samples}"));
+    let json = std::env::temp_dir().join(format!(
+        "benches-report-ipc-{}-{rate}.json",
+        std::process::id()
+    ));
+    say(&format!(
+        "ipc_latency --samples {samples} --rate {rate} --modes {modes}"
+    ));
     let st = Command::new(&bin)
-        .args(["--samples", samples, "--warmup", "5000", "--json"])
+        .args(["--samples", &samples.to_string(), "--warmup", "5000"])
+        .args(["--rate", &rate.to_string(), "--modes", modes, "--json"])
         .arg(&json)
         .stdout(Stdio::null())
         .status()
@@ -399,29 +413,52 @@ fn ipc(o: &Opts, md: &mut String) -> Result<BTreeMap<String, (Pct, Pct)>> {
     let v: Value = serde_json::from_str(&std::fs::read_to_string(&json)?)?;
     let _ = std::fs::remove_file(&json);
     let mut res = BTreeMap::new();
+    for (mode, m) in v.as_object().context("ipc_latency JSON")? {
+        res.insert(
+            mode.clone(),
+            (
+                Pct::from_json(&m["one_way"]),
+                Pct::from_json(&m["round_trip"]),
+            ),
+        );
+    }
+    Ok(res)
+}
+
+/// Raw transports, back to back and paced at the pipeline's rate. Keys: `MODE` (back to
+/// back) and `MODE paced` (one ping every 1/[`PIPELINE_RATE`] s).
+fn ipc(o: &Opts, md: &mut String) -> Result<BTreeMap<String, (Pct, Pct)>> {
+    let samples = if o.quick { 10_000 } else { 30_000 };
+    let all = "iox-spin,iox-block,uds-spin,uds-block";
+    let mut res = ipc_latency(o, samples, 0.0, all)?;
+    for (mode, v) in ipc_latency(o, samples, PIPELINE_RATE, all)? {
+        res.insert(format!("{mode} paced"), v);
+    }
     md.push_str("## IPC latency: raw transports (ping-pong between two processes)\n\n");
-    md.push_str(
+    let _ = writeln!(
+        md,
         "`ipc_latency` spawns itself as the peer. Each round sends a 128-byte message carrying \
          its `CLOCK_MONOTONIC` send time; the peer stamps the receive time and answers. \
          **One-way** = ping sent → ping received by the peer (the quantity the pipeline's \
          \"slot sent → estimate published\" is compared with); round trip = ping sent → pong \
          back. Spin = busy-poll on both sides; block = iceoryx2 pub/sub + event service with \
-         the receiver asleep in a `WaitSet`, or a blocking `read` on the socket.\n\n",
+         the receiver asleep in a `WaitSet`, or a blocking `read` on the socket.\n\n\
+         Two schedules, {samples} rounds each: **back to back** (the next ping as soon as the \
+         pong is in: the whole run lasts a fraction of a second and rarely meets a timer tick \
+         or another process) and **paced** at {PIPELINE_RATE} pings/s (`--rate`), sleeping \
+         between pings exactly as `channel-sim` sleeps between slots. The paced run is the \
+         like-for-like baseline of the pipeline below: same rate, same sleeping sender, same \
+         exposure to the rest of the machine.\n"
     );
     md.push_str("### One-way\n\n");
     md.push_str(PCT_HEAD);
-    if let Some(obj) = v.as_object() {
-        for (mode, m) in obj {
-            let ow = Pct::from_json(&m["one_way"]);
-            let rt = Pct::from_json(&m["round_trip"]);
-            let _ = writeln!(md, "{}", ow.row(mode));
-            res.insert(mode.clone(), (ow, rt));
-        }
-        md.push_str("\n### Round trip\n\n");
-        md.push_str(PCT_HEAD);
-        for (mode, (_, rt)) in &res {
-            let _ = writeln!(md, "{}", rt.row(mode));
-        }
+    for (mode, (ow, _)) in &res {
+        let _ = writeln!(md, "{}", ow.row(mode));
+    }
+    md.push_str("\n### Round trip\n\n");
+    md.push_str(PCT_HEAD);
+    for (mode, (_, rt)) in &res {
+        let _ = writeln!(md, "{}", rt.row(mode));
     }
     md.push('\n');
     Ok(res)
@@ -485,7 +522,7 @@ fn demo(o: &Opts, wait: &str, rate: f64, steps: u32) -> Result<(Value, f64)> {
 }
 
 fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Result<()> {
-    let steps: u32 = if o.quick { 10_000 } else { 50_000 };
+    let steps: u32 = if o.quick { 10_000 } else { 30_000 };
     md.push_str("## IPC latency: the full pipeline end to end\n\n");
     md.push_str(
         "`ipc-runner demo` (scenario given below): `channel-sim` publishes slots from its \
@@ -496,51 +533,118 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
     );
     let _ = writeln!(
         md,
-        "Scenario `{}`, {steps} instants per wait mode.\n",
+        "Scenario `{}`, {steps} instants per run at {PIPELINE_RATE} Hz.\n",
         demo_scenario()
     );
-    md.push_str(PCT_HEAD);
-    let mut e2e_spin = None;
-    for (wait, rate) in [("spin", 10_000.0), ("block", 10_000.0)] {
-        let (v, _) = demo(o, wait, rate, steps)?;
+    // The spin target is a ratio of two tails measured minutes apart on a shared VM, so it
+    // is measured as pairs run back to back (paced raw iceoryx2, then the pipeline), three
+    // times; the verdict is on the median pair.
+    let mut pairs = Vec::new();
+    for _ in 0..3 {
+        let raw_now = ipc_latency(o, steps, PIPELINE_RATE, "iox-spin")?;
+        let iox = raw_now.get("iox-spin").context("iox-spin row")?.0;
+        let (v, _) = demo(o, "spin", PIPELINE_RATE, steps)?;
         let lat = &v["latency"];
         let e2e = Pct::from_json(&lat["end_to_end"]);
         let tr = Pct::from_json(&lat["transport"]);
+        pairs.push((iox, e2e, tr));
+    }
+    let mut order: Vec<usize> = (0..pairs.len()).collect();
+    order.sort_by(|&a, &b| {
+        let r = |i: usize| pairs[i].1.p99 / pairs[i].0.p99;
+        r(a).total_cmp(&r(b))
+    });
+    let median = order[order.len() / 2];
+    let (block, _) = demo(o, "block", PIPELINE_RATE, steps)?;
+    md.push_str(PCT_HEAD);
+    let (iox, e2e, tr) = pairs[median];
+    let hz = PIPELINE_RATE;
+    let _ = writeln!(
+        md,
+        "{}",
+        e2e.row(&format!("pipeline spin, {hz} Hz: end to end"))
+    );
+    let _ = writeln!(
+        md,
+        "{}",
+        tr.row(&format!("pipeline spin, {hz} Hz: transport"))
+    );
+    let _ = writeln!(
+        md,
+        "{}",
+        iox.row(&format!("raw iceoryx2 spin paced, {hz} Hz: one-way"))
+    );
+    let lat = &block["latency"];
+    let _ = writeln!(
+        md,
+        "{}",
+        Pct::from_json(&lat["end_to_end"]).row(&format!("pipeline block, {hz} Hz: end to end"))
+    );
+    let _ = writeln!(
+        md,
+        "{}",
+        Pct::from_json(&lat["transport"]).row(&format!("pipeline block, {hz} Hz: transport"))
+    );
+    md.push_str(
+        "\nThe spin rows are the median of three pairs, each pair = paced raw iceoryx2 \
+         (`ipc_latency --modes iox-spin --rate`) immediately followed by the pipeline:\n\n\
+         | pair | raw iceoryx2 paced p99 µs | pipeline end to end p99 µs | ratio |\n\
+         |---:|---:|---:|---:|\n",
+    );
+    for (i, (iox, e2e, _)) in pairs.iter().enumerate() {
         let _ = writeln!(
             md,
-            "{}",
-            e2e.row(&format!("pipeline {wait}, {rate} Hz: end to end"))
+            "| {}{} | {:.2} | {:.2} | {:.2} |",
+            i + 1,
+            if i == median { " (median)" } else { "" },
+            iox.p99,
+            e2e.p99,
+            e2e.p99 / iox.p99
         );
-        let _ = writeln!(
-            md,
-            "{}",
-            tr.row(&format!("pipeline {wait}, {rate} Hz: transport"))
-        );
-        if wait == "spin" {
-            e2e_spin = Some(e2e);
-        }
     }
     md.push('\n');
-    if let (Some(p), Some((iox, _)), Some((uds, _))) =
-        (e2e_spin, raw.get("iox-spin"), raw.get("uds-spin"))
-    {
-        let r_iox = p.p99 / iox.p99;
-        let r_uds = uds.p99 / p.p99;
+    let r_paced = e2e.p99 / iox.p99;
+    let verdict = |ok: bool| if ok { "met" } else { "**missed**" };
+    let _ = writeln!(
+        md,
+        "Spin mode, p99, target pipeline ≤ 1.5× raw iceoryx2: **{r_paced:.2}×** against raw \
+         iceoryx2 paced at the same rate ({}).",
+        verdict(r_paced <= 1.5)
+    );
+    if let Some((b2b, _)) = raw.get("iox-spin") {
         let _ = writeln!(
             md,
-            "Spin mode, p99: pipeline end to end {:.2} µs = {r_iox:.2}× raw iceoryx2 one-way \
-             ({:.2} µs; target ≤ 1.5×: {}). Unix socket one-way p99 ({:.2} µs) ÷ pipeline \
-             p99 = {r_uds:.3} (target ≥ 10: {}). The two targets together ask for raw \
-             iceoryx2 to be ≥ 15× below the socket, because the pipeline contains one \
-             iceoryx2 hop (raw iceoryx2 is {:.2}× below the socket here).\n",
-            p.p99,
-            iox.p99,
-            if r_iox <= 1.5 { "met" } else { "**missed**" },
-            uds.p99,
-            if r_uds >= 10.0 { "met" } else { "**missed**" },
-            uds.p99 / iox.p99,
+            "Against the back-to-back ping-pong ({:.2} µs p99) it is {:.2}× ({}): that run \
+             lasts a fraction of a second and never sleeps, so its tail is the transport's \
+             alone, while a paced sender wakes from a sleep before every message and a \
+             5-second run meets timer ticks and the other processes of a 2-core VM.",
+            b2b.p99,
+            e2e.p99 / b2b.p99,
+            verdict(e2e.p99 / b2b.p99 <= 1.5)
         );
     }
+    for (key, what) in [("uds-spin paced", "paced"), ("uds-spin", "back to back")] {
+        if let Some((uds, _)) = raw.get(key) {
+            let _ = writeln!(
+                md,
+                "Unix socket spin one-way p99 {what}: {:.2} µs = {:.2}× the pipeline's \
+                 (target ≥ 10: {}).",
+                uds.p99,
+                uds.p99 / e2e.p99,
+                verdict(uds.p99 / e2e.p99 >= 10.0)
+            );
+        }
+    }
+    if let (Some((iox_b, _)), Some((uds_b, _))) = (raw.get("iox-spin"), raw.get("uds-spin")) {
+        let _ = writeln!(
+            md,
+            "The two spin targets together ask for raw iceoryx2 to be ≥ 15× below the \
+             socket, because the pipeline contains one iceoryx2 hop; here raw iceoryx2 is \
+             {:.2}× below it back to back.",
+            uds_b.p99 / iox_b.p99
+        );
+    }
+    md.push('\n');
     // Sustained rate: 100 000 slots/s for a few seconds, zero loss required.
     let steps: u32 = if o.quick { 100_000 } else { 1_000_000 };
     let (v, secs) = demo(o, "spin", 100_000.0, steps)?;
