@@ -69,6 +69,13 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
         "precondition: no IPC loss {r}"
     );
     assert_eq!(r["truth_missing"], 0);
+    for (file, needle) in [
+        ("trajectories.svg", "<svg"),
+        ("latency.svg", "slot sent → estimates published"),
+    ] {
+        let text = std::fs::read_to_string(out.join(file)).unwrap_or_default();
+        assert!(text.contains(needle), "{file} lacks {needle:?}");
+    }
 
     // The same experiment in-process, by `eval` (run 0 of seed SEED, one run).
     let nx = scenario.nx();

@@ -233,33 +233,44 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     if let Err(e) = plot_trajectories(&traj, &plot, scenario.name()) {
         eprintln!("demo: no plot ({e:#})");
     }
+    let lat = &report.latency;
+    let ladder = args.out.join("latency.svg");
+    if let Err(e) = crate::plot_latency::plot_ladder(
+        &format!(
+            "{scenario_name}: latency per instant, {} wait",
+            args.wait.as_str()
+        ),
+        &[
+            (
+                "slot sent → received (transport)".to_string(),
+                lat.transport,
+            ),
+            ("estimator step".to_string(), lat.step),
+            (
+                "slot sent → estimates published".to_string(),
+                lat.end_to_end,
+            ),
+        ],
+        &ladder,
+    ) {
+        eprintln!("demo: no latency plot ({e:#})");
+    }
 
     println!("{}", report.summary());
     println!(
-        "wrote {} (true vs estimated), estimates.csv, slots.csv (replayable), report.json in {:?}",
+        "wrote {} (true vs estimated), latency.svg, estimates.csv, slots.csv (replayable), \
+         report.json in {:?}",
         plot.file_name().and_then(|f| f.to_str()).unwrap_or(""),
         args.out
     );
     Ok(run::exit_code(&report))
 }
 
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // The embedded font is valid; a failure would only lose the plot's text.
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            plotters::style::FontStyle::Normal,
-            include_bytes!("../assets/DejaVuSans.ttf"),
-        );
-    });
-}
-
 /// One panel per state component: truth and each estimator over k (first session). SVG, or
 /// PNG when `path` ends in `.png`.
 pub fn plot_trajectories(traj: &run::Trajectories, path: &Path, title: &str) -> Result<()> {
     use plotters::prelude::*;
-    register_font();
+    crate::plot::register_font();
     let size = (900, 260 * traj.nx.max(1) as u32);
     if path
         .extension()

@@ -10,6 +10,7 @@ pub mod eval;
 pub mod latency;
 pub mod plot;
 pub mod plot_bound;
+pub mod plot_latency;
 pub mod plot_tokens;
 pub mod replay;
 pub mod run;

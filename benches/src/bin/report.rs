@@ -302,8 +302,21 @@ The time ratio fell more than the instruction ratio (the shorter dependency chai
 not met: adskalman's unvalidated nalgebra code vectorises the 4×4 f32 products into full \
 SIMD registers, which the triangle-wise products here do not (a column-wise variant was \
 tried: it made 4x2 f32 slower, 170 ns against 120 ns, and left 3x2 f64 unchanged). \
-Dropping the validation would close the rest of the gap; the core keeps it, because \
-\"never panics, returns an error and keeps its last good state\" is the product's promise.\n\n";
+Two experiments (2026-11-23, same benches, idle machine; not in the product) show what \
+the rest of the gap is made of. Without the validation of inputs and outputs (no finiteness \
+tests, no NIS; the pivot test kept, as `adskalman`'s Cholesky has one): 617 / 913 \
+instructions, 0.93× / 1.10×. With that *and* the expanded Joseph form \
+`P − K Gᵀ − G Kᵀ + K S Kᵀ` (algebraically equal for any gain, first-order insensitive to gain \
+errors, but no longer a sum of two congruences, so positive semi-definiteness under rounding \
+is not preserved the same way): 499 / 653 instructions — far fewer than `adskalman`'s 680 / \
+815 — and still 0.91× / 0.95×. At these sizes the step is bound by its dependency chain \
+(predict → `C P Cᵀ` → two pivots with a division each → gain → covariance), not by the \
+instruction count, and that chain is as long in `adskalman`. So neither dropping the \
+validation (which the core's promise — never panic, return an error, keep the last good \
+state — forbids) nor a cheaper Joseph variant would reach 0.8×. What is left is shortening the \
+chain (a closed-form 2 × 2 inverse saves one division, roughly 5–8 ns by the chain's \
+arithmetic) and explicit SIMD (architecture-specific code in a `no_std`, \
+`forbid(unsafe_code)` core); neither is attempted.\n\n";
 
 // ----------------------------------------------------------------------------- firmware
 
@@ -376,6 +389,52 @@ impl Pct {
             "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.1} | {:.1} |",
             self.count, self.p50, self.p90, self.p99, self.p999, self.max
         )
+    }
+}
+
+impl Pct {
+    fn percentiles(&self) -> ipc_runner::latency::Percentiles {
+        ipc_runner::latency::Percentiles {
+            count: self.count,
+            p50_us: self.p50,
+            p90_us: self.p90,
+            p99_us: self.p99,
+            p999_us: self.p999,
+            max_us: self.max,
+        }
+    }
+}
+
+/// Draws the latency ladders next to the report (`<out dir>/benches/latency-{spin,block}.svg`)
+/// and links them from `md`. A plot that cannot be drawn is reported, not fatal.
+fn ladders(o: &Opts, md: &mut String, spin: &[(String, Pct)], block: &[(String, Pct)]) {
+    let dir = o
+        .out
+        .parent()
+        .map_or_else(|| PathBuf::from("benches"), |d| d.join("benches"));
+    let _ = std::fs::create_dir_all(&dir);
+    for (name, title, rows) in [
+        (
+            "latency-spin.svg",
+            "One-way latency, spin (busy-poll) receivers",
+            spin,
+        ),
+        (
+            "latency-block.svg",
+            "One-way latency, sleeping receivers",
+            block,
+        ),
+    ] {
+        let rows: Vec<_> = rows
+            .iter()
+            .map(|(l, p)| (l.clone(), p.percentiles()))
+            .collect();
+        match ipc_runner::plot_latency::plot_ladder(title, &rows, &dir.join(name)) {
+            Ok(()) => {
+                let _ = writeln!(md, "![{title}](benches/{name})\n");
+            }
+            Err(e) => say(&format!("{name}: {e:#}")),
+        }
     }
 }
 
@@ -675,6 +734,39 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
         );
     }
     md.push('\n');
+    let hz = PIPELINE_RATE;
+    let raw_row = |key: &str, label: &str| raw.get(key).map(|(ow, _)| (label.to_string(), *ow));
+    let spin: Vec<(String, Pct)> = [
+        raw_row("iox-spin", "raw iceoryx2, back to back"),
+        raw_row("iox-spin paced", &format!("raw iceoryx2, paced {hz} Hz")),
+        raw_row("uds-spin", "Unix socket, back to back"),
+        raw_row("uds-spin paced", &format!("Unix socket, paced {hz} Hz")),
+        Some((format!("pipeline end to end, queue, {hz} Hz"), e2e)),
+        Some((format!("pipeline end to end, blackboard, {hz} Hz"), board)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let blocking: Vec<(String, Pct)> = [
+        raw_row("iox-block", "raw iceoryx2 (WaitSet), back to back"),
+        raw_row(
+            "iox-block paced",
+            &format!("raw iceoryx2 (WaitSet), paced {hz} Hz"),
+        ),
+        raw_row("uds-block", "Unix socket (blocking read), back to back"),
+        raw_row(
+            "uds-block paced",
+            &format!("Unix socket (blocking read), paced {hz} Hz"),
+        ),
+        Some((
+            format!("pipeline end to end, block, {hz} Hz"),
+            Pct::from_json(&block["latency"]["end_to_end"]),
+        )),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    ladders(o, md, &spin, &blocking);
     // Sustained rate: 100 000 slots/s for a few seconds, zero loss required.
     let steps: u32 = if o.quick { 100_000 } else { 1_000_000 };
     let (v, secs) = demo(o, "spin", 100_000.0, steps, false)?;
