@@ -313,10 +313,11 @@ is not preserved the same way): 499 / 653 instructions — far fewer than `adska
 (predict → `C P Cᵀ` → two pivots with a division each → gain → covariance), not by the \
 instruction count, and that chain is as long in `adskalman`. So neither dropping the \
 validation (which the core's promise — never panic, return an error, keep the last good \
-state — forbids) nor a cheaper Joseph variant would reach 0.8×. What is left is shortening the \
-chain (a closed-form 2 × 2 inverse saves one division, roughly 5–8 ns by the chain's \
-arithmetic) and explicit SIMD (architecture-specific code in a `no_std`, \
-`forbid(unsafe_code)` core); neither is attempted.\n\n";
+state — forbids) nor a cheaper Joseph variant would reach 0.8×. Shortening the chain with a \
+closed-form 2 × 2 inverse of S (one division instead of two, validation kept) was tried too \
+and gained nothing: 98 vs 102 ns and 126 vs 95 ns in one run (0.96× / 1.32×), with more \
+instructions (885 / 1 189). Explicit SIMD (architecture-specific code in a `no_std`, \
+`forbid(unsafe_code)` core) is not attempted.\n\n";
 
 // ----------------------------------------------------------------------------- firmware
 
