@@ -95,9 +95,32 @@ fn tick(v: f64) -> String {
     }
 }
 
-fn color(j: usize) -> RGBColor {
-    // Colour-blind-safe palette (Okabe–Ito).
-    const P: [RGBColor; 7] = [
+/// The legend every plot draws: a white, framed box at `pos`, labels at `size` pt.
+pub(crate) fn draw_legend<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    pos: SeriesLabelPosition,
+    size: u32,
+) -> anyhow::Result<()>
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+    X: Ranged,
+    Y: Ranged,
+{
+    chart
+        .configure_series_labels()
+        .position(pos)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, size))
+        .draw()?;
+    Ok(())
+}
+
+/// Line colour `j`: the colour-blind-safe Okabe–Ito palette, then darker variants, so that up
+/// to 12 lines are told apart.
+pub(crate) fn color(j: usize) -> RGBColor {
+    const P: [RGBColor; 12] = [
         RGBColor(0, 114, 178),
         RGBColor(213, 94, 0),
         RGBColor(0, 158, 115),
@@ -105,6 +128,11 @@ fn color(j: usize) -> RGBColor {
         RGBColor(230, 159, 0),
         RGBColor(86, 180, 233),
         RGBColor(120, 120, 120),
+        RGBColor(0, 0, 0),
+        RGBColor(0, 70, 110),
+        RGBColor(140, 60, 0),
+        RGBColor(0, 100, 70),
+        RGBColor(130, 70, 110),
     ];
     P[j % P.len()]
 }
@@ -188,14 +216,7 @@ where
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 16))
-        .draw()?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 16)
 }
 
 fn draw_state<DB: DrawingBackend>(
@@ -256,12 +277,5 @@ where
             .label(*name)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 14))
-        .draw()?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 14)
 }

@@ -107,13 +107,7 @@ where
             .label(label.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 14))
-        .draw()?;
+    crate::plot::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
     root.present()?;
     Ok(())
 }

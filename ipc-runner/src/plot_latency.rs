@@ -7,7 +7,7 @@ use std::path::Path;
 use plotters::prelude::*;
 
 use crate::latency::Percentiles;
-use crate::plot::{check_extension, register_font, FONT};
+use crate::plot::{check_extension, color, draw_legend, register_font, FONT};
 
 const WIDTH: u32 = 1000;
 const HEIGHT: u32 = 560;
@@ -108,33 +108,7 @@ where
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
         chart.draw_series(pts.into_iter().map(|pt| Circle::new(pt, 4, c.filled())))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 14))
-        .draw()?;
-    Ok(())
-}
-
-/// Okabe–Ito plus darker variants: up to 12 distinguishable lines.
-fn color(j: usize) -> RGBColor {
-    const P: [RGBColor; 12] = [
-        RGBColor(0, 114, 178),
-        RGBColor(213, 94, 0),
-        RGBColor(0, 158, 115),
-        RGBColor(204, 121, 167),
-        RGBColor(230, 159, 0),
-        RGBColor(86, 180, 233),
-        RGBColor(120, 120, 120),
-        RGBColor(0, 0, 0),
-        RGBColor(0, 70, 110),
-        RGBColor(140, 60, 0),
-        RGBColor(0, 100, 70),
-        RGBColor(130, 70, 110),
-    ];
-    P[j % P.len()]
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)
 }
 
 #[cfg(test)]

@@ -202,12 +202,7 @@ where
         .label(name)
         .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], col));
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 14))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
+    crate::plot::draw_legend(&mut c, SeriesLabelPosition::UpperRight, 14)?;
 
     let l = t.sent.len() as u32;
     let mut c = ChartBuilder::on(&bottom)
