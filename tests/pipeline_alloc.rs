@@ -17,9 +17,9 @@
 #[path = "pipeline_common.rs"]
 mod common;
 
-use common::{loop_setup, prefix, scratch, start_channel_sim, LoopSetup};
+use common::{loop_setup, prefix, scratch, start_channel_sim};
 use e2e_tests::CountingAllocator;
-use ipc_runner::run::{run_loop, select, Hooks, WaitMode};
+use ipc_runner::run::{select, Hooks, WaitMode};
 
 #[global_allocator]
 static ALLOC: CountingAllocator = CountingAllocator::new();
@@ -78,30 +78,18 @@ fn estimator_allocations(name: &str) -> usize {
 fn run_mode(mode: WaitMode, publish: Option<bool>) -> Outcome {
     let dir = scratch("alloc");
     let p = prefix("alloc");
-    let LoopSetup {
-        mut args,
-        nx,
-        nodes,
-        ny,
-        make,
-    } = loop_setup(S, &p, STEPS);
-    args.wait = mode;
-    args.no_publish_estimates = publish.is_none();
-    args.latest_estimates = publish == Some(true);
+    let mut setup = loop_setup(S, &p, STEPS);
+    setup.args.wait = mode;
+    setup.args.no_publish_estimates = publish.is_none();
+    setup.args.latest_estimates = publish == Some(true);
     let mut publ = start_channel_sim(&dir, &p, S, STEPS, 2000);
-    let (r, _) = run_loop(
-        &args,
-        nx,
-        nodes,
-        ny,
-        &make,
-        Hooks {
+    let (r, _) = setup
+        .run(Hooks {
             alloc_probe: Some(probe),
             warmup: WARMUP,
             progress: None,
-        },
-    )
-    .unwrap();
+        })
+        .unwrap();
     assert!(publ.wait(30).success());
     assert_eq!(r.counts.instants, u64::from(STEPS));
     assert_eq!(r.counts.lost_in_ipc, 0, "precondition");

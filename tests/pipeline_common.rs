@@ -200,6 +200,16 @@ pub struct LoopSetup {
     pub make: ipc_runner::run::select::EstimatorFactory,
 }
 
+impl LoopSetup {
+    /// Runs the real-time loop in this thread with these arguments and estimators.
+    pub fn run(
+        &self,
+        hooks: ipc_runner::run::Hooks<'_>,
+    ) -> anyhow::Result<(ipc_runner::run::RunReport, ipc_runner::run::Trajectories)> {
+        ipc_runner::run::run_loop(&self.args, self.nx, self.nodes, self.ny, &self.make, hooks)
+    }
+}
+
 pub fn loop_setup(scenario: &str, prefix: &str, steps: u32) -> LoopSetup {
     use ipc_runner::run::select;
     let (sc, _) = select::scenario(scenario, None).unwrap();

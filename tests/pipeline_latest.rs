@@ -7,9 +7,9 @@
 mod common;
 
 use channel_sim::wire::{self, Estimate, WIRE_VERSION};
-use common::{loop_setup, prefix, scratch, start_channel_sim, LoopSetup};
+use common::{loop_setup, prefix, scratch, start_channel_sim};
 use iceoryx2::prelude::*;
-use ipc_runner::run::{run_loop, Hooks};
+use ipc_runner::run::Hooks;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -60,21 +60,16 @@ fn read_board(p: &str, stop: &AtomicBool) -> (Vec<Estimate>, bool) {
 fn a_reader_sees_every_estimators_latest_estimate() {
     let dir = scratch("latest");
     let p = prefix("latest");
-    let LoopSetup {
-        mut args,
-        nx,
-        nodes,
-        ny,
-        make,
-    } = loop_setup(S, &p, STEPS);
-    args.latest_estimates = true;
+    let mut setup = loop_setup(S, &p, STEPS);
+    setup.args.latest_estimates = true;
+    let nx = setup.nx;
     let stop = Arc::new(AtomicBool::new(false));
     let reader = {
         let (p, stop) = (p.clone(), Arc::clone(&stop));
         std::thread::spawn(move || read_board(&p, &stop))
     };
     let mut publ = start_channel_sim(&dir, &p, S, STEPS, 2000);
-    let (r, traj) = run_loop(&args, nx, nodes, ny, &make, Hooks::default()).unwrap();
+    let (r, traj) = setup.run(Hooks::default()).unwrap();
     stop.store(true, Ordering::Relaxed);
     let (last, monotone) = reader.join().unwrap();
     assert!(publ.wait(30).success());

@@ -735,7 +735,6 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
         );
     }
     md.push('\n');
-    let hz = PIPELINE_RATE;
     let raw_row = |key: &str, label: &str| raw.get(key).map(|(ow, _)| (label.to_string(), *ow));
     let spin: Vec<(String, Pct)> = [
         raw_row("iox-spin", "raw iceoryx2, back to back"),

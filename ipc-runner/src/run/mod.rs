@@ -568,10 +568,10 @@ pub fn run_loop(
         _ => None,
     };
     let mut last_signal_check = 0u64;
-    let mut spin_polls = 0u32;
     let spinning = waitset.is_none() && t.listener.is_none();
     let mut idle_polls = 0u32;
     let mut spin_clock = wire::monotonic_ns();
+    let mut spin_signal_check = spin_clock;
     let mut wait = |timeout_ns: u64| -> Result<Woke> {
         match (&waitset, &guard, &t.listener) {
             (Some(ws), Some(g), Some(l)) => {
@@ -608,19 +608,9 @@ pub fn run_loop(
             }
             _ => {
                 // One PAUSE per poll: a longer back-off (32 were here) costs up to ~1.5 µs of
-                // latency on a slot that lands just after a poll. The clock is read only
-                // every SPIN_CLOCK_EVERY polls (see there).
+                // latency on a slot that lands just after a poll. Signals are checked by the
+                // caller with the clock, every SPIN_CLOCK_EVERY polls.
                 core::hint::spin_loop();
-                spin_polls = spin_polls.wrapping_add(1);
-                if spin_polls.is_multiple_of(SPIN_CLOCK_EVERY) {
-                    let now = wire::monotonic_ns();
-                    if now - last_signal_check > 1_000_000 {
-                        last_signal_check = now;
-                        if t.node.wait(Duration::ZERO).is_err() {
-                            return Ok(Woke::Signal);
-                        }
-                    }
-                }
                 Ok(Woke::Ready)
             }
         }
@@ -710,12 +700,19 @@ pub fn run_loop(
             }
         }
 
-        // Nothing pending: check the deadline, then wait. Spinning reads the clock only
-        // every SPIN_CLOCK_EVERY polls; a stale `now` can only make a deadline fire later.
+        // Nothing pending: check the deadline, then wait. Spinning reads the clock (and
+        // checks for signals, every ms) only every SPIN_CLOCK_EVERY polls; a stale `now` can
+        // only make a deadline fire later.
         let now = if spinning {
             idle_polls = idle_polls.wrapping_add(1);
             if idle_polls.is_multiple_of(SPIN_CLOCK_EVERY) {
                 spin_clock = wire::monotonic_ns();
+                if spin_clock - spin_signal_check > 1_000_000 {
+                    spin_signal_check = spin_clock;
+                    if t.node.wait(Duration::ZERO).is_err() {
+                        break 'outer Ending::Interrupted;
+                    }
+                }
             }
             spin_clock
         } else {
