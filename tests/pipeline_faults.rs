@@ -222,3 +222,28 @@ fn non_finite_measurements_are_rejected_and_counted() {
     assert!(e["mse"].as_f64().unwrap().is_finite());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn ctrl_c_ends_the_runner_cleanly_in_every_wait_mode() {
+    let dir = scratch("sigint");
+    for mode in ["spin", "block", "listener"] {
+        let p = prefix(&format!("sigint-{mode}"));
+        let mut run = runner(
+            &dir,
+            &format!("runner-{mode}"),
+            &p,
+            &["--wait", mode, "--connect-timeout", "60"],
+        );
+        run.wait_for_stderr("waiting for channel-sim", 30);
+        let st = std::process::Command::new("kill")
+            .args(["-INT", &run.pid().to_string()])
+            .status()
+            .unwrap();
+        assert!(st.success());
+        let st = run.wait(10);
+        assert_eq!(st.code(), Some(130), "{mode}: {st}\n{}", run.err());
+        let r = report(&dir.join(format!("runner-{mode}.json")));
+        assert_eq!(r["ending"], "interrupted", "{mode}: {r}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

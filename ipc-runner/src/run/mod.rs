@@ -28,6 +28,7 @@ use assemble::{Assembler, Counts, Pushed};
 use channel_sim::sim::MAX_NX;
 use channel_sim::wire::{self, Estimate, WIRE_VERSION};
 use channel_sim::Observation;
+use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::writer::{EntryHandleMut, Writer};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::blackboard;
@@ -545,6 +546,12 @@ pub fn run_loop(
     let mut last_data_ns: Option<u64> = None;
     let mut waiting_since = wire::monotonic_ns();
 
+    // iceoryx2 installs its SIGINT/SIGTERM handler on the first `Node::wait`; do that before
+    // announcing the wait, so Ctrl-C ends the run cleanly in every wait mode from here on
+    // (the listener's wait would otherwise leave the signal to its default action, which
+    // kills the process without a report). Before this call a signal ends the process, so
+    // there is no earlier signal to carry over.
+    let _ = t.node.wait(Duration::ZERO);
     say(&format!(
         "waiting for channel-sim on prefix {:?} ({} wait)",
         args.prefix,
@@ -595,8 +602,12 @@ pub fn run_loop(
                 })
             }
             (None, None, Some(l)) => {
-                l.timed_wait(|_| {}, Duration::from_nanos(timeout_ns.max(1000)))
-                    .map_err(|e| anyhow!("listener wait failed: {e:?}"))?;
+                match l.timed_wait(|_| {}, Duration::from_nanos(timeout_ns.max(1000))) {
+                    Ok(_) => {}
+                    // A signal interrupts the wait itself; it is the user's Ctrl-C, not a failure.
+                    Err(ListenerWaitError::InterruptSignal) => return Ok(Woke::Signal),
+                    Err(e) => bail!("listener wait failed: {e:?}"),
+                }
                 let now = wire::monotonic_ns();
                 if now - last_signal_check > 1_000_000 {
                     last_signal_check = now;
