@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use estimator_core::filter::nn_bound::NnBoundConfig;
-use estimator_core::filter::nn_system::{Seed003Example, Tanh};
-use estimator_core::filter::nn_tbcp::NnTbcpEstimator;
+use estimator_core::filter::nn_system::Seed003Example;
+use estimator_core::filter::nn_tbcp::Seed003Nn;
 use estimator_core::filter::{
     AssumedDensityFilter, CrossCoupledEstimator, IntermittentKalmanFilter, KalmanFilter, KfIo,
 };
@@ -471,15 +471,7 @@ fn host_f32_occlusion_estimators_match_f64() {
 #[test]
 fn host_f32_nn_matches_f64_until_f32_refuses() {
     let s = nn_stream();
-    let mut nn = NnTbcpEstimator::<f64, 3, 1, 2, 3, 6, Tanh>::new(
-        NnBoundConfig::seed003_example(),
-        Tanh,
-        Seed003Example::xhat0(),
-        Seed003Example::h0(),
-        Seed003Example::p0(),
-        Seed003Example::p0(),
-    )
-    .unwrap();
+    let mut nn = Seed003Nn::<f64>::seed003(NnBoundConfig::seed003_example()).unwrap();
     let full = run::run_nn(&s, usize::MAX);
     println!("nn (f32, paper configuration): {full}");
     let ok_steps = full.first_error.saturating_sub(1) as usize;

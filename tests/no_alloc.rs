@@ -84,24 +84,14 @@ fn nn_tbcp_section() {
     use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
     use estimator_core::filter::nn_assumptions::RunMonitor;
     use estimator_core::filter::nn_bound::{GainSolver, NnBoundConfig};
-    use estimator_core::filter::nn_system::{Seed003Example, Tanh};
-    use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
+    use estimator_core::filter::nn_system::Seed003Example;
+    use estimator_core::filter::nn_tbcp::Seed003Nn;
     use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
 
     // A configuration with δ₁ < 1 so the bound stays finite over 10 000 steps.
     let cfg = NnBoundConfig::new([0.5; 4], [0.5; 12], [0.05, 10.0], 8.0, 1.8, 0.1, 0.1).unwrap();
-    let new_nn = |solver| -> Seed003Nn<f64> {
-        NnTbcpEstimator::new(
-            cfg,
-            Tanh,
-            Seed003Example::xhat0(),
-            Seed003Example::h0(),
-            Seed003Example::p0(),
-            Seed003Example::p0(),
-        )
-        .unwrap()
-        .with_gain_solver(solver)
-    };
+    let new_nn =
+        |solver| -> Seed003Nn<f64> { Seed003Nn::seed003(cfg).unwrap().with_gain_solver(solver) };
     let mut nn_k = new_nn(GainSolver::Kronecker);
     let mut nn_t = new_nn(GainSolver::TwoSided);
     let mut mon = RunMonitor::new(&nn_k);

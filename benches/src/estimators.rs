@@ -6,8 +6,8 @@
 use estimator_core::examples::Seed001Example;
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation};
 use estimator_core::filter::nn_bound::{GainSolver, NnBoundConfig};
-use estimator_core::filter::nn_system::{Seed003Example, Tanh};
-use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
+use estimator_core::filter::nn_system::Seed003Example;
+use estimator_core::filter::nn_tbcp::Seed003Nn;
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, TobitFusion};
 use estimator_core::gsum::GaussSum;
@@ -88,18 +88,11 @@ fn nn_estimator<T: Real>(solver: GainSolver) -> Seed003Nn<T> {
         T::lit(0.1),
     )
     .expect("valid config");
-    NnTbcpEstimator::new(
-        cfg,
-        Tanh,
-        Seed003Example::xhat0(),
-        Seed003Example::h0(),
-        Seed003Example::p0(),
-        Seed003Example::p0(),
-    )
-    .expect("valid")
-    .with_initial_measurement(SVector::<T, 2>::new(T::lit(0.3), T::lit(-0.2)))
-    .expect("finite")
-    .with_gain_solver(solver)
+    Seed003Nn::seed003(cfg)
+        .expect("valid")
+        .with_initial_measurement(SVector::<T, 2>::new(T::lit(0.3), T::lit(-0.2)))
+        .expect("finite")
+        .with_gain_solver(solver)
 }
 
 /// Seed 003 kernels: the NN estimator's transmitted-measurement step (gain solve included)

@@ -19,7 +19,7 @@ use estimator_core::filter::adf::AssumedDensityFilter;
 use estimator_core::filter::cce::CrossCoupledEstimator;
 use estimator_core::filter::kf_io::KfIo;
 use estimator_core::filter::nn_bound::NnBoundConfig;
-use estimator_core::filter::nn_system::{Seed003Example, Tanh};
+use estimator_core::filter::nn_system::Seed003Example;
 use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::{IntermittentKalmanFilter, KalmanFilter, TobitFusion};
@@ -784,14 +784,7 @@ impl Driven<1> for Nn {
 /// The NN estimator over the token-bucket stream.
 pub fn run_nn(stream: &Stream<'_>, steps: usize) -> Summary {
     drive("nn", stream.instants(Link::Channel), steps, || {
-        NnTbcpEstimator::new(
-            NnBoundConfig::seed003_example(),
-            Tanh,
-            Seed003Example::xhat0(),
-            Seed003Example::h0(),
-            Seed003Example::p0(),
-            Seed003Example::p0(),
-        )
+        Nn::seed003(NnBoundConfig::seed003_example())
     })
 }
 

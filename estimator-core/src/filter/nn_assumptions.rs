@@ -394,15 +394,7 @@ mod tests {
         // Noise-free plant; the estimate quickly leaves the region where ‖tanh(x̂)‖ ≤ 1, and
         // tr P̄ grows by ≈ δ₁ ≈ 5.5 per step on average.
         let sys = Seed003Example;
-        let mut nn: Seed003Nn<f64> = NnTbcpEstimator::new(
-            NnBoundConfig::seed003_example(),
-            Tanh,
-            Seed003Example::xhat0(),
-            Seed003Example::h0(),
-            Seed003Example::p0(),
-            Seed003Example::p0(),
-        )
-        .unwrap();
+        let mut nn = Seed003Nn::<f64>::seed003(NnBoundConfig::seed003_example()).unwrap();
         let mut mon = RunMonitor::new(&nn);
         let mut tb = TokenBucket::new(TokenBucketConfig::new(2, 3, 10, 6).unwrap());
         let mut x = Seed003Example::x0::<f64>();

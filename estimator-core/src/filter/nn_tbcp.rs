@@ -55,6 +55,23 @@ pub struct NnTbcpEstimator<
 /// The section IV instance: 3 states, 1 noise, 2 measurements, `tanh` on 3 outputs.
 pub type Seed003Nn<T> = NnTbcpEstimator<T, 3, 1, 2, 3, 6, crate::filter::nn_system::Tanh>;
 
+impl<T: Real> Seed003Nn<T> {
+    /// Seed 003's estimator from the paper's initial values (section IV: `x̂₀`, `Ĥ₀`, and
+    /// `P̄₀ = Q̄₀` = [`Seed003Example::p0`](crate::filter::nn_system::Seed003Example::p0)) with
+    /// the bounds' configuration `cfg` (the paper's is [`NnBoundConfig::seed003_example`]).
+    pub fn seed003(cfg: NnBoundConfig<T>) -> Result<Self> {
+        use crate::filter::nn_system::{Seed003Example, Tanh};
+        Self::new(
+            cfg,
+            Tanh,
+            Seed003Example::xhat0(),
+            Seed003Example::h0(),
+            Seed003Example::p0(),
+            Seed003Example::p0(),
+        )
+    }
+}
+
 impl<
         T: Real,
         const NX: usize,
@@ -234,15 +251,7 @@ mod tests {
     use nalgebra::{matrix, vector};
 
     fn example_f64() -> Seed003Nn<f64> {
-        NnTbcpEstimator::new(
-            NnBoundConfig::seed003_example(),
-            Tanh,
-            Seed003Example::xhat0(),
-            Seed003Example::h0(),
-            Seed003Example::p0(),
-            Seed003Example::p0(),
-        )
-        .unwrap()
+        Seed003Nn::seed003(NnBoundConfig::seed003_example()).unwrap()
     }
 
     #[test]
@@ -320,16 +329,7 @@ mod tests {
     ) -> core::result::Result<Seed003Nn<T>, (usize, Error)> {
         use crate::filter::nn_system::DifferentiableMap;
         let sys = Seed003Example;
-        let mut nn: Seed003Nn<T> = NnTbcpEstimator::new(
-            cfg,
-            Tanh,
-            Seed003Example::xhat0(),
-            Seed003Example::h0(),
-            Seed003Example::p0(),
-            Seed003Example::p0(),
-        )
-        .unwrap()
-        .with_gain_solver(solver);
+        let mut nn = Seed003Nn::seed003(cfg).unwrap().with_gain_solver(solver);
         let mut tb = TokenBucket::new(TokenBucketConfig::new(2, 3, 10, 6).unwrap());
         let mut x = Seed003Example::x0::<T>();
         for k in 0..steps {
