@@ -317,7 +317,23 @@ state — forbids) nor a cheaper Joseph variant would reach 0.8×. Shortening th
 closed-form 2 × 2 inverse of S (one division instead of two, validation kept) was tried too \
 and gained nothing: 98 vs 102 ns and 126 vs 95 ns in one run (0.96× / 1.32×), with more \
 instructions (885 / 1 189). Explicit SIMD (architecture-specific code in a `no_std`, \
-`forbid(unsafe_code)` core) is not attempted.\n\n";
+`forbid(unsafe_code)` core) is not attempted. \
+What the vectoriser does was measured last (2026-11-23 06:30 UTC, one run each, same \
+benches): with LLVM's SLP vectoriser switched off for the whole build \
+(`RUSTFLAGS=\"-C llvm-args=-vectorize-slp=false\"`), our 3x2 f64 step took 89 ns against \
+104 ns with it (886 against 773 instructions: the SLP code has fewer instructions but its \
+shuffles lengthen the chain), and `adskalman`'s 4x2 f32 step took 158 ns against 93 ns \
+(1 998 against 815 instructions). The ratios of that build, 0.79× and 0.82×, do not count: \
+the flag meets the target by slowing `adskalman` down. What they show is where the gap is: \
+LLVM vectorises nalgebra's column-wise products well and our triangle-wise ones badly. Two \
+column-wise rewrites were tried the same morning (not in the product): `mul` alone (4x2 f32 \
+1 370 instructions, 151 ns: worse), and the whole step on `[T; N]` columns in axpy form, \
+exact symmetry by mirroring (825 / 1 388 instructions; 98 vs 89 ns and 111 vs 102 ns, then \
+105 vs 94 ns and 108 vs 95 ns: 1.10–1.12× and 1.08–1.14×). The second brings 4x2 f32 from \
+about 1.3× to about 1.1× but leaves 3x2 f64 where it was, and the disassembly shows why it \
+stops there: LLVM rebuilds the 4-float columns from scalar loads and shuffles (224 `shufps` \
+against 141 `mulps`) instead of keeping them in registers. Neither is near 0.8×; reaching it \
+looks like explicit SIMD types, not loop shapes.\n\n";
 
 // ----------------------------------------------------------------------------- firmware
 
