@@ -26,6 +26,12 @@ fn versus_adskalman(c: &mut Criterion) {
     g.bench_function(BenchmarkId::new("adskalman", p.name), |b| {
         b.iter(|| black_box(black_box(&a).step()))
     });
+    g.bench_function(BenchmarkId::new("ours_standard", p.name), |b| {
+        b.iter(|| black_box(black_box(&p).kf_standard_step()))
+    });
+    g.bench_function(BenchmarkId::new("adskalman_symmetric", p.name), |b| {
+        b.iter(|| black_box(black_box(&a).step_symmetric()))
+    });
     let p = tracking_4x2_f32();
     let a = AdsProblem::from_core(&p);
     g.bench_function(BenchmarkId::new("ours", p.name), |b| {
@@ -33,6 +39,12 @@ fn versus_adskalman(c: &mut Criterion) {
     });
     g.bench_function(BenchmarkId::new("adskalman", p.name), |b| {
         b.iter(|| black_box(black_box(&a).step()))
+    });
+    g.bench_function(BenchmarkId::new("ours_standard", p.name), |b| {
+        b.iter(|| black_box(black_box(&p).kf_standard_step()))
+    });
+    g.bench_function(BenchmarkId::new("adskalman_symmetric", p.name), |b| {
+        b.iter(|| black_box(black_box(&a).step_symmetric()))
     });
     g.finish();
 }

@@ -107,13 +107,37 @@ where
     /// [`KfProblem::kf_step`].
     #[inline]
     pub fn step(&self) -> Result<StateAndCovariance<T, Const<NX>>, Error> {
-        let kf = KalmanFilterNoControl::<T, Const<NX>, Const<NY>>::new(&self.model, &self.model);
-        kf.step_with_options(&self.prior, &self.y, CovarianceUpdateMethod::JosephForm)
+        self.step_with(CovarianceUpdateMethod::JosephForm)
     }
 
-    /// The posterior as nalgebra-0.34 matrices (for agreement checks).
-    pub fn posterior(&self) -> Option<(nalgebra::SVector<T, NX>, nalgebra::SMatrix<T, NX, NX>)> {
-        let post = self.step().ok()?;
+    /// One `adskalman` step with the optimal-gain form made symmetric,
+    /// `((I − KH) P + ((I − KH) P)ᵀ) / 2`: the same work as [`KfProblem::kf_standard_step`].
+    #[inline]
+    pub fn step_symmetric(&self) -> Result<StateAndCovariance<T, Const<NX>>, Error> {
+        self.step_with(CovarianceUpdateMethod::OptimalKalmanForcedSymmetric)
+    }
+
+    #[inline]
+    fn step_with(
+        &self,
+        method: CovarianceUpdateMethod,
+    ) -> Result<StateAndCovariance<T, Const<NX>>, Error> {
+        let kf = KalmanFilterNoControl::<T, Const<NX>, Const<NY>>::new(&self.model, &self.model);
+        kf.step_with_options(&self.prior, &self.y, method)
+    }
+
+    /// The posterior of [`AdsProblem::step`] (`joseph`) or [`AdsProblem::step_symmetric`] as
+    /// nalgebra-0.34 matrices (for agreement checks).
+    pub fn posterior(
+        &self,
+        joseph: bool,
+    ) -> Option<(nalgebra::SVector<T, NX>, nalgebra::SMatrix<T, NX, NX>)> {
+        let post = if joseph {
+            self.step()
+        } else {
+            self.step_symmetric()
+        }
+        .ok()?;
         Some((
             nalgebra::SVector::from_column_slice(post.state().as_slice()),
             nalgebra::SMatrix::from_column_slice(post.covariance().as_slice()),

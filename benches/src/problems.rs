@@ -1,7 +1,7 @@
 //! The benchmark problems: one Kalman step at the papers' dimensions, from a converged prior.
 
 use estimator_core::examples::Seed001Example;
-use estimator_core::filter::{IntermittentKalmanFilter, KalmanFilter};
+use estimator_core::filter::{CovarianceUpdate, IntermittentKalmanFilter, KalmanFilter};
 use estimator_core::model::{LinearModel, LinearSystem};
 use estimator_core::{Real, Result};
 use nalgebra::{matrix, vector, SMatrix, SVector};
@@ -60,6 +60,18 @@ impl<T: Real, const NX: usize, const NY: usize> KfProblem<T, NX, NY> {
     #[inline]
     pub fn kf_step(&self) -> Result<KalmanFilter<T, NX>> {
         let mut f = self.prior;
+        f.step(&self.model, 1, &self.y)?;
+        Ok(f)
+    }
+
+    /// One KF step with the optimal-gain covariance form `P − K Gᵀ` ([`CovarianceUpdate::Standard`],
+    /// exactly symmetric), the like-for-like partner of `adskalman`'s
+    /// `OptimalKalmanForcedSymmetric`.
+    #[inline]
+    pub fn kf_standard_step(&self) -> Result<KalmanFilter<T, NX>> {
+        let mut f = self
+            .prior
+            .with_covariance_update(CovarianceUpdate::Standard);
         f.step(&self.model, 1, &self.y)?;
         Ok(f)
     }

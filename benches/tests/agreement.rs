@@ -5,41 +5,77 @@
 use benches::ads::AdsProblem;
 use benches::problems::{occlusion_3x2_f64, tracking_4x2_f32};
 
+// Each problem in both covariance forms the benches compare: Joseph (`kf_step` against
+// `adskalman`'s `JosephForm`) and the optimal-gain form (`kf_standard_step` against
+// `OptimalKalmanForcedSymmetric`).
+
 #[test]
 fn ours_and_adskalman_agree_on_the_3x2_f64_problem() {
     let p = occlusion_3x2_f64();
-    let ours = p.kf_step().expect("our step");
-    let (x, pp) = AdsProblem::from_core(&p)
-        .posterior()
-        .expect("adskalman step");
-    // Same Joseph-form algebra in a different order (adskalman inverts S, we solve):
-    // a few ulps of the entries' magnitude (≤ ~1e2 here).
-    assert!(
-        (ours.state() - x).amax() < 1e-11,
-        "{} vs {}",
-        ours.state(),
-        x
-    );
-    assert!((ours.covariance() - pp).amax() < 1e-11);
+    let a = AdsProblem::from_core(&p);
+    for joseph in [true, false] {
+        let ours = if joseph {
+            p.kf_step()
+        } else {
+            p.kf_standard_step()
+        }
+        .expect("our step");
+        let (x, pp) = a.posterior(joseph).expect("adskalman step");
+        // Same algebra in a different order (adskalman inverts S, we solve): a few ulps of
+        // the entries' magnitude (≤ ~1e2 here).
+        assert!(
+            (ours.state() - x).amax() < 1e-11,
+            "joseph={joseph}: {} vs {}",
+            ours.state(),
+            x
+        );
+        assert!((ours.covariance() - pp).amax() < 1e-11, "joseph={joseph}");
+        assert_eq!(ours.covariance(), &ours.covariance().transpose());
+    }
 }
 
 #[test]
 fn ours_and_adskalman_agree_on_the_4x2_f32_problem() {
     let p = tracking_4x2_f32();
-    let ours = p.kf_step().expect("our step");
-    let (x, pp) = AdsProblem::from_core(&p)
-        .posterior()
-        .expect("adskalman step");
-    // f32: relative 1e-5 of the entries' magnitude.
-    let sx = x.amax().max(1.0);
-    let sp = pp.amax().max(1e-3);
+    let a = AdsProblem::from_core(&p);
+    for joseph in [true, false] {
+        let ours = if joseph {
+            p.kf_step()
+        } else {
+            p.kf_standard_step()
+        }
+        .expect("our step");
+        let (x, pp) = a.posterior(joseph).expect("adskalman step");
+        // f32: relative 1e-5 of the entries' magnitude.
+        let sx = x.amax().max(1.0);
+        let sp = pp.amax().max(1e-3);
+        assert!(
+            (ours.state() - x).amax() < 1e-5 * sx,
+            "joseph={joseph}: {} vs {}",
+            ours.state(),
+            x
+        );
+        assert!(
+            (ours.covariance() - pp).amax() < 1e-5 * sp,
+            "joseph={joseph}"
+        );
+        assert_eq!(ours.covariance(), &ours.covariance().transpose());
+    }
+}
+
+#[test]
+fn the_two_forms_differ_only_by_rounding_at_the_optimal_gain() {
+    // Joseph and P − K Gᵀ are equal for the optimal gain: if the benches' two forms differed
+    // by more than rounding, the second comparison would not be of the same step.
+    let p = occlusion_3x2_f64();
+    let j = p.kf_step().unwrap();
+    let s = p.kf_standard_step().unwrap();
+    assert_eq!(j.state(), s.state());
+    assert!((j.covariance() - s.covariance()).amax() < 1e-12);
     assert!(
-        (ours.state() - x).amax() < 1e-5 * sx,
-        "{} vs {}",
-        ours.state(),
-        x
+        j.covariance() != s.covariance(),
+        "the forms must be different code paths"
     );
-    assert!((ours.covariance() - pp).amax() < 1e-5 * sp);
 }
 
 #[test]

@@ -32,6 +32,7 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
     let t32 = tracking_4x2_f32();
     let a64 = AdsProblem::from_core(&p64);
     let a32 = AdsProblem::from_core(&t32);
+    let (a64s, a32s) = (a64.clone(), a32.clone());
     // Profiling parts of the 3x2 f64 step (not a product API): where the instructions go.
     let pp = p64;
     let c = pp.model.c;
@@ -76,6 +77,22 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
         ("adskalman/3x2_f64", repeat(move || black_box(&a64).step())),
         ("kf/4x2_f32", repeat(move || black_box(&t32).kf_step())),
         ("adskalman/4x2_f32", repeat(move || black_box(&a32).step())),
+        (
+            "kf_standard/3x2_f64",
+            repeat(move || black_box(&p64).kf_standard_step()),
+        ),
+        (
+            "adskalman_symmetric/3x2_f64",
+            repeat(move || black_box(&a64s).step_symmetric()),
+        ),
+        (
+            "kf_standard/4x2_f32",
+            repeat(move || black_box(&t32).kf_standard_step()),
+        ),
+        (
+            "adskalman_symmetric/4x2_f32",
+            repeat(move || black_box(&a32s).step_symmetric()),
+        ),
         ("kf/3x2_f32", repeat(move || black_box(&p32).kf_step())),
         ("kf/4x2_f64", repeat(move || black_box(&t64).kf_step())),
         (
