@@ -249,6 +249,8 @@ pub struct RunReport {
     pub cpu_pinning: Option<String>,
     /// Outcome of `--mlock`.
     pub memory_lock: Option<String>,
+    /// Set-up conditions that will show in the latency (e.g. spinning under RT throttling).
+    pub warnings: Vec<String>,
     /// How the run ended.
     pub ending: Ending,
 }
@@ -480,6 +482,15 @@ pub fn run_loop(
     };
     for m in cpu_pinning.iter().chain(memory_lock.iter()) {
         say(m);
+    }
+    // After pinning: a warning, not a refusal (a machine with throttling off passes).
+    let warnings: Vec<String> = (args.wait == WaitMode::Spin)
+        .then(system::spin_under_rt_throttling)
+        .flatten()
+        .into_iter()
+        .collect();
+    for w in &warnings {
+        eprintln!("ipc-runner: {w}");
     }
 
     let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
@@ -799,6 +810,7 @@ pub fn run_loop(
         published_after_warmup: st.published - published_at_warmup,
         cpu_pinning,
         memory_lock,
+        warnings,
         ending,
     };
     Ok((report, st.traj))
@@ -840,6 +852,10 @@ impl RunReport {
                 "allocations after warm-up: {a} over {} slots ({} estimates published)\n",
                 self.slots_after_warmup, self.published_after_warmup
             ));
+        }
+        for w in &self.warnings {
+            s.push_str(w);
+            s.push('\n');
         }
         s
     }

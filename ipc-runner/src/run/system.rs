@@ -30,3 +30,66 @@ pub fn lock_memory() -> Result<(), String> {
     }
     Ok(())
 }
+
+/// The stall a thread that never sleeps gets under Linux's real-time throttling, if any:
+/// `SCHED_FIFO`/`SCHED_RR` tasks may run `runtime_us` of every `period_us` (by default 950 ms
+/// of every second), and a busy-polling loop uses all of it, so the kernel stops it for the
+/// rest of every period. `runtime_us = -1` turns throttling off.
+pub fn rt_throttle_stall_us(realtime: bool, runtime_us: i64, period_us: i64) -> Option<i64> {
+    (realtime && runtime_us >= 0 && runtime_us < period_us).then_some(period_us - runtime_us)
+}
+
+/// A warning for `--wait spin` when the calling thread runs under a real-time policy with
+/// throttling on (measured on this machine: `chrt -f 10` made the spin pipeline's p99
+/// ≈ 35 ms instead of ≈ 10 µs, the throttled 50 ms of each second).
+pub fn spin_under_rt_throttling() -> Option<String> {
+    // SAFETY: sched_getscheduler(0) only reads the calling thread's policy.
+    #[allow(unsafe_code)]
+    let policy = unsafe { libc::sched_getscheduler(0) };
+    let realtime = policy == libc::SCHED_FIFO || policy == libc::SCHED_RR;
+    if !realtime {
+        return None;
+    }
+    let read = |name: &str| -> Option<i64> {
+        std::fs::read_to_string(format!("/proc/sys/kernel/{name}"))
+            .ok()?
+            .trim()
+            .parse()
+            .ok()
+    };
+    let (runtime, period) = (read("sched_rt_runtime_us")?, read("sched_rt_period_us")?);
+    let stall = rt_throttle_stall_us(realtime, runtime, period)?;
+    Some(format!(
+        "warning: --wait spin under a real-time policy with RT throttling on \
+         (kernel.sched_rt_runtime_us = {runtime} of {period}): the kernel stops a thread \
+         that never sleeps for {} ms of every {} ms, which becomes the loop's tail latency. \
+         Use --wait block or listener, or set kernel.sched_rt_runtime_us = -1 on a machine \
+         with a core isolated for the loop.",
+        stall / 1000,
+        period / 1000
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn throttling_stalls_only_realtime_threads_with_a_budget_below_the_period() {
+        assert_eq!(rt_throttle_stall_us(true, 950_000, 1_000_000), Some(50_000));
+        assert_eq!(rt_throttle_stall_us(true, -1, 1_000_000), None);
+        assert_eq!(rt_throttle_stall_us(true, 1_000_000, 1_000_000), None);
+        assert_eq!(rt_throttle_stall_us(false, 950_000, 1_000_000), None);
+    }
+
+    #[test]
+    fn a_normal_thread_gets_no_warning() {
+        // Tests run under SCHED_OTHER (CI and here); a real-time test runner would be odd.
+        // SAFETY: as in spin_under_rt_throttling.
+        #[allow(unsafe_code)]
+        let policy = unsafe { libc::sched_getscheduler(0) };
+        if policy == libc::SCHED_OTHER {
+            assert_eq!(spin_under_rt_throttling(), None);
+        }
+    }
+}
