@@ -11,3 +11,4 @@
 pub mod ads;
 pub mod estimators;
 pub mod problems;
+pub mod simd_experiment;

@@ -86,3 +86,48 @@ fn the_prior_is_converged_so_every_timed_step_does_the_same_work() {
     let rel = (post.covariance() - p.prior.covariance()).amax() / p.prior.covariance().amax();
     assert!(rel < 1e-9, "covariance still moving: {rel}");
 }
+
+#[test]
+fn simd_experiment_agrees() {
+    let p = tracking_4x2_f32();
+    let ours = p.kf_step().unwrap();
+    let (x, pp, nis) = benches::simd_experiment::step_4x2_f32(&p).unwrap();
+    let sp = pp.amax().max(1e-3);
+    assert!(
+        (ours.state() - x).amax() < 1e-5 * x.amax().max(1.0),
+        "{} {}",
+        ours.state(),
+        x
+    );
+    assert!(
+        (ours.covariance() - pp).amax() < 1e-5 * sp,
+        "{} {}",
+        ours.covariance(),
+        pp
+    );
+    assert_eq!(pp, pp.transpose());
+    assert!((ours.last_nis() - nis).abs() < 1e-4 * nis.max(1.0));
+}
+
+#[test]
+fn simd_experiment_agrees_f64() {
+    let p = occlusion_3x2_f64();
+    let ours = p.kf_step().unwrap();
+    let (x, pp, nis) = benches::simd_experiment::step_3x2_f64(&p).unwrap();
+    assert!((ours.state() - x).amax() < 1e-11, "{} {}", ours.state(), x);
+    assert!((ours.covariance() - pp).amax() < 1e-11);
+    assert_eq!(pp, pp.transpose());
+    assert!((ours.last_nis() - nis).abs() < 1e-10);
+}
+
+#[test]
+fn simd_experiment_refuses_what_the_core_refuses() {
+    let mut p = occlusion_3x2_f64();
+    p.y[1] = f64::NAN;
+    assert!(p.kf_step().is_err());
+    assert!(benches::simd_experiment::step_3x2_f64(&p).is_none());
+    let mut t = tracking_4x2_f32();
+    t.y[0] = f32::INFINITY;
+    assert!(t.kf_step().is_err());
+    assert!(benches::simd_experiment::step_4x2_f32(&t).is_none());
+}

@@ -148,6 +148,28 @@ fn criterion(o: &Opts, md: &mut String) -> Result<BTreeMap<String, Crit>> {
             }
         }
     }
+    let simd: Vec<String> = ["3x2_f64", "4x2_f32"]
+        .iter()
+        .filter_map(|prob| {
+            let a = get(&format!("kf_vs_adskalman/simd_experiment/{prob}"))?;
+            let b = get(&format!("kf_vs_adskalman/adskalman/{prob}"))?;
+            Some(format!(
+                "{prob} {} = {:.2}×",
+                fmt_ns(a.median_ns),
+                a.median_ns / b.median_ns
+            ))
+        })
+        .collect();
+    if !simd.is_empty() {
+        let _ = writeln!(
+            md,
+            "\nExplicit-SIMD experiment, **not in the product** \
+             (`benches/src/simd_experiment.rs`: the same Joseph step and validation on \
+             `wide` 4-lane columns, state padded to 4 lanes; agreement with the core's step is \
+             tested): {} `adskalman`'s Joseph step, same run.",
+            simd.join(", ")
+        );
+    }
     md.push_str("\n## Every criterion benchmark (medians)\n\n");
     md.push_str("| benchmark | median | 95 % CI of the median |\n|---|---:|---:|\n");
     for (id, c) in &res {
@@ -332,8 +354,7 @@ validation (which the core's promise — never panic, return an error, keep the 
 state — forbids) nor a cheaper Joseph variant would reach 0.8×. Shortening the chain with a \
 closed-form 2 × 2 inverse of S (one division instead of two, validation kept) was tried too \
 and gained nothing: 98 vs 102 ns and 126 vs 95 ns in one run (0.96× / 1.32×), with more \
-instructions (885 / 1 189). Explicit SIMD (architecture-specific code in a `no_std`, \
-`forbid(unsafe_code)` core) is not attempted. \
+instructions (885 / 1 189). \
 What the vectoriser does was measured last (2026-11-23 06:30 UTC, one run each, same \
 benches): with LLVM's SLP vectoriser switched off for the whole build \
 (`RUSTFLAGS=\"-C llvm-args=-vectorize-slp=false\"`), our 3x2 f64 step took 89 ns against \
@@ -348,8 +369,16 @@ exact symmetry by mirroring (825 / 1 388 instructions; 98 vs 89 ns and 111 vs 10
 105 vs 94 ns and 108 vs 95 ns: 1.10–1.12× and 1.08–1.14×). The second brings 4x2 f32 from \
 about 1.3× to about 1.1× but leaves 3x2 f64 where it was, and the disassembly shows why it \
 stops there: LLVM rebuilds the 4-float columns from scalar loads and shuffles (224 `shufps` \
-against 141 `mulps`) instead of keeping them in registers. Neither is near 0.8×; reaching it \
-looks like explicit SIMD types, not loop shapes.\n\n";
+against 141 `mulps`) instead of keeping them in registers. Neither is near 0.8×. \
+Explicit SIMD types were tried last, as an experiment kept in the benches \
+(`benches/src/simd_experiment.rs`, its ratios in the line under the table above): the same \
+step and validation on `wide::f32x4` / `wide::f64x4` columns. In its first run (07:30 UTC) \
+it took 64 ns against `adskalman`'s 83 ns on 4x2 f32 (0.77×) and 80 ns against 93 ns on 3x2 \
+f64 (0.86×): vectorisation is most of the f32 gap, and not enough for f64 with 3 states in \
+4 lanes. It is not in the core: it is written for NX ≤ 4, NY = 2 and two lane types, would \
+add a SIMD dependency to the `no_std` core, and would run as plain scalar code on the \
+Cortex-M4, which has no SIMD floating point; whether that trade is wanted is a product \
+decision, not a benchmark one.\n\n";
 
 // ----------------------------------------------------------------------------- firmware
 
