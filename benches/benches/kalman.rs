@@ -32,9 +32,6 @@ fn versus_adskalman(c: &mut Criterion) {
     g.bench_function(BenchmarkId::new("adskalman_symmetric", p.name), |b| {
         b.iter(|| black_box(black_box(&a).step_symmetric()))
     });
-    g.bench_function(BenchmarkId::new("simd_experiment", p.name), |b| {
-        b.iter(|| black_box(benches::simd_experiment::step_3x2_f64(black_box(&p))))
-    });
     let p = tracking_4x2_f32();
     let a = AdsProblem::from_core(&p);
     g.bench_function(BenchmarkId::new("ours", p.name), |b| {
@@ -48,9 +45,6 @@ fn versus_adskalman(c: &mut Criterion) {
     });
     g.bench_function(BenchmarkId::new("adskalman_symmetric", p.name), |b| {
         b.iter(|| black_box(black_box(&a).step_symmetric()))
-    });
-    g.bench_function(BenchmarkId::new("simd_experiment", p.name), |b| {
-        b.iter(|| black_box(benches::simd_experiment::step_4x2_f32(black_box(&p))))
     });
     g.finish();
 }

@@ -11,4 +11,3 @@
 pub mod ads;
 pub mod estimators;
 pub mod problems;
-pub mod simd_experiment;

@@ -9,6 +9,9 @@
 //! * Nothing panics on bad data: every step returns [`Result`], and on error the estimator's
 //!   state is exactly what it was before the call.
 //!
+//! Features (off by default): `simd` runs the Kalman kernels of `linalg_small` on SIMD lanes
+//! on x86-64 and AArch64 (`linalg_lanes`), bit-identical to the scalar ones.
+//!
 //! Module map (one concept per file): [`linalg`] (Cholesky solves, symmetrisation),
 //! [`gauss`] (normal pdf/cdf, tail-accurate inverse Mills ratio, log-sum-exp), [`model`]
 //! (linear and time-varying models), [`protocol`] (sensor-side communication protocols) and
@@ -45,6 +48,8 @@ pub mod gsum;
 pub mod linalg;
 pub mod linalg_eig;
 pub mod linalg_kron;
+#[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
+pub mod linalg_lanes;
 pub mod linalg_small;
 pub mod model;
 pub mod protocol;

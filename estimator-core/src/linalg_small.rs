@@ -198,6 +198,12 @@ impl<T: Real, const N: usize> SmallLdl<T, N> {
         &self.d
     }
 
+    /// The pivots' reciprocals `1 / d_j`, as every solve uses them.
+    #[inline]
+    pub fn inv_d(&self) -> &[T; N] {
+        &self.inv_d
+    }
+
     /// `ln det S = Σ ln d_j`.
     #[inline]
     pub fn ln_det(&self) -> T {

@@ -148,28 +148,6 @@ fn criterion(o: &Opts, md: &mut String) -> Result<BTreeMap<String, Crit>> {
             }
         }
     }
-    let simd: Vec<String> = ["3x2_f64", "4x2_f32"]
-        .iter()
-        .filter_map(|prob| {
-            let a = get(&format!("kf_vs_adskalman/simd_experiment/{prob}"))?;
-            let b = get(&format!("kf_vs_adskalman/adskalman/{prob}"))?;
-            Some(format!(
-                "{prob} {} = {:.2}×",
-                fmt_ns(a.median_ns),
-                a.median_ns / b.median_ns
-            ))
-        })
-        .collect();
-    if !simd.is_empty() {
-        let _ = writeln!(
-            md,
-            "\nExplicit-SIMD experiment, **not in the product** \
-             (`benches/src/simd_experiment.rs`: the same Joseph step and validation on \
-             `wide` 4-lane columns, state padded to 4 lanes; agreement with the core's step is \
-             tested): {} `adskalman`'s Joseph step, same run.",
-            simd.join(", ")
-        );
-    }
     md.push_str("\n## Every criterion benchmark (medians)\n\n");
     md.push_str("| benchmark | median | 95 % CI of the median |\n|---|---:|---:|\n");
     for (id, c) in &res {
@@ -330,9 +308,9 @@ triangle and mirrored (exactly symmetric, no symmetrisation pass), `(I − KC) P
 `P − K (C P)`, a square-root-free `L D Lᵀ` factorisation of S with reciprocal pivots (the \
 factor-and-solve chain is about half as long as `L Lᵀ`'s: no square root and one division \
 per pivot), and a one-pass branch-free finiteness test.\n\n\
-| instructions / step (binaries of the time) | first | 1 | 1 + 2 | 1 + 2 + 3 | adskalman |\n|---|---:|---:|---:|---:|---:|\n\
-| kf 3x2 f64 | 1404 | 1119 | 1054 | 770 | 678 |\n\
-| kf 4x2 f32 | 1432 | 1258 | 1247 | 1143 | 814 |\n\n\
+| instructions / step (binaries of the time) | first | 1 | 1 + 2 | 1 + 2 + 3 | 1 – 4 (`simd`) | adskalman |\n|---|---:|---:|---:|---:|---:|---:|\n\
+| kf 3x2 f64 | 1404 | 1119 | 1054 | 770 | 847 | 678 |\n\
+| kf 4x2 f32 | 1432 | 1258 | 1247 | 1143 | 721 | 814 |\n\n\
 Counts depend on inlining, which changes with the binary: the current ones are in the table \
 above (same method).\n\n\
 The time ratio fell more than the instruction ratio (the shorter dependency chain of \
@@ -370,15 +348,24 @@ exact symmetry by mirroring (825 / 1 388 instructions; 98 vs 89 ns and 111 vs 10
 about 1.3× to about 1.1× but leaves 3x2 f64 where it was, and the disassembly shows why it \
 stops there: LLVM rebuilds the 4-float columns from scalar loads and shuffles (224 `shufps` \
 against 141 `mulps`) instead of keeping them in registers. Neither is near 0.8×. \
-Explicit SIMD types were tried last, as an experiment kept in the benches \
-(`benches/src/simd_experiment.rs`, its ratios in the line under the table above): the same \
-step and validation on `wide::f32x4` / `wide::f64x4` columns. In its first run (07:30 UTC) \
-it took 64 ns against `adskalman`'s 83 ns on 4x2 f32 (0.77×) and 80 ns against 93 ns on 3x2 \
-f64 (0.86×): vectorisation is most of the f32 gap, and not enough for f64 with 3 states in \
-4 lanes. It is not in the core: it is written for NX ≤ 4, NY = 2 and two lane types, would \
-add a SIMD dependency to the `no_std` core, and would run as plain scalar code on the \
-Cortex-M4, which has no SIMD floating point; whether that trade is wanted is a product \
-decision, not a benchmark one.\n\n";
+Explicit SIMD types came next. A first experiment (the same step and validation on \
+`wide::f32x4` / `wide::f64x4` columns, NX ≤ 4 padded to 4 lanes, free summation order) \
+measured 0.77× / 0.75× on 4x2 f32 and 0.86× / 0.75× on 3x2 f64 in two runs (07:00–07:10 \
+UTC; `adskalman`'s 3x2 f64 median was unusually noisy in the second). What went into the \
+core is the constrained version of it, 4. below.\n\n\
+4. `linalg_lanes` (feature `simd`, off by default, on x86-64 and AArch64; `ipc-runner` and \
+these benches turn it on): the predict and the update, fused in `KalmanFilter::step`, on \
+4-lane columns, computing **the same IEEE operations in the same order** as `linalg_small` \
+(sums from the first product over `k` ascending, symmetric results from the upper triangle, \
+the same `L D Lᵀ` factor). The results are the same bits: tested against the scalar kernels \
+on 2 000 random problems (NX 1–4, NY 1–4, f32 and f64, both covariance forms), and by the \
+firmware check, whose host side now takes the lanes while the Cortex-M4 keeps the scalar \
+code. Keeping the scalar order costs some speed against the free experiment (sequential \
+horizontal sums for S and ν, mirroring through memory). First measurements (07:30 UTC, \
+one run each): 4x2 f32 83–86 ns against `adskalman`'s 82–89 ns (0.95–1.02×; 117–168 ns \
+before), 3x2 f64 92–96 ns against 91–92 ns (1.01–1.04×; 99–107 ns before). The table above \
+has the figures of this run. f64 gains little: three states in two 2-lane SSE2 registers \
+leave half of the second idle.\n\n";
 
 // ----------------------------------------------------------------------------- firmware
 

@@ -138,6 +138,23 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         // prediction always makes the update fail (NaN and ∞ reach S or x⁺ through every
         // product, 0·∞ included), and the error is then the one `predict` would have given.
         let j = k.saturating_sub(1);
+        #[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
+        if let Some((x, p, nis)) = crate::linalg_lanes::step(
+            &self.x,
+            &self.p,
+            &model.a(j),
+            &model.process_cov(j),
+            &model.c(k),
+            &model.measurement_cov(k),
+            y,
+            self.form,
+        ) {
+            // The same bits as the scalar path below; refusals take that path for the error.
+            self.x = x;
+            self.p = p;
+            self.nis = nis;
+            return Ok(());
+        }
         let (x_pred, p_pred) = predict_raw(&self.x, &self.p, &model.a(j), &model.process_cov(j));
         let (x, p, nis) = kalman_update(
             &x_pred,
@@ -163,6 +180,24 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
 /// Shared by the estimators that run a Kalman update inside a larger step.
 #[inline(always)]
 pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
+    x: &SVector<T, NX>,
+    p: &SMatrix<T, NX, NX>,
+    c: &SMatrix<T, NY, NX>,
+    r: &SMatrix<T, NY, NY>,
+    y: &SVector<T, NY>,
+    form: CovarianceUpdate,
+) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
+    #[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
+    if let Some(out) = crate::linalg_lanes::kalman_update(x, p, c, r, y, form) {
+        return Ok(out); // the same bits as the scalar kernels, several entries at a time
+    }
+    kalman_update_scalar(x, p, c, r, y, form)
+}
+
+/// [`kalman_update`] on the scalar kernels of [`crate::linalg_small`] (every target; the
+/// reference the SIMD lanes are tested against bit for bit).
+#[inline(always)]
+pub(crate) fn kalman_update_scalar<T: Real, const NX: usize, const NY: usize>(
     x: &SVector<T, NX>,
     p: &SMatrix<T, NX, NX>,
     c: &SMatrix<T, NY, NX>,

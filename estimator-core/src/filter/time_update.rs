@@ -17,6 +17,10 @@ pub fn predict_raw<T: Real, const NX: usize>(
     a: &SMatrix<T, NX, NX>,
     q: &SMatrix<T, NX, NX>,
 ) -> (SVector<T, NX>, SMatrix<T, NX, NX>) {
+    #[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
+    if let Some(out) = crate::linalg_lanes::predict(x, p, a, q) {
+        return out; // the same bits as below, several entries at a time
+    }
     (small::mul_vec(a, x), small::congruence_add(a, p, q))
 }
 
