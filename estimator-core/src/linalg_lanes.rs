@@ -31,6 +31,23 @@ fn cast<U: 'static>(v: &dyn Any) -> Option<&U> {
     v.downcast_ref::<U>()
 }
 
+/// The body of every entry point: the `f32` lanes, else the `f64` lanes, else `None`
+/// (`NX > 4`, or another scalar type).
+macro_rules! dispatch {
+    ($f:ident::<$($g:ident),+>($($m:ident),+; $($rest:expr),*)) => {{
+        if NX > 4 {
+            return None;
+        }
+        if let ($(Some($m),)+) = ($(cast($m),)+) {
+            return cast(&f32_lanes::$f::<$($g),+>($($m,)+ $($rest),*)?).copied();
+        }
+        if let ($(Some($m),)+) = ($(cast($m),)+) {
+            return cast(&f64_lanes::$f::<$($g),+>($($m,)+ $($rest),*)?).copied();
+        }
+        None
+    }};
+}
+
 /// Same as [`crate::filter::time_update::predict_raw`], on lanes.
 #[inline(always)]
 pub fn predict<T: Real, const NX: usize>(
@@ -39,18 +56,7 @@ pub fn predict<T: Real, const NX: usize>(
     a: &SMatrix<T, NX, NX>,
     q: &SMatrix<T, NX, NX>,
 ) -> Option<(SVector<T, NX>, SMatrix<T, NX, NX>)> {
-    if NX > 4 {
-        return None;
-    }
-    if let (Some(x), Some(p), Some(a), Some(q)) = (cast(x), cast(p), cast(a), cast(q)) {
-        let out = f32_lanes::predict::<NX>(x, p, a, q);
-        return cast::<(SVector<T, NX>, SMatrix<T, NX, NX>)>(&out).copied();
-    }
-    if let (Some(x), Some(p), Some(a), Some(q)) = (cast(x), cast(p), cast(a), cast(q)) {
-        let out = f64_lanes::predict::<NX>(x, p, a, q);
-        return cast::<(SVector<T, NX>, SMatrix<T, NX, NX>)>(&out).copied();
-    }
-    None
+    dispatch!(predict::<NX>(x, p, a, q;))
 }
 
 /// Same as [`crate::filter::kalman::kalman_update`], on lanes; `None` also when it would
@@ -65,22 +71,7 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
     y: &SVector<T, NY>,
     form: CovarianceUpdate,
 ) -> Option<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
-    if NX > 4 {
-        return None;
-    }
-    if let (Some(x), Some(p), Some(c), Some(r), Some(y)) =
-        (cast(x), cast(p), cast(c), cast(r), cast(y))
-    {
-        let out = f32_lanes::update::<NX, NY>(x, p, c, r, y, form)?;
-        return cast::<(SVector<T, NX>, SMatrix<T, NX, NX>, T)>(&out).copied();
-    }
-    if let (Some(x), Some(p), Some(c), Some(r), Some(y)) =
-        (cast(x), cast(p), cast(c), cast(r), cast(y))
-    {
-        let out = f64_lanes::update::<NX, NY>(x, p, c, r, y, form)?;
-        return cast::<(SVector<T, NX>, SMatrix<T, NX, NX>, T)>(&out).copied();
-    }
-    None
+    dispatch!(update::<NX, NY>(x, p, c, r, y; form))
 }
 
 /// [`predict`] then [`kalman_update`] (the Kalman filter's step), without leaving the lanes
@@ -97,34 +88,7 @@ pub fn step<T: Real, const NX: usize, const NY: usize>(
     y: &SVector<T, NY>,
     form: CovarianceUpdate,
 ) -> Option<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
-    if NX > 4 {
-        return None;
-    }
-    if let (Some(x), Some(p), Some(a), Some(q), Some(c), Some(r), Some(y)) = (
-        cast(x),
-        cast(p),
-        cast(a),
-        cast(q),
-        cast(c),
-        cast(r),
-        cast(y),
-    ) {
-        let out = f32_lanes::step::<NX, NY>(x, p, a, q, c, r, y, form)?;
-        return cast::<(SVector<T, NX>, SMatrix<T, NX, NX>, T)>(&out).copied();
-    }
-    if let (Some(x), Some(p), Some(a), Some(q), Some(c), Some(r), Some(y)) = (
-        cast(x),
-        cast(p),
-        cast(a),
-        cast(q),
-        cast(c),
-        cast(r),
-        cast(y),
-    ) {
-        let out = f64_lanes::step::<NX, NY>(x, p, a, q, c, r, y, form)?;
-        return cast::<(SVector<T, NX>, SMatrix<T, NX, NX>, T)>(&out).copied();
-    }
-    None
+    dispatch!(step::<NX, NY>(x, p, a, q, c, r, y; form))
 }
 
 macro_rules! lanes {
@@ -306,9 +270,9 @@ macro_rules! lanes {
                 p: &SMatrix<$t, NX, NX>,
                 a: &SMatrix<$t, NX, NX>,
                 q: &SMatrix<$t, NX, NX>,
-            ) -> (SVector<$t, NX>, SMatrix<$t, NX, NX>) {
+            ) -> Option<(SVector<$t, NX>, SMatrix<$t, NX, NX>)> {
                 let (xn, pp) = predict_cols(x, p, a, q);
-                (full::<NX, 1>(&[xn]), full(&pp))
+                Some((full::<NX, 1>(&[xn]), full(&pp)))
             }
 
             #[allow(clippy::type_complexity)]
