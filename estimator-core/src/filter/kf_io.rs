@@ -1,6 +1,6 @@
 //! `kf-io`: a linear MMSE filter that treats packet arrival as a Bernoulli variable whose
 //! probability comes from the prior — the baseline the seed 001 paper compares against
-//! (its ref. [37], Thapliyal et al. 2019), which it cites without equations. The construction
+//! (its ref. \[37\], Thapliyal et al. 2019), which it cites without equations. The construction
 //! is fixed in DESIGN.md ("Seed 001 … KF-IO"):
 //!
 //! ```text
