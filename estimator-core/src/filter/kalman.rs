@@ -138,8 +138,10 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         // prediction always makes the update fail (NaN and ∞ reach S or x⁺ through every
         // product, 0·∞ included), and the error is then the one `predict` would have given.
         let j = k.saturating_sub(1);
+        // With `simd`, predict and update on lanes (the same bits as the scalar path); a
+        // refusal there takes the scalar path, which names the error.
         #[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
-        if let Some((x, p, nis)) = crate::linalg_lanes::step(
+        let lanes = crate::linalg_lanes::step(
             &self.x,
             &self.p,
             &model.a(j),
@@ -148,23 +150,25 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
             &model.measurement_cov(k),
             y,
             self.form,
-        ) {
-            // The same bits as the scalar path below; refusals take that path for the error.
-            self.x = x;
-            self.p = p;
-            self.nis = nis;
-            return Ok(());
-        }
-        let (x_pred, p_pred) = predict_raw(&self.x, &self.p, &model.a(j), &model.process_cov(j));
-        let (x, p, nis) = kalman_update(
-            &x_pred,
-            &p_pred,
-            &model.c(k),
-            &model.measurement_cov(k),
-            y,
-            self.form,
-        )
-        .map_err(|e| check_predicted(&x_pred, &p_pred).err().unwrap_or(e))?;
+        );
+        #[cfg(not(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64"))))]
+        let lanes = None;
+        let (x, p, nis) = match lanes {
+            Some(out) => out,
+            None => {
+                let (x_pred, p_pred) =
+                    predict_raw(&self.x, &self.p, &model.a(j), &model.process_cov(j));
+                kalman_update_scalar(
+                    &x_pred,
+                    &p_pred,
+                    &model.c(k),
+                    &model.measurement_cov(k),
+                    y,
+                    self.form,
+                )
+                .map_err(|e| check_predicted(&x_pred, &p_pred).err().unwrap_or(e))?
+            }
+        };
         self.x = x;
         self.p = p;
         self.nis = nis;
