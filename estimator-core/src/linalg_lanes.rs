@@ -162,6 +162,13 @@ macro_rules! lanes {
                 SMatrix::from_fn(|i, j| a[j][i])
             }
 
+            /// The symmetric matrix whose upper triangle is that of `m`'s columns.
+            #[inline(always)]
+            fn full_sym<const R: usize>(m: &Cols<R>) -> SMatrix<$t, R, R> {
+                let a: [[$t; 4]; R] = core::array::from_fn(|j| m[j].to_array());
+                SMatrix::from_fn(|i, j| if i <= j { a[j][i] } else { a[i][j] })
+            }
+
             /// `Σ_k u_k v_k` over the first `K` lanes, from the first product.
             #[inline(always)]
             fn dot<const K: usize>(u: V, v: V) -> $t {
@@ -262,9 +269,14 @@ macro_rules! lanes {
                 let nis = chol.mahalanobis(&nu);
                 // Lanes below the diagonal and past NX are checked too: a spurious refusal
                 // only sends the caller to the scalar path, which decides exactly.
-                (finite(&[xn]) && finite(&pn) && nis.is_finite()).then(|| (xn, mirror(&pn), nis))
+                let mut fin = xn - xn;
+                for v in &pn {
+                    fin += *v - *v;
+                }
+                (finite(&[fin]) && nis.is_finite()).then_some((xn, pn, nis))
             }
 
+            #[inline(always)]
             pub fn predict<const NX: usize>(
                 x: &SVector<$t, NX>,
                 p: &SMatrix<$t, NX, NX>,
@@ -275,6 +287,7 @@ macro_rules! lanes {
                 Some((full::<NX, 1>(&[xn]), full(&pp)))
             }
 
+            #[inline(always)]
             #[allow(clippy::type_complexity)]
             pub fn update<const NX: usize, const NY: usize>(
                 x: &SVector<$t, NX>,
@@ -285,9 +298,10 @@ macro_rules! lanes {
                 form: CovarianceUpdate,
             ) -> Option<(SVector<$t, NX>, SMatrix<$t, NX, NX>, $t)> {
                 let (xn, pn, nis) = update_cols(col(x, 0), &cols(p), c, r, y, form)?;
-                Some((full::<NX, 1>(&[xn]), full(&pn), nis))
+                Some((full::<NX, 1>(&[xn]), full_sym(&pn), nis))
             }
 
+            #[inline(always)]
             /// Predict then update without leaving the lanes in between.
             #[allow(clippy::type_complexity, clippy::too_many_arguments)]
             pub fn step<const NX: usize, const NY: usize>(
@@ -302,7 +316,7 @@ macro_rules! lanes {
             ) -> Option<(SVector<$t, NX>, SMatrix<$t, NX, NX>, $t)> {
                 let (xp, pp) = predict_cols(x, p, a, q);
                 let (xn, pn, nis) = update_cols(xp, &pp, c, r, y, form)?;
-                Some((full::<NX, 1>(&[xn]), full(&pn), nis))
+                Some((full::<NX, 1>(&[xn]), full_sym(&pn), nis))
             }
         }
     };

@@ -155,24 +155,43 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         let lanes = None;
         let (x, p, nis) = match lanes {
             Some(out) => out,
-            None => {
-                let (x_pred, p_pred) =
-                    predict_raw(&self.x, &self.p, &model.a(j), &model.process_cov(j));
-                kalman_update_scalar(
-                    &x_pred,
-                    &p_pred,
-                    &model.c(k),
-                    &model.measurement_cov(k),
-                    y,
-                    self.form,
-                )
-                .map_err(|e| check_predicted(&x_pred, &p_pred).err().unwrap_or(e))?
-            }
+            None => self.step_scalar(model, j, k, y)?,
         };
         self.x = x;
         self.p = p;
         self.nis = nis;
         Ok(())
+    }
+
+    /// `step`'s scalar path: every target without `simd`, and the exact error after the
+    /// lanes refused (then out of line and cold, so that the lanes' fast path stays small).
+    #[cfg_attr(
+        all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")),
+        cold,
+        inline(never)
+    )]
+    #[cfg_attr(
+        not(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64"))),
+        inline(always)
+    )]
+    #[allow(clippy::type_complexity)]
+    fn step_scalar<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        j: usize,
+        k: usize,
+        y: &SVector<T, NY>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
+        let (x_pred, p_pred) = predict_raw(&self.x, &self.p, &model.a(j), &model.process_cov(j));
+        kalman_update_scalar(
+            &x_pred,
+            &p_pred,
+            &model.c(k),
+            &model.measurement_cov(k),
+            y,
+            self.form,
+        )
+        .map_err(|e| check_predicted(&x_pred, &p_pred).err().unwrap_or(e))
     }
 }
 
