@@ -6,6 +6,7 @@
 //! `benches/run.sh` turns the medians into the ratios of `BENCHMARKS.md`.
 
 use benches::ads::AdsProblem;
+use benches::compare as cmp;
 use benches::problems::{
     occlusion_3x2_f32, occlusion_3x2_f64, tracking_4x2_f32, tracking_4x2_f64, KfProblem,
 };
@@ -18,33 +19,35 @@ fn versus_adskalman(c: &mut Criterion) {
     let mut g = c.benchmark_group("kf_vs_adskalman");
     g.warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(3));
+    // The steps are `benches::compare`'s non-inlined functions, the same machine code that
+    // `icount` and `kf_interleaved` run.
     let p = occlusion_3x2_f64();
     let a = AdsProblem::from_core(&p);
     g.bench_function(BenchmarkId::new("ours", p.name), |b| {
-        b.iter(|| black_box(black_box(&p).kf_step()))
+        b.iter(|| cmp::ours_joseph_3x2_f64(black_box(&p)))
     });
     g.bench_function(BenchmarkId::new("adskalman", p.name), |b| {
-        b.iter(|| black_box(black_box(&a).step()))
+        b.iter(|| cmp::ads_joseph_3x2_f64(black_box(&a)))
     });
     g.bench_function(BenchmarkId::new("ours_standard", p.name), |b| {
-        b.iter(|| black_box(black_box(&p).kf_standard_step()))
+        b.iter(|| cmp::ours_standard_3x2_f64(black_box(&p)))
     });
     g.bench_function(BenchmarkId::new("adskalman_symmetric", p.name), |b| {
-        b.iter(|| black_box(black_box(&a).step_symmetric()))
+        b.iter(|| cmp::ads_symmetric_3x2_f64(black_box(&a)))
     });
     let p = tracking_4x2_f32();
     let a = AdsProblem::from_core(&p);
     g.bench_function(BenchmarkId::new("ours", p.name), |b| {
-        b.iter(|| black_box(black_box(&p).kf_step()))
+        b.iter(|| cmp::ours_joseph_4x2_f32(black_box(&p)))
     });
     g.bench_function(BenchmarkId::new("adskalman", p.name), |b| {
-        b.iter(|| black_box(black_box(&a).step()))
+        b.iter(|| cmp::ads_joseph_4x2_f32(black_box(&a)))
     });
     g.bench_function(BenchmarkId::new("ours_standard", p.name), |b| {
-        b.iter(|| black_box(black_box(&p).kf_standard_step()))
+        b.iter(|| cmp::ours_standard_4x2_f32(black_box(&p)))
     });
     g.bench_function(BenchmarkId::new("adskalman_symmetric", p.name), |b| {
-        b.iter(|| black_box(black_box(&a).step_symmetric()))
+        b.iter(|| cmp::ads_symmetric_4x2_f32(black_box(&a)))
     });
     g.finish();
 }

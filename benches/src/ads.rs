@@ -20,6 +20,9 @@ fn conv<T: Real + na35::Scalar, const R: usize, const C: usize>(
     SMatrix::from_column_slice(m.as_slice())
 }
 
+/// What one `adskalman` step returns.
+pub type AdsState<T, const NX: usize> = Result<StateAndCovariance<T, Const<NX>>, Error>;
+
 /// A linear model in `adskalman`'s shape (`F`, `Fᵀ`, `Q`, `H`, `Hᵀ`, `R` stored).
 #[derive(Clone, Debug)]
 pub struct AdsModel<T: RealField + Copy, const NX: usize, const NY: usize> {

@@ -9,5 +9,6 @@
 //! branch pattern, and our filter and `adskalman` see bit-for-bit the same inputs.
 
 pub mod ads;
+pub mod compare;
 pub mod estimators;
 pub mod problems;

@@ -6,6 +6,7 @@
 //! instructions of one step. `icount list` prints the kernel names.
 
 use benches::ads::AdsProblem;
+use benches::compare as cmp;
 use benches::problems::{occlusion_3x2_f32, occlusion_3x2_f64, tracking_4x2_f32, tracking_4x2_f64};
 use std::hint::black_box;
 use std::process::ExitCode;
@@ -73,25 +74,37 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
                 f.update(&pp.model, 1, &pp.y).map(|_| f)
             }),
         ),
-        ("kf/3x2_f64", repeat(move || black_box(&p64).kf_step())),
-        ("adskalman/3x2_f64", repeat(move || black_box(&a64).step())),
-        ("kf/4x2_f32", repeat(move || black_box(&t32).kf_step())),
-        ("adskalman/4x2_f32", repeat(move || black_box(&a32).step())),
+        (
+            "kf/3x2_f64",
+            repeat(move || cmp::ours_joseph_3x2_f64(black_box(&p64))),
+        ),
+        (
+            "adskalman/3x2_f64",
+            repeat(move || cmp::ads_joseph_3x2_f64(black_box(&a64))),
+        ),
+        (
+            "kf/4x2_f32",
+            repeat(move || cmp::ours_joseph_4x2_f32(black_box(&t32))),
+        ),
+        (
+            "adskalman/4x2_f32",
+            repeat(move || cmp::ads_joseph_4x2_f32(black_box(&a32))),
+        ),
         (
             "kf_standard/3x2_f64",
-            repeat(move || black_box(&p64).kf_standard_step()),
+            repeat(move || cmp::ours_standard_3x2_f64(black_box(&p64))),
         ),
         (
             "adskalman_symmetric/3x2_f64",
-            repeat(move || black_box(&a64s).step_symmetric()),
+            repeat(move || cmp::ads_symmetric_3x2_f64(black_box(&a64s))),
         ),
         (
             "kf_standard/4x2_f32",
-            repeat(move || black_box(&t32).kf_standard_step()),
+            repeat(move || cmp::ours_standard_4x2_f32(black_box(&t32))),
         ),
         (
             "adskalman_symmetric/4x2_f32",
-            repeat(move || black_box(&a32s).step_symmetric()),
+            repeat(move || cmp::ads_symmetric_4x2_f32(black_box(&a32s))),
         ),
         ("kf/3x2_f32", repeat(move || black_box(&p32).kf_step())),
         ("kf/4x2_f64", repeat(move || black_box(&t64).kf_step())),

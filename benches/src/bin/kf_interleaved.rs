@@ -18,13 +18,13 @@
 
 use anyhow::{bail, Context, Result};
 use benches::ads::AdsProblem;
+use benches::compare as cmp;
 use benches::problems::{occlusion_3x2_f64, tracking_4x2_f32};
 use std::hint::black_box;
 use std::time::Instant;
 
-/// Nanoseconds per call of `f`, over `batch` calls. Generic, so that each step is inlined
-/// into its own timing loop as in criterion's `iter` (the codegen of both sides is then what
-/// the criterion bench and `icount` measure).
+/// Nanoseconds per call of `f`, over `batch` calls. The steps themselves are
+/// `benches::compare`'s non-inlined functions, the machine code criterion and `icount` run.
 #[inline(always)]
 fn time(batch: u32, f: &mut impl FnMut()) -> f64 {
     let t = Instant::now();
@@ -125,10 +125,10 @@ fn run() -> Result<()> {
                 n,
                 batch,
                 || {
-                    black_box(black_box(&p64).kf_step()).ok();
+                    black_box(cmp::ours_joseph_3x2_f64(black_box(&p64))).ok();
                 },
                 || {
-                    black_box(black_box(&a64).step()).ok();
+                    black_box(cmp::ads_joseph_3x2_f64(black_box(&a64))).ok();
                 },
             ),
             Pair::measure(
@@ -137,10 +137,10 @@ fn run() -> Result<()> {
                 n,
                 batch,
                 || {
-                    black_box(black_box(&p32).kf_step()).ok();
+                    black_box(cmp::ours_joseph_4x2_f32(black_box(&p32))).ok();
                 },
                 || {
-                    black_box(black_box(&a32).step()).ok();
+                    black_box(cmp::ads_joseph_4x2_f32(black_box(&a32))).ok();
                 },
             ),
             Pair::measure(
@@ -149,10 +149,10 @@ fn run() -> Result<()> {
                 n,
                 batch,
                 || {
-                    black_box(black_box(&p64).kf_standard_step()).ok();
+                    black_box(cmp::ours_standard_3x2_f64(black_box(&p64))).ok();
                 },
                 || {
-                    black_box(black_box(&a64).step_symmetric()).ok();
+                    black_box(cmp::ads_symmetric_3x2_f64(black_box(&a64))).ok();
                 },
             ),
             Pair::measure(
@@ -161,10 +161,10 @@ fn run() -> Result<()> {
                 n,
                 batch,
                 || {
-                    black_box(black_box(&p32).kf_standard_step()).ok();
+                    black_box(cmp::ours_standard_4x2_f32(black_box(&p32))).ok();
                 },
                 || {
-                    black_box(black_box(&a32).step_symmetric()).ok();
+                    black_box(cmp::ads_symmetric_4x2_f32(black_box(&a32))).ok();
                 },
             ),
         ];
