@@ -52,14 +52,19 @@ struct Pair {
 impl Pair {
     /// Runs `rounds` rounds of `batch` calls of each side (after one warm-up batch each),
     /// alternating which side goes first.
-    fn measure(
-        problem: &'static str,
-        form: &'static str,
+    fn measure<P, A, RP, RA>(
+        (problem, form): (&'static str, &'static str),
         rounds: u32,
         batch: u32,
-        mut ours: impl FnMut(),
-        mut ads: impl FnMut(),
+        (ours, p): (fn(&P) -> RP, &P),
+        (ads, a): (fn(&A) -> RA, &A),
     ) -> Self {
+        let mut ours = || {
+            black_box(ours(black_box(p)));
+        };
+        let mut ads = || {
+            black_box(ads(black_box(a)));
+        };
         time(batch, &mut ours);
         time(batch, &mut ads);
         let mut p = Self {
@@ -120,52 +125,32 @@ fn run() -> Result<()> {
         let n = chunk.min(rounds - done);
         let parts = [
             Pair::measure(
-                "3x2_f64",
-                "Joseph",
+                ("3x2_f64", "Joseph"),
                 n,
                 batch,
-                || {
-                    black_box(cmp::ours_joseph_3x2_f64(black_box(&p64))).ok();
-                },
-                || {
-                    black_box(cmp::ads_joseph_3x2_f64(black_box(&a64))).ok();
-                },
+                (cmp::ours_joseph_3x2_f64, &p64),
+                (cmp::ads_joseph_3x2_f64, &a64),
             ),
             Pair::measure(
-                "4x2_f32",
-                "Joseph",
+                ("4x2_f32", "Joseph"),
                 n,
                 batch,
-                || {
-                    black_box(cmp::ours_joseph_4x2_f32(black_box(&p32))).ok();
-                },
-                || {
-                    black_box(cmp::ads_joseph_4x2_f32(black_box(&a32))).ok();
-                },
+                (cmp::ours_joseph_4x2_f32, &p32),
+                (cmp::ads_joseph_4x2_f32, &a32),
             ),
             Pair::measure(
-                "3x2_f64",
-                "optimal gain",
+                ("3x2_f64", "optimal gain"),
                 n,
                 batch,
-                || {
-                    black_box(cmp::ours_standard_3x2_f64(black_box(&p64))).ok();
-                },
-                || {
-                    black_box(cmp::ads_symmetric_3x2_f64(black_box(&a64))).ok();
-                },
+                (cmp::ours_standard_3x2_f64, &p64),
+                (cmp::ads_symmetric_3x2_f64, &a64),
             ),
             Pair::measure(
-                "4x2_f32",
-                "optimal gain",
+                ("4x2_f32", "optimal gain"),
                 n,
                 batch,
-                || {
-                    black_box(cmp::ours_standard_4x2_f32(black_box(&p32))).ok();
-                },
-                || {
-                    black_box(cmp::ads_symmetric_4x2_f32(black_box(&a32))).ok();
-                },
+                (cmp::ours_standard_4x2_f32, &p32),
+                (cmp::ads_symmetric_4x2_f32, &a32),
             ),
         ];
         if pairs.is_empty() {
