@@ -4,7 +4,8 @@
 # Cortex-M4 counts from .ci/firmware, IPC latency, the pipeline end to end, Monte-Carlo
 # throughput) and writes the tables.
 #
-#   benches/run.sh                 # full run (~15-25 min on 2 cores)
+#   benches/run.sh                 # full run (~15-20 min on 2 cores; the first also builds
+#                                  # two extra kf_interleaved variants, ~3 min each)
 #   benches/run.sh --quick         # short runs, indicative only
 #   benches/run.sh --skip firmware,eval
 #
@@ -13,6 +14,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export IOX2_LOG_LEVEL=Error
-cargo build --release -p benches --bins
+# The benchmark binaries with the profile `cargo bench` uses (`profile.bench`: thin LTO, one
+# codegen unit), so that criterion, icount and kf_interleaved time the same build; the report
+# builds the plain-release variants of kf_interleaved into target/plain-release and
+# target/x86-64-v3 itself.
+cargo build --profile bench -p benches --bins
 cargo build --release -p ipc-runner
 exec target/release/report "$@"
