@@ -145,11 +145,12 @@ macro_rules! lanes {
                 core::array::from_fn(|j| V::from(a[j]))
             }
 
-            /// Every lane finite (`v − v` is 0 for finite `v`, NaN otherwise).
+            /// Every lane of `x` and of `m` finite (`v − v` is 0 for finite `v`, NaN
+            /// otherwise), in one reduction.
             #[inline(always)]
-            fn finite<const C: usize>(m: &Cols<C>) -> bool {
-                let mut acc = m[0] - m[0];
-                for v in m.iter().skip(1) {
+            fn finite<const C: usize>(x: V, m: &Cols<C>) -> bool {
+                let mut acc = x - x;
+                for v in m {
                     acc += *v - *v;
                 }
                 let a = acc.to_array();
@@ -197,8 +198,9 @@ macro_rules! lanes {
                 (xn, mirror(&pp))
             }
 
-            /// The update on columns, `P⁺` mirrored. `None` when refused or when a lane of
-            /// the result is not finite.
+            /// The update on columns; only the upper triangle of `P⁺` is meaningful (read it
+            /// with `full_sym`). `None` when refused or when a lane of the result is not
+            /// finite.
             #[inline(always)]
             #[allow(clippy::type_complexity)]
             fn update_cols<const NX: usize, const NY: usize>(
@@ -269,11 +271,7 @@ macro_rules! lanes {
                 let nis = chol.mahalanobis(&nu);
                 // Lanes below the diagonal and past NX are checked too: a spurious refusal
                 // only sends the caller to the scalar path, which decides exactly.
-                let mut fin = xn - xn;
-                for v in &pn {
-                    fin += *v - *v;
-                }
-                (finite(&[fin]) && nis.is_finite()).then_some((xn, pn, nis))
+                (finite(xn, &pn) && nis.is_finite()).then_some((xn, pn, nis))
             }
 
             #[inline(always)]
@@ -301,8 +299,8 @@ macro_rules! lanes {
                 Some((full::<NX, 1>(&[xn]), full_sym(&pn), nis))
             }
 
-            #[inline(always)]
             /// Predict then update without leaving the lanes in between.
+            #[inline(always)]
             #[allow(clippy::type_complexity, clippy::too_many_arguments)]
             pub fn step<const NX: usize, const NY: usize>(
                 x: &SVector<$t, NX>,
