@@ -76,6 +76,7 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
         let text = std::fs::read_to_string(out.join(file)).unwrap_or_default();
         assert!(text.contains(needle), "{file} lacks {needle:?}");
     }
+    check_latency_trace(&out, &r, steps);
 
     // The same experiment in-process, by `eval` (run 0 of seed SEED, one run).
     let nx = scenario.nx();
@@ -147,4 +148,54 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
         }
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `latency.csv` has one row per instant, in send order, and is the same data as the
+/// histograms of `report.json`: the end-to-end maxima agree (hdrhistogram keeps 3
+/// significant digits, hence the 0.1 % tolerance).
+fn check_latency_trace(out: &std::path::Path, r: &serde_json::Value, steps: u32) {
+    let (head, rows) = csv(&out.join("latency.csv"));
+    assert_eq!(
+        head,
+        ["session", "k", "t_s", "transport_us", "end_to_end_us"]
+    );
+    assert_eq!(rows.len(), steps as usize);
+    let mut prev_t = -1.0;
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[1], (i + 1) as f64);
+        assert!(row[2] >= prev_t, "send times out of order at k={}", i + 1);
+        prev_t = row[2];
+        assert!(
+            0.0 <= row[3] && row[3] <= row[4],
+            "k={}: transport {} > end to end {}",
+            i + 1,
+            row[3],
+            row[4]
+        );
+    }
+    // The last instant was sent about steps / rate seconds after the first (--rate 1000).
+    let span = rows[rows.len() - 1][2];
+    let expect = f64::from(steps - 1) / 1000.0;
+    assert!(
+        (span - expect).abs() < 0.05 + 0.05 * expect,
+        "first to last send {span} s, paced {expect} s"
+    );
+    // End to end is one sample per instant in both; transport is per slot in the histogram
+    // but only the completing slot's in the trace (two nodes here).
+    let tol = |h: f64| 1e-3 * h + 2e-3;
+    for (col, key, equal) in [(3, "transport", false), (4, "end_to_end", true)] {
+        let csv_max = rows.iter().map(|r| r[col]).fold(0.0, f64::max);
+        let hist_max = r["latency"][key]["max_us"].as_f64().unwrap();
+        let ok = if equal {
+            (csv_max - hist_max).abs() <= tol(hist_max)
+        } else {
+            csv_max <= hist_max + tol(hist_max)
+        };
+        assert!(
+            ok,
+            "{key}: max {csv_max} µs in latency.csv, {hist_max} µs in report.json"
+        );
+    }
+    let svg = std::fs::read_to_string(out.join("latency-trace.svg")).unwrap_or_default();
+    assert!(svg.contains("end to end, max per bin"), "latency-trace.svg");
 }

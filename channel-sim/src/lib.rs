@@ -5,6 +5,7 @@
 //! (→ shared memory in the pipeline) → estimator.
 
 pub mod publisher;
+pub mod signal;
 pub mod sim;
 pub mod wire;
 

@@ -179,6 +179,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.buffer = 1024;
     rargs.estimates_csv = Some(args.out.join("estimates.csv"));
     rargs.slots_csv = Some(args.out.join("slots.csv"));
+    rargs.latency_csv = Some(args.out.join("latency.csv"));
     rargs.json = Some(args.out.join("report.json"));
 
     eprintln!(
@@ -255,11 +256,22 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     ) {
         eprintln!("demo: no latency plot ({e:#})");
     }
+    let points: Vec<_> = traj.timing.iter().map(|t| traj.latency_point(t)).collect();
+    if let Err(e) = crate::plot_trace::plot_trace(
+        &format!(
+            "{scenario_name}: latency over the run, {} wait",
+            args.wait.as_str()
+        ),
+        &points,
+        &args.out.join("latency-trace.svg"),
+    ) {
+        eprintln!("demo: no latency trace ({e:#})");
+    }
 
     println!("{}", report.summary());
     println!(
-        "wrote {} (true vs estimated), latency.svg, estimates.csv, slots.csv (replayable), \
-         report.json in {:?}",
+        "wrote {} (true vs estimated), latency.svg (percentiles), latency-trace.svg (over \
+         time), estimates.csv, latency.csv, slots.csv (replayable), report.json in {:?}",
         plot.file_name().and_then(|f| f.to_str()).unwrap_or(""),
         args.out
     );

@@ -12,6 +12,8 @@ pub mod plot;
 pub mod plot_bound;
 pub mod plot_latency;
 pub mod plot_tokens;
+pub mod plot_trace;
 pub mod replay;
 pub mod run;
+pub mod tail;
 pub mod transport;

@@ -774,9 +774,35 @@ fn demo_scenario() -> &'static str {
     "linear"
 }
 
-/// Runs `ipc-runner demo` and returns its report JSON and the process's wall time.
-/// `latest` adds `--latest-estimates` (estimates on the blackboard instead of the queue).
-fn demo(o: &Opts, wait: &str, rate: f64, steps: u32, latest: bool) -> Result<(Value, f64)> {
+/// A demo's report JSON, the process's wall time, and its per-instant end-to-end latencies
+/// (`latency.csv`: seconds since the first send, transport µs, end to end µs).
+struct DemoRun {
+    report: Value,
+    secs: f64,
+    trace: Vec<ipc_runner::plot_trace::Point>,
+}
+
+/// Reads `latency.csv` as written by `ipc-runner demo`.
+fn read_trace(path: &Path) -> Result<Vec<ipc_runner::plot_trace::Point>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{path:?}"))?;
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<f64> = l
+                .split(',')
+                .skip(2)
+                .map(str::parse)
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("{path:?}: {l:?}"))?;
+            anyhow::ensure!(f.len() == 3, "{path:?}: {l:?}");
+            Ok((f[0], f[1], f[2]))
+        })
+        .collect()
+}
+
+/// Runs `ipc-runner demo`. `latest` adds `--latest-estimates` (estimates on the blackboard
+/// instead of the queue).
+fn demo(o: &Opts, wait: &str, rate: f64, steps: u32, latest: bool) -> Result<DemoRun> {
     let bin = o.target.join("release/ipc-runner");
     let out = std::env::temp_dir().join(format!(
         "benches-report-demo-{}-{wait}-{rate}",
@@ -810,18 +836,80 @@ fn demo(o: &Opts, wait: &str, rate: f64, steps: u32, latest: bool) -> Result<(Va
         .status()
         .context("ipc-runner demo");
     let secs = t.elapsed().as_secs_f64();
-    let read = || -> Result<Value> {
+    let read = || -> Result<DemoRun> {
         let st = res?;
         if !st.success() {
             bail!("ipc-runner demo --wait {wait} --rate {rate} failed ({st})");
         }
-        Ok(serde_json::from_str(&std::fs::read_to_string(
-            out.join("report.json"),
-        )?)?)
+        Ok(DemoRun {
+            report: serde_json::from_str(&std::fs::read_to_string(out.join("report.json"))?)?,
+            secs,
+            trace: read_trace(&out.join("latency.csv"))?,
+        })
     };
     let v = read();
     let _ = std::fs::remove_dir_all(&out);
-    Ok((v?, secs))
+    v
+}
+
+/// What the spin tails were made of: per queue run of the triples, the slowest 1 % of
+/// instants split into isolated ones and episodes (`ipc_runner::tail`), and the median
+/// triple's run drawn over time (`benches/latency-trace-spin.svg`).
+fn tail_section(
+    o: &Opts,
+    md: &mut String,
+    traces: &[Vec<ipc_runner::plot_trace::Point>],
+    median: usize,
+) {
+    use ipc_runner::tail::{TailBreakdown, EPISODE_MIN};
+    let _ = write!(
+        md,
+        "**What the tail is made of.** Every demo also writes `latency.csv` (one row per \
+         instant, in send order) and `latency-trace.svg`. Per queue run above, the slowest \
+         1 % of instants by end-to-end latency, split into isolated slow instants and \
+         episodes of ≥ {EPISODE_MIN} consecutive ones (≥ {} µs of slots: longer than any \
+         one send or step, so a process kept off its core, or both on one core):\n\n\
+         | triple | slowest 1 % from µs | instants | runs | in episodes | longest episode |\n\
+         |---:|---:|---:|---:|---:|---|\n",
+        (EPISODE_MIN as f64 * 1e6 / PIPELINE_RATE) as u64
+    );
+    for (i, tr) in traces.iter().enumerate() {
+        let e2e: Vec<f64> = tr.iter().map(|p| p.2).collect();
+        let b = TailBreakdown::of(&e2e, 0.99);
+        let at = tr.get(b.longest_at).map_or(0.0, |p| p.0);
+        let _ = writeln!(
+            md,
+            "| {}{} | {:.2} | {} | {} | {} ({:.0} %) | {} instants at {:.2} s |",
+            i + 1,
+            if i == median { " (median)" } else { "" },
+            b.threshold_us,
+            b.tail,
+            b.runs,
+            b.in_episodes,
+            100.0 * b.episode_share(),
+            b.longest,
+            at
+        );
+    }
+    md.push('\n');
+    let Some(tr) = traces.get(median) else {
+        return;
+    };
+    let dir = o
+        .out
+        .parent()
+        .map_or_else(|| PathBuf::from("benches"), |d| d.join("benches"));
+    let _ = std::fs::create_dir_all(&dir);
+    let name = "latency-trace-spin.svg";
+    let title = format!(
+        "Pipeline spin, {PIPELINE_RATE} Hz, median triple: end-to-end latency over the run"
+    );
+    match ipc_runner::plot_trace::plot_trace(&title, tr, &dir.join(name)) {
+        Ok(()) => {
+            let _ = writeln!(md, "![{title}](benches/{name})\n");
+        }
+        Err(e) => say(&format!("{name}: {e:#}")),
+    }
 }
 
 /// How many (raw, queue, blackboard) triples the spin verdict is the median of.
@@ -847,16 +935,18 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
     // on the queue, the pipeline publishing on the blackboard), three times; the verdict is
     // on the median triple (by the queue's ratio).
     let mut pairs = Vec::new();
+    let mut traces = Vec::new();
     for _ in 0..TRIPLES {
         let raw_now = ipc_latency(o, steps, PIPELINE_RATE, "iox-spin")?;
         let iox = raw_now.get("iox-spin").context("iox-spin row")?.0;
-        let (v, _) = demo(o, "spin", PIPELINE_RATE, steps, false)?;
-        let lat = &v["latency"];
+        let queue = demo(o, "spin", PIPELINE_RATE, steps, false)?;
+        let lat = &queue.report["latency"];
         let e2e = Pct::from_json(&lat["end_to_end"]);
         let tr = Pct::from_json(&lat["transport"]);
-        let (v, _) = demo(o, "spin", PIPELINE_RATE, steps, true)?;
+        let v = demo(o, "spin", PIPELINE_RATE, steps, true)?.report;
         let board = Pct::from_json(&v["latency"]["end_to_end"]);
         pairs.push((iox, e2e, tr, board));
+        traces.push(queue.trace);
     }
     let mut order: Vec<usize> = (0..pairs.len()).collect();
     order.sort_by(|&a, &b| {
@@ -864,7 +954,7 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
         r(a).total_cmp(&r(b))
     });
     let median = order[order.len() / 2];
-    let (block, _) = demo(o, "block", PIPELINE_RATE, steps, false)?;
+    let block = demo(o, "block", PIPELINE_RATE, steps, false)?.report;
     md.push_str(PCT_HEAD);
     let (iox, e2e, tr, board) = pairs[median];
     let hz = PIPELINE_RATE;
@@ -988,6 +1078,7 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
         );
     }
     md.push('\n');
+    tail_section(o, md, &traces, median);
     let raw_row = |key: &str, label: &str| raw.get(key).map(|(ow, _)| (label.to_string(), *ow));
     let spin: Vec<(String, Pct)> = [
         raw_row("iox-spin", "raw iceoryx2, back to back"),
@@ -1022,7 +1113,9 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
     ladders(o, md, &spin, &blocking);
     // Sustained rate: 100 000 slots/s for a few seconds, zero loss required.
     let steps: u32 = if o.quick { 100_000 } else { 1_000_000 };
-    let (v, secs) = demo(o, "spin", 100_000.0, steps, false)?;
+    let DemoRun {
+        report: v, secs, ..
+    } = demo(o, "spin", 100_000.0, steps, false)?;
     let c = &v["counts"];
     let lost = c["lost_in_ipc"].as_u64().unwrap_or(u64::MAX);
     let received = c["received"].as_u64().unwrap_or(0);

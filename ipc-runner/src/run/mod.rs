@@ -122,6 +122,10 @@ pub struct RunArgs {
     /// Write the received slots to this CSV file at the end (input for `replay`).
     #[arg(long)]
     pub slots_csv: Option<PathBuf>,
+    /// Write the latency of every instant (slot sent → received → estimates published) to
+    /// this CSV file at the end: where the tail of the histograms happened, and when.
+    #[arg(long)]
+    pub latency_csv: Option<PathBuf>,
     /// Write the run report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -163,6 +167,7 @@ impl RunArgs {
             steps: channel_sim::publisher::DEFAULT_STEPS,
             estimates_csv: None,
             slots_csv: None,
+            latency_csv: None,
             json: None,
             no_publish_estimates: false,
             latest_estimates: false,
@@ -267,6 +272,9 @@ pub struct Trajectories {
     pub truth: Vec<f64>,
     /// Estimates per instant and estimator (`n_est · nx` values).
     pub estimates: Vec<f64>,
+    /// Per instant: the completing slot's send time, its receive time and the time the
+    /// instant's estimates were all published (`CLOCK_MONOTONIC` ns).
+    pub timing: Vec<[u64; 3]>,
     /// Received slots (for `replay`), if requested.
     pub slots: Vec<Observation>,
     /// State dimension.
@@ -415,17 +423,15 @@ impl State {
                 self.err.get_or_insert(e);
             }
         }
-        Latency::record(
-            &mut self.latency.end_to_end,
-            self.last_send_ns,
-            wire::monotonic_ns(),
-        );
+        let done_ns = wire::monotonic_ns();
+        Latency::record(&mut self.latency.end_to_end, self.last_send_ns, done_ns);
         self.last_k = k;
-        self.evaluate(t, k);
+        self.evaluate(t, k, done_ns);
     }
 
-    /// Errors against truth and the recorded trajectories of instant `k`.
-    fn evaluate(&mut self, t: &Transport, k: u32) {
+    /// Errors against truth and the recorded trajectories of instant `k`, whose estimates
+    /// were published at `done_ns`.
+    fn evaluate(&mut self, t: &Transport, k: u32, done_ns: u64) {
         self.drain_truth(t);
         let i = k as usize % TRUTH_RING;
         let truth = (self.truth_k[i] == k && self.truth_stream == self.stream_id)
@@ -437,6 +443,9 @@ impl State {
         let record = self.traj.keys.len() < self.record_cap;
         if record {
             self.traj.keys.push((self.session, k));
+            self.traj
+                .timing
+                .push([self.last_send_ns, self.last_recv_ns, done_ns]);
             for j in 0..nx {
                 self.traj.truth.push(truth.map_or(f64::NAN, |x| x[j]));
             }
@@ -509,6 +518,7 @@ pub fn run_loop(
             keys: Vec::with_capacity(record_cap),
             truth: Vec::with_capacity(record_cap * nx),
             estimates: Vec::with_capacity(record_cap * nx * n_est),
+            timing: Vec::with_capacity(record_cap),
             slots: Vec::with_capacity(if args.slots_csv.is_some() {
                 record_cap * usize::from(nodes)
             } else {
@@ -625,7 +635,7 @@ pub fn run_loop(
                 let now = wire::monotonic_ns();
                 if now - last_signal_check > 1_000_000 {
                     last_signal_check = now;
-                    if t.node.wait(Duration::ZERO).is_err() {
+                    if channel_sim::signal::termination_requested() {
                         return Ok(Woke::Signal);
                     }
                 }
@@ -734,7 +744,7 @@ pub fn run_loop(
                 spin_clock = wire::monotonic_ns();
                 if spin_clock - spin_signal_check > 1_000_000 {
                     spin_signal_check = spin_clock;
-                    if t.node.wait(Duration::ZERO).is_err() {
+                    if channel_sim::signal::termination_requested() {
                         break 'outer Ending::Interrupted;
                     }
                 }
@@ -895,6 +905,35 @@ impl Trajectories {
         Ok(())
     }
 
+    /// Writes `session,k,t_s,transport_us,end_to_end_us` rows, one per instant: `t_s` is the
+    /// send time of the slot that completed the instant, in seconds since the first recorded
+    /// one; the latencies are that slot sent → received and sent → all estimates published.
+    /// The end-to-end column is the end-to-end histogram's samples in order; the transport
+    /// histogram also holds the other nodes' slots.
+    pub fn write_latency_csv(&self, path: &std::path::Path) -> Result<()> {
+        use std::io::Write;
+        let mut w = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
+        );
+        writeln!(w, "session,k,t_s,transport_us,end_to_end_us")?;
+        for ((session, k), tr) in self.keys.iter().zip(&self.timing) {
+            let (t_s, transport, e2e) = self.latency_point(tr);
+            writeln!(w, "{session},{k},{t_s:.6},{transport:.3},{e2e:.3}")?;
+        }
+        Ok(())
+    }
+
+    /// `(seconds since the first recorded send, transport µs, end to end µs)` of one
+    /// recorded instant.
+    pub fn latency_point(&self, tr: &[u64; 3]) -> (f64, f64, f64) {
+        let t0 = self.timing.first().map_or(0, |t| t[0]);
+        (
+            tr[0].saturating_sub(t0) as f64 * 1e-9,
+            tr[1].saturating_sub(tr[0]) as f64 * 1e-3,
+            tr[2].saturating_sub(tr[0]) as f64 * 1e-3,
+        )
+    }
+
     /// Writes the received slots in the `replay` format (see `docs/replay.md`).
     pub fn write_slots_csv(&self, path: &std::path::Path, ny: usize) -> Result<()> {
         crate::replay::write_slots(path, &self.slots, ny)
@@ -935,6 +974,9 @@ pub fn finish(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize
     }
     if let Some(p) = &args.slots_csv {
         traj.write_slots_csv(p, ny)?;
+    }
+    if let Some(p) = &args.latency_csv {
+        traj.write_latency_csv(p)?;
     }
     if let Some(p) = &args.json {
         std::fs::write(p, serde_json::to_string_pretty(report)?)
