@@ -3,8 +3,9 @@
 //! bursts (the runner preempted, slots queueing behind one another) or at start-up.
 //!
 //! The run is cut into at most [`BINS`] equal time bins; per bin the plot shows the median
-//! and the maximum of the end-to-end latency and the maximum of the transport latency, on a
-//! log axis, with the run's end-to-end p99 as a dashed line.
+//! and the maximum of the end-to-end latency and the maximum of the runner's own share
+//! (received → estimates published; the rest is transport), on a log axis, with the run's
+//! end-to-end p99 as a dashed line.
 
 use std::path::Path;
 
@@ -29,8 +30,11 @@ pub struct Bin {
     pub median: f64,
     /// Maximum end-to-end latency, µs.
     pub max: f64,
-    /// Maximum transport latency, µs.
+    /// Maximum transport latency (slot sent → received), µs.
     pub max_transport: f64,
+    /// Maximum of received → estimates published (end to end − transport): the runner's own
+    /// share, µs.
+    pub max_after_receipt: f64,
 }
 
 /// The trace cut into at most [`BINS`] equal time bins (empty bins left out).
@@ -50,6 +54,7 @@ pub fn bins(points: &[Point]) -> Vec<Bin> {
         .filter(|(_, v)| !v.is_empty())
         .map(|(b, mut v)| {
             let max_tr = v.iter().map(|p| p.0).fold(0.0, f64::max);
+            let max_after = v.iter().map(|p| p.1 - p.0).fold(0.0, f64::max);
             v.sort_by(|a, b| a.1.total_cmp(&b.1));
             // The lower median: one spike in a bin of two is not the bin's typical latency.
             let med = v[(v.len() - 1) / 2].1;
@@ -59,6 +64,7 @@ pub fn bins(points: &[Point]) -> Vec<Bin> {
                 median: med,
                 max,
                 max_transport: max_tr,
+                max_after_receipt: max_after,
             }
         })
         .collect()
@@ -110,7 +116,7 @@ where
     let positive = |v: f64| v.is_finite() && v > 0.0;
     let vals = b
         .iter()
-        .flat_map(|r| [r.median, r.max, r.max_transport])
+        .flat_map(|r| [r.median, r.max, r.max_after_receipt])
         .chain([p99])
         .filter(|v| positive(*v));
     let (lo, hi) = vals.fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
@@ -141,14 +147,15 @@ where
         .axis_desc_style((FONT, 16))
         .draw()?;
     type Field = fn(&Bin) -> f64;
-    let series: [(&str, Field); 3] = [
-        ("end to end, max per bin", |r| r.max),
-        ("end to end, median per bin", |r| r.median),
-        ("transport (sent → received), max per bin", |r| {
-            r.max_transport
+    // The runner's own share first, so the end-to-end lines are drawn over it.
+    let series: [(usize, &str, Field); 3] = [
+        (2, "received → estimates published, max per bin", |r| {
+            r.max_after_receipt
         }),
+        (0, "end to end, max per bin", |r| r.max),
+        (1, "end to end, median per bin", |r| r.median),
     ];
-    for (j, (label, f)) in series.into_iter().enumerate() {
+    for (j, label, f) in series {
         let c = color(j);
         let pts: Vec<(f64, f64)> = b
             .iter()
@@ -200,6 +207,7 @@ mod tests {
         let spike = b.iter().find(|r| r.max == 50.0).unwrap();
         assert!((spike.t - 0.5).abs() < 1e-2, "spike binned at {}", spike.t);
         assert_eq!(spike.max_transport, 25.0);
+        assert_eq!(spike.max_after_receipt, 25.0);
         assert_eq!(quantile_e2e(&pts, 0.99), Some(1.0));
         assert_eq!(quantile_e2e(&pts, 1.0), Some(50.0));
         assert!(bins(&[]).is_empty());
