@@ -15,7 +15,7 @@ use crate::plot::{check_extension, color, draw_legend, register_font, FONT};
 
 const WIDTH: u32 = 1000;
 const HEIGHT: u32 = 520;
-/// Bins across the run: a few pixels each at [`WIDTH`].
+/// Bins across the run: a few pixels each at the plot's width.
 pub const BINS: usize = 400;
 
 /// One instant: `(seconds since the first send, transport µs, end to end µs)`.
