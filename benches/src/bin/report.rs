@@ -647,14 +647,20 @@ impl Pct {
     }
 }
 
-/// Draws the latency ladders next to the report (`<out dir>/benches/latency-{spin,block}.svg`)
-/// and links them from `md`. A plot that cannot be drawn is reported, not fatal.
-fn ladders(o: &Opts, md: &mut String, spin: &[(String, Pct)], block: &[(String, Pct)]) {
+/// `benches/` next to the report, where its plots go (created if missing).
+fn plots_dir(o: &Opts) -> PathBuf {
     let dir = o
         .out
         .parent()
         .map_or_else(|| PathBuf::from("benches"), |d| d.join("benches"));
     let _ = std::fs::create_dir_all(&dir);
+    dir
+}
+
+/// Draws the latency ladders next to the report (`<out dir>/benches/latency-{spin,block}.svg`)
+/// and links them from `md`. A plot that cannot be drawn is reported, not fatal.
+fn ladders(o: &Opts, md: &mut String, spin: &[(String, Pct)], block: &[(String, Pct)]) {
+    let dir = plots_dir(o);
     for (name, title, rows) in [
         (
             "latency-spin.svg",
@@ -895,11 +901,7 @@ fn tail_section(
     let Some(tr) = traces.get(median) else {
         return;
     };
-    let dir = o
-        .out
-        .parent()
-        .map_or_else(|| PathBuf::from("benches"), |d| d.join("benches"));
-    let _ = std::fs::create_dir_all(&dir);
+    let dir = plots_dir(o);
     let name = "latency-trace-spin.svg";
     let title = format!(
         "Pipeline spin, {PIPELINE_RATE} Hz, median triple: end-to-end latency over the run"
