@@ -12,6 +12,10 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe;
 
+/// Estimate samples the loop loans ahead (one per estimator, up to this many); the publisher
+/// allows one more, for the estimators past it, which loan at send time.
+pub const PRELOANED_ESTIMATES: usize = 16;
+
 /// Open ports of one runner.
 #[derive(Debug)]
 pub struct Transport {
@@ -54,7 +58,10 @@ impl Transport {
             .buffer_size(wire::MAX_SUBSCRIBER_BUFFER)
             .create()
             .map_err(|e| anyhow!("cannot subscribe to {prefix}/truth: {e:?}"))?;
-        let estimate_pub = estimates.publisher_builder().create().map_err(|e| {
+        let estimate_pub = estimates
+            .publisher_builder()
+            .max_loaned_samples(PRELOANED_ESTIMATES + 1)
+            .create().map_err(|e| {
             anyhow!("cannot publish on {prefix}/estimates ({e:?}): is another runner using this --prefix?")
         })?;
         let listener = if with_listener {

@@ -5,9 +5,16 @@
 //! latencies ([`crate::latency`]) and the squared error against the truth service (evaluation
 //! beside the loop, never inside the estimator). Once the estimators exist nothing in this path
 //! allocates except iceoryx2 0.10 itself, one small block per estimate loaned on the queue
-//! (none on the `--latest-estimates` blackboard; `tests/pipeline_alloc.rs` counts). Loaning
-//! the next samples ahead, after publishing, was tried: no change in interleaved runs
-//! (end-to-end p50 1.01/1.02/1.91 µs before, 1.03/1.04/1.83 µs after), so it was not kept.
+//! (none on the `--latest-estimates` blackboard; `tests/pipeline_alloc.rs` counts).
+//!
+//! The queue samples of the next instant are loaned right after an instant's estimates are
+//! published, off the latency path. At p50 this changes nothing (a first trial measured
+//! end-to-end p50 only and dropped it), but a loan after 100 µs of idling is slow in the tail:
+//! alone, paced at 10 kHz, `loan_uninit` took p50 0.26 µs, p99 1.8 µs (0.16 µs p99 back to
+//! back — the memory it touches goes cold while the loop waits). In 6 interleaved
+//! 30 000-instant spin runs at 10 kHz, the runner's own share (received → estimates
+//! published, from `latency.csv`) had p99 1.86–2.62 µs (median 2.38) with the loans ahead
+//! against 1.91–3.06 µs (median 2.70) without; lower in 5 of the 6 pairs.
 //!
 //! Waiting: `--wait spin` busy-polls `receive()`; `--wait block` sleeps in a WaitSet on the
 //! `slots-ready` event and re-drains `receive()` after every wake-up (wake-ups can be spurious
@@ -314,6 +321,9 @@ struct State {
     publish: bool,
     /// The latest-estimate board, when estimates go there instead of the queue.
     board: Option<LatestBoard>,
+    /// Queue samples loaned after an instant for the next one's estimates (one per estimator,
+    /// up to [`crate::transport::PRELOANED_ESTIMATES`]).
+    held: Vec<Option<PreLoaned>>,
     /// Estimates published (after warm-up, for the allocation accounting).
     published: u64,
     // set per slot by the receive path
@@ -323,6 +333,13 @@ struct State {
     stream_id: u64,
     err: Option<anyhow::Error>,
 }
+
+/// A queue sample loaned ahead of its estimate.
+type PreLoaned = iceoryx2::sample_mut_uninit::SampleMutUninit<
+    ipc::Service,
+    core::mem::MaybeUninit<Estimate>,
+    (),
+>;
 
 /// The writer side of `channel_sim::wire::latest_estimates_board`, one entry handle per
 /// estimator (created once; updating an entry writes in place and allocates nothing).
@@ -410,15 +427,16 @@ impl State {
                 b.entries[e].update_with_copy(msg);
                 continue;
             }
-            let sent = t
-                .estimate_pub
-                .loan_uninit()
-                .map_err(|e| anyhow!("loan for estimate: {e:?}"))
-                .and_then(|s| {
-                    s.write_payload(msg)
-                        .send()
-                        .map_err(|e| anyhow!("send estimate: {e:?}"))
-                });
+            let sent = match self.held.get_mut(e).and_then(Option::take) {
+                Some(s) => Ok(s),
+                None => t.estimate_pub.loan_uninit(),
+            }
+            .map_err(|e| anyhow!("loan for estimate: {e:?}"))
+            .and_then(|s| {
+                s.write_payload(msg)
+                    .send()
+                    .map_err(|e| anyhow!("send estimate: {e:?}"))
+            });
             if let Err(e) = sent {
                 self.err.get_or_insert(e);
             }
@@ -427,6 +445,21 @@ impl State {
         Latency::record(&mut self.latency.end_to_end, self.last_send_ns, done_ns);
         self.last_k = k;
         self.evaluate(t, k, done_ns);
+        self.preloan(t);
+    }
+
+    /// Loans the next instant's queue samples now, off the latency path. A failed loan is
+    /// left to the send, which then loans itself and reports the error.
+    fn preloan(&mut self, t: &Transport) {
+        if !self.publish || self.board.is_some() {
+            return;
+        }
+        for h in self.held.iter_mut().filter(|h| h.is_none()) {
+            match t.estimate_pub.loan_uninit() {
+                Ok(s) => *h = Some(s),
+                Err(_) => break,
+            }
+        }
     }
 
     /// Errors against truth and the recorded trajectories of instant `k`, whose estimates
@@ -544,6 +577,9 @@ pub fn run_loop(
         record_cap,
         publish: !args.no_publish_estimates,
         board: None,
+        held: (0..n_est.min(crate::transport::PRELOANED_ESTIMATES))
+            .map(|_| None)
+            .collect(),
         published: 0,
         last_send_ns: 0,
         last_recv_ns: 0,
