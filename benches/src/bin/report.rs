@@ -615,16 +615,23 @@ struct Pct {
 }
 
 impl Pct {
-    fn from_json(v: &Value) -> Self {
-        let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-        Self {
-            count: v["count"].as_u64().unwrap_or(0),
-            p50: f("p50_us"),
-            p90: f("p90_us"),
-            p99: f("p99_us"),
-            p999: f("p999_us"),
-            max: f("max_us"),
-        }
+    /// Reads `ipc_runner::latency::Percentiles` as serialised (`report.json`, `ipc_latency
+    /// --json`). A missing or non-numeric field is an error, not a NaN in a table.
+    fn from_json(v: &Value) -> Result<Self> {
+        let f = |k: &str| {
+            v[k].as_f64()
+                .with_context(|| format!("latency percentiles without a numeric {k:?}: {v}"))
+        };
+        Ok(Self {
+            count: v["count"]
+                .as_u64()
+                .with_context(|| format!("latency percentiles without \"count\": {v}"))?,
+            p50: f("p50_us")?,
+            p90: f("p90_us")?,
+            p99: f("p99_us")?,
+            p999: f("p999_us")?,
+            max: f("max_us")?,
+        })
     }
     fn row(&self, name: &str) -> String {
         format!(
@@ -724,8 +731,8 @@ fn ipc_latency(
         res.insert(
             mode.clone(),
             (
-                Pct::from_json(&m["one_way"]),
-                Pct::from_json(&m["round_trip"]),
+                Pct::from_json(&m["one_way"]).with_context(|| format!("{mode} one-way"))?,
+                Pct::from_json(&m["round_trip"]).with_context(|| format!("{mode} round trip"))?,
             ),
         );
     }
@@ -917,6 +924,70 @@ fn tail_section(
 /// How many (raw, queue, blackboard) triples the spin verdict is the median of.
 const TRIPLES: usize = 5;
 
+/// The spin target: pipeline p99 ≤ this × raw iceoryx2's.
+const SPIN_TARGET: f64 = 1.5;
+
+/// One back-to-back triple of the spin comparison: p99s measured within the same minute.
+#[derive(Clone, Copy, Debug)]
+struct Triple {
+    /// Raw iceoryx2, paced at the pipeline's rate (one-way).
+    raw: Pct,
+    /// The pipeline end to end, estimates on the queue (the default, the verdict).
+    queue: Pct,
+    /// The queue run's own iceoryx2 hop (slot sent → received).
+    hop: Pct,
+    /// The pipeline end to end, estimates on the blackboard.
+    board: Pct,
+}
+
+impl Triple {
+    fn ratio(&self) -> f64 {
+        self.queue.p99 / self.raw.p99
+    }
+    fn board_ratio(&self) -> f64 {
+        self.board.p99 / self.raw.p99
+    }
+    fn own_hop(&self) -> f64 {
+        self.queue.p99 / self.hop.p99
+    }
+}
+
+/// The triple the verdict is read from: the median by the queue's ratio (the upper one of an
+/// even count).
+fn median_triple(t: &[Triple]) -> usize {
+    let mut order: Vec<usize> = (0..t.len()).collect();
+    order.sort_by(|&a, &b| t[a].ratio().total_cmp(&t[b].ratio()));
+    order[order.len() / 2]
+}
+
+/// Range, median and count within a target of some ratios.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Spread {
+    lo: f64,
+    median: f64,
+    hi: f64,
+    within: usize,
+    n: usize,
+}
+
+impl Spread {
+    fn of(ratios: impl Iterator<Item = f64>, target: f64) -> Self {
+        let mut r: Vec<f64> = ratios.collect();
+        r.sort_by(f64::total_cmp);
+        Self {
+            lo: r[0],
+            median: r[r.len() / 2],
+            hi: r[r.len() - 1],
+            within: r.iter().filter(|&&x| x <= target).count(),
+            n: r.len(),
+        }
+    }
+    /// Every ratio on the same side of the target.
+    fn unanimous(&self) -> bool {
+        self.within == 0 || self.within == self.n
+    }
+}
+
 fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Result<()> {
     let steps: u32 = if o.quick { 10_000 } else { 30_000 };
     md.push_str("## IPC latency: the full pipeline end to end\n\n");
@@ -943,22 +1014,26 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
         let iox = raw_now.get("iox-spin").context("iox-spin row")?.0;
         let queue = demo(o, "spin", PIPELINE_RATE, steps, false)?;
         let lat = &queue.report["latency"];
-        let e2e = Pct::from_json(&lat["end_to_end"]);
-        let tr = Pct::from_json(&lat["transport"]);
         let v = demo(o, "spin", PIPELINE_RATE, steps, true)?.report;
-        let board = Pct::from_json(&v["latency"]["end_to_end"]);
-        pairs.push((iox, e2e, tr, board));
+        pairs.push(Triple {
+            raw: iox,
+            queue: Pct::from_json(&lat["end_to_end"])?,
+            hop: Pct::from_json(&lat["transport"])?,
+            board: Pct::from_json(&v["latency"]["end_to_end"])?,
+        });
         traces.push(queue.trace);
     }
-    let mut order: Vec<usize> = (0..pairs.len()).collect();
-    order.sort_by(|&a, &b| {
-        let r = |i: usize| pairs[i].1.p99 / pairs[i].0.p99;
-        r(a).total_cmp(&r(b))
-    });
-    let median = order[order.len() / 2];
+    let median = median_triple(&pairs);
     let block = demo(o, "block", PIPELINE_RATE, steps, false)?.report;
+    let block_e2e = Pct::from_json(&block["latency"]["end_to_end"])?;
+    let block_tr = Pct::from_json(&block["latency"]["transport"])?;
     md.push_str(PCT_HEAD);
-    let (iox, e2e, tr, board) = pairs[median];
+    let Triple {
+        raw: iox,
+        queue: e2e,
+        hop: tr,
+        board,
+    } = pairs[median];
     let hz = PIPELINE_RATE;
     let _ = writeln!(
         md,
@@ -982,16 +1057,15 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
         "{}",
         iox.row(&format!("raw iceoryx2 spin paced, {hz} Hz: one-way"))
     );
-    let lat = &block["latency"];
     let _ = writeln!(
         md,
         "{}",
-        Pct::from_json(&lat["end_to_end"]).row(&format!("pipeline block, {hz} Hz: end to end"))
+        block_e2e.row(&format!("pipeline block, {hz} Hz: end to end"))
     );
     let _ = writeln!(
         md,
         "{}",
-        Pct::from_json(&lat["transport"]).row(&format!("pipeline block, {hz} Hz: transport"))
+        block_tr.row(&format!("pipeline block, {hz} Hz: transport"))
     );
     let _ = write!(
         md,
@@ -1005,62 +1079,55 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
          | triple | raw iceoryx2 paced p99 µs | pipeline p99 µs (queue) | ratio | pipeline p99 µs (blackboard) | ratio | its own hop p99 µs | pipeline / own hop |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|\n"
     );
-    for (i, (iox, e2e, tr, board)) in pairs.iter().enumerate() {
+    for (i, t) in pairs.iter().enumerate() {
         let _ = writeln!(
             md,
             "| {}{} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
             i + 1,
             if i == median { " (median)" } else { "" },
-            iox.p99,
-            e2e.p99,
-            e2e.p99 / iox.p99,
-            board.p99,
-            board.p99 / iox.p99,
-            tr.p99,
-            e2e.p99 / tr.p99
+            t.raw.p99,
+            t.queue.p99,
+            t.ratio(),
+            t.board.p99,
+            t.board_ratio(),
+            t.hop.p99,
+            t.own_hop()
         );
     }
     md.push('\n');
-    let mut own: Vec<f64> = pairs.iter().map(|p| p.1.p99 / p.2.p99).collect();
-    own.sort_by(f64::total_cmp);
+    let own = Spread::of(pairs.iter().map(Triple::own_hop), SPIN_TARGET);
     let _ = writeln!(
         md,
         "Against its own hop, the pipeline's p99 was {:.2}–{:.2}× (median {:.2}×): the share of \
          the tail that the runner's work (steps, publishing) adds to the IPC it rides on.\n",
-        own[0],
-        own[own.len() - 1],
-        own[own.len() / 2]
+        own.lo, own.hi, own.median
     );
-    let r_paced = e2e.p99 / iox.p99;
+    let r_paced = pairs[median].ratio();
     let verdict = |ok: bool| if ok { "met" } else { "**missed**" };
-    let ratios: Vec<f64> = pairs.iter().map(|p| p.1.p99 / p.0.p99).collect();
-    let (lo, hi) = ratios
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(l, h), &r| (l.min(r), h.max(r)));
+    let queue = Spread::of(pairs.iter().map(Triple::ratio), SPIN_TARGET);
     let _ = writeln!(
         md,
-        "Spin mode, p99, target pipeline ≤ 1.5× raw iceoryx2: **{r_paced:.2}×** against raw \
-         iceoryx2 paced at the same rate ({}, median triple). The {TRIPLES} triples ranged \
-         {lo:.2}–{hi:.2}×, {} of {TRIPLES} within 1.5×: {}.",
-        verdict(r_paced <= 1.5),
-        ratios.iter().filter(|&&r| r <= 1.5).count(),
-        if hi <= 1.5 || lo > 1.5 {
+        "Spin mode, p99, target pipeline ≤ {SPIN_TARGET}× raw iceoryx2: **{r_paced:.2}×** against \
+         raw iceoryx2 paced at the same rate ({}, median triple). The {TRIPLES} triples ranged \
+         {:.2}–{:.2}×, {} of {TRIPLES} within {SPIN_TARGET}×: {}.",
+        verdict(r_paced <= SPIN_TARGET),
+        queue.lo,
+        queue.hi,
+        queue.within,
+        if queue.unanimous() {
             "the verdict held in every triple"
         } else {
             "on this VM the verdict depends on the minute it is measured in"
         }
     );
-    let mut board_r: Vec<f64> = pairs.iter().map(|p| p.3.p99 / p.0.p99).collect();
-    board_r.sort_by(f64::total_cmp);
+    let board_r = Spread::of(pairs.iter().map(Triple::board_ratio), SPIN_TARGET);
     let _ = writeln!(
         md,
         "With the estimates on the blackboard (`--latest-estimates`: one entry per estimator, \
          overwritten in place) the median of the {TRIPLES} ratios is {:.2}× ({} of {TRIPLES} \
-         within 1.5×, range {:.2}–{:.2}×). The verdict above stays on the queue, the default.",
-        board_r[board_r.len() / 2],
-        board_r.iter().filter(|&&r| r <= 1.5).count(),
-        board_r[0],
-        board_r[board_r.len() - 1],
+         within {SPIN_TARGET}×, range {:.2}–{:.2}×). The verdict above stays on the queue, the \
+         default.",
+        board_r.median, board_r.within, board_r.lo, board_r.hi,
     );
     if let Some((b2b, _)) = raw.get("iox-spin") {
         let _ = writeln!(
@@ -1120,10 +1187,7 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
             "uds-block paced",
             &format!("Unix socket (blocking read), paced {hz} Hz"),
         ),
-        Some((
-            format!("pipeline end to end, block, {hz} Hz"),
-            Pct::from_json(&block["latency"]["end_to_end"]),
-        )),
+        Some((format!("pipeline end to end, block, {hz} Hz"), block_e2e)),
     ]
     .into_iter()
     .flatten()
@@ -1413,5 +1477,82 @@ fn main() {
     if let Err(e) = run() {
         eprintln!("report: {e:#}");
         std::process::exit(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ipc_runner::latency::Percentiles;
+
+    fn pct(p99: f64) -> Pct {
+        Pct {
+            count: 1,
+            p99,
+            ..Pct::default()
+        }
+    }
+
+    #[test]
+    fn reads_what_the_runner_and_ipc_latency_write() {
+        let p = Percentiles {
+            count: 30_000,
+            p50_us: 0.5,
+            p90_us: 0.56,
+            p99_us: 0.91,
+            p999_us: 9.8,
+            max_us: 1500.25,
+        };
+        let back = Pct::from_json(&serde_json::to_value(p).unwrap()).unwrap();
+        assert_eq!(back.percentiles(), p);
+        // A renamed or missing field fails loudly instead of printing NaN in BENCHMARKS.md.
+        let mut v = serde_json::to_value(p).unwrap();
+        v.as_object_mut().unwrap().remove("p99_us");
+        let e = Pct::from_json(&v).unwrap_err();
+        assert!(format!("{e:#}").contains("p99_us"), "{e:#}");
+        assert!(Pct::from_json(&Value::Null).is_err());
+    }
+
+    #[test]
+    fn the_verdict_is_read_from_the_median_triple_by_the_queue_ratio() {
+        // Queue ratios 2.0, 1.2, 3.0, 1.6, 1.4 → sorted 1.2 1.4 1.6 2.0 3.0: median is the 4th.
+        let t: Vec<Triple> = [(1.0, 2.0), (1.0, 1.2), (0.5, 1.5), (1.0, 1.6), (1.0, 1.4)]
+            .iter()
+            .map(|&(raw, queue)| Triple {
+                raw: pct(raw),
+                queue: pct(queue),
+                hop: pct(raw),
+                // The blackboard ratio must not decide which triple is the median.
+                board: pct(10.0 / queue),
+            })
+            .collect();
+        assert_eq!(median_triple(&t), 3);
+        assert_eq!(
+            median_triple(&t[..4]),
+            0,
+            "upper median of 1.2 1.6 2.0 3.0: 2.0"
+        );
+        assert_eq!(median_triple(&t[..1]), 0);
+    }
+
+    #[test]
+    fn spread_counts_the_ratios_within_the_target() {
+        let s = Spread::of([2.13, 1.6, 1.94, 2.26, 2.89].into_iter(), SPIN_TARGET);
+        assert_eq!(
+            s,
+            Spread {
+                lo: 1.6,
+                median: 2.13,
+                hi: 2.89,
+                within: 0,
+                n: 5
+            }
+        );
+        assert!(s.unanimous());
+        let mixed = Spread::of([1.43, 1.57, 7.03, 1.55, 1.9].into_iter(), SPIN_TARGET);
+        assert_eq!((mixed.within, mixed.median), (1, 1.57));
+        assert!(!mixed.unanimous());
+        // The target itself counts as met.
+        assert_eq!(Spread::of([1.5].into_iter(), SPIN_TARGET).within, 1);
     }
 }
