@@ -321,6 +321,9 @@ struct State {
     publish: bool,
     /// The latest-estimate board, when estimates go there instead of the queue.
     board: Option<LatestBoard>,
+    /// Per estimator, when its step of the current instant started and ended (recorded in the
+    /// histogram after publishing).
+    step_ns: Vec<(u64, u64)>,
     /// Queue samples loaned after an instant for the next one's estimates (one per estimator,
     /// up to [`crate::transport::PRELOANED_ESTIMATES`]).
     held: Vec<Option<PreLoaned>>,
@@ -401,7 +404,7 @@ impl State {
             let xhat = &mut self.xhat[e];
             est.estimate(&mut xhat[..nx]);
             let t1 = wire::monotonic_ns();
-            Latency::record(&mut self.latency.step, t0, t1);
+            self.step_ns[e] = (t0, t1);
             let seq = self.est_seq;
             self.est_seq += 1;
             if !self.publish {
@@ -442,6 +445,10 @@ impl State {
             }
         }
         let done_ns = wire::monotonic_ns();
+        // Statistics after the estimates are out: a histogram bucket can be a cache miss.
+        for &(t0, t1) in &self.step_ns {
+            Latency::record(&mut self.latency.step, t0, t1);
+        }
         Latency::record(&mut self.latency.end_to_end, self.last_send_ns, done_ns);
         self.last_k = k;
         self.evaluate(t, k, done_ns);
@@ -577,6 +584,7 @@ pub fn run_loop(
         record_cap,
         publish: !args.no_publish_estimates,
         board: None,
+        step_ns: vec![(0, 0); n_est],
         held: (0..n_est.min(crate::transport::PRELOANED_ESTIMATES))
             .map(|_| None)
             .collect(),
@@ -707,7 +715,6 @@ pub fn run_loop(
             }
             last_data_ns = Some(recv_ns);
             if slot.kind == wire::SLOT_DATA {
-                Latency::record(&mut st.latency.transport, slot.send_ns, recv_ns);
                 period_ns = slot.period_ns;
                 st.last_send_ns = slot.send_ns;
                 st.last_recv_ns = recv_ns;
@@ -730,6 +737,10 @@ pub fn run_loop(
                 });
             }
             let pushed = pushed.with_context(|| "refusing slot from channel-sim")?;
+            // After the instant this slot may have completed was published.
+            if slot.kind == wire::SLOT_DATA {
+                Latency::record(&mut st.latency.transport, slot.send_ns, recv_ns);
+            }
             if st.record_slots
                 && pushed == Pushed::Data
                 && st.traj.slots.len() < st.traj.slots.capacity()
