@@ -1217,6 +1217,65 @@ fn pipeline(o: &Opts, md: &mut String, raw: &BTreeMap<String, (Pct, Pct)>) -> Re
     Ok(())
 }
 
+// --------------------------------------------------------------------------------- idle
+
+/// `idle_penalty`: the same small works back to back and paced at the pipeline's rate, the
+/// floor under the runner's share of the pipeline's tail on this machine.
+fn idle(o: &Opts, md: &mut String) -> Result<()> {
+    let bin = o.target.join("release/idle_penalty");
+    let samples = if o.quick { "10000" } else { "30000" };
+    let rate = PIPELINE_RATE.to_string();
+    say(&format!("idle_penalty --samples {samples} --rate {rate}"));
+    let out = Command::new(&bin)
+        .args(["--samples", samples, "--rate", &rate, "--json"])
+        .env("IOX2_LOG_LEVEL", "Error")
+        .output()
+        .with_context(|| format!("{bin:?}"))?;
+    if !out.status.success() {
+        bail!("{}", String::from_utf8_lossy(&out.stderr).trim());
+    }
+    let v: Value = serde_json::from_slice(&out.stdout).context("idle_penalty JSON")?;
+    md.push_str(
+        "## What idling costs here
+
+",
+    );
+    let _ = write!(
+        md,
+        "`idle_penalty` times the same small works {samples} times back to back and {samples} \
+         times paced at {PIPELINE_RATE} Hz, spinning on the clock in between as the runner \
+         does (`--wait spin`). The code is the same, so what slows the paced ones is the \
+         machine's state after idling: most likely caches and TLB gone cold (this VM exposes no \
+         PMU to count the misses). The runner's own work on an instant, its share of the \
+         pipeline's end to end, runs in exactly that state.\n\n\
+         | work | back to back p50 µs | p99 µs | paced p50 µs | p99 µs | paced / back to back, p99 |\n\
+         |---|---:|---:|---:|---:|---:|\n"
+    );
+    for r in v.as_array().context("idle_penalty rows")? {
+        let work = r["work"].as_str().context("work")?;
+        let b =
+            Pct::from_json(&r["back_to_back"]).with_context(|| format!("{work} back to back"))?;
+        let p = Pct::from_json(&r["paced"]).with_context(|| format!("{work} paced"))?;
+        let _ = writeln!(
+            md,
+            "| {work} | {:.3} | {:.3} | {:.3} | {:.3} | {:.2}× |",
+            b.p50,
+            b.p99,
+            p.p50,
+            p.p99,
+            p.p99 / b.p99
+        );
+    }
+    md.push_str(
+        "\n`touch 16 KiB`: one `u64` read and written per cache line of a 16 KiB buffer. \
+         `iceoryx2 loan+send`: `loan_uninit` + `write_payload` + `send` of one `Estimate` on \
+         a service without subscribers (the runner's publish before 5e02d93); `loaned ahead`: \
+         `write_payload` + `send` of a sample loaned after the previous send, off the clock \
+         (the runner's publish since).\n\n",
+    );
+    Ok(())
+}
+
 // --------------------------------------------------------------------------------- eval
 
 fn eval(o: &Opts, md: &mut String) -> Result<()> {
@@ -1325,7 +1384,7 @@ fn run() -> Result<()> {
             "--out" => o.out = PathBuf::from(args.next().ok_or_else(|| anyhow!("--out FILE"))?),
             "-h" | "--help" => {
                 println!(
-                    "report [--quick] [--skip criterion,icount,firmware,ipc,pipeline,eval] [--out FILE]"
+                    "report [--quick] [--skip criterion,icount,firmware,ipc,pipeline,idle,eval] [--out FILE]"
                 );
                 return Ok(());
             }
@@ -1397,6 +1456,11 @@ fn run() -> Result<()> {
         let mut part = String::new();
         let r = pipeline(&o, &mut part, &raw);
         keep("pipeline", r, part, &mut body);
+    }
+    if o.runs("idle") {
+        let mut part = String::new();
+        let r = idle(&o, &mut part);
+        keep("idle", r, part, &mut body);
     }
     if o.runs("eval") {
         let mut part = String::new();
