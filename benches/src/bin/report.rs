@@ -203,15 +203,22 @@ fn criterion(o: &Opts, md: &mut String) -> Result<BTreeMap<String, Crit>> {
 
 /// Runs `kf_interleaved` and returns its JSON rows.
 fn run_kf_interleaved(bin: &Path, rounds: &str) -> Result<Value> {
-    say(&format!("{} --rounds {rounds} --json", bin.display()));
+    run_json(bin, &["--rounds", rounds])
+}
+
+/// Runs one of the benchmark binaries with `args` and `--json`, and parses its stdout.
+fn run_json(bin: &Path, args: &[&str]) -> Result<Value> {
+    say(&format!("{} {} --json", bin.display(), args.join(" ")));
     let out = Command::new(bin)
-        .args(["--rounds", rounds, "--json"])
+        .args(args)
+        .arg("--json")
+        .env("IOX2_LOG_LEVEL", "Error")
         .output()
         .with_context(|| format!("{bin:?}"))?;
     if !out.status.success() {
         bail!("{}", String::from_utf8_lossy(&out.stderr).trim());
     }
-    serde_json::from_slice(&out.stdout).context("kf_interleaved JSON")
+    serde_json::from_slice(&out.stdout).with_context(|| format!("{bin:?}: JSON on stdout"))
 }
 
 /// The table of `kf_interleaved`'s rows.
@@ -1225,16 +1232,7 @@ fn idle(o: &Opts, md: &mut String) -> Result<()> {
     let bin = o.target.join("release/idle_penalty");
     let samples = if o.quick { "10000" } else { "30000" };
     let rate = PIPELINE_RATE.to_string();
-    say(&format!("idle_penalty --samples {samples} --rate {rate}"));
-    let out = Command::new(&bin)
-        .args(["--samples", samples, "--rate", &rate, "--json"])
-        .env("IOX2_LOG_LEVEL", "Error")
-        .output()
-        .with_context(|| format!("{bin:?}"))?;
-    if !out.status.success() {
-        bail!("{}", String::from_utf8_lossy(&out.stderr).trim());
-    }
-    let v: Value = serde_json::from_slice(&out.stdout).context("idle_penalty JSON")?;
+    let v = run_json(&bin, &["--samples", samples, "--rate", &rate])?;
     md.push_str(
         "## What idling costs here
 
