@@ -40,20 +40,17 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod covariance_update;
 pub mod error;
 pub mod examples;
 pub mod filter;
 pub mod gauss;
 pub mod gsum;
 pub mod linalg;
-pub mod linalg_eig;
-pub mod linalg_kron;
-#[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
-pub mod linalg_lanes;
-pub mod linalg_small;
 pub mod model;
 pub mod protocol;
 pub mod real;
 
+pub use covariance_update::CovarianceUpdate;
 pub use error::{Error, Result};
 pub use real::Real;

@@ -43,13 +43,14 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::kalman::{kalman_update, CovarianceUpdate};
+use crate::filter::kalman::kalman_update;
 use crate::filter::prior;
 use crate::filter::time_update::predict;
 use crate::gauss::{cdf, inv_mills, inv_mills_delta, ln_sf, pdf, sf};
 use crate::linalg::{check_finite, symmetrize};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
+use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
 
 /// Assumed-density filter with the exact occlusion likelihood (`n_e = 1`, `S` regions).

@@ -24,15 +24,16 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::kalman::{kalman_update, CovarianceUpdate};
+use crate::filter::kalman::kalman_update;
 use crate::filter::prior;
 use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
 use crate::gsum::GaussSum;
+use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{check_finite, symmetrize};
-use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
 use crate::protocol::occlusion::Occlusion;
+use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
 
 /// Cross-coupled region-label / state estimator (seed 001) on `NX` states, with `S` occlusion

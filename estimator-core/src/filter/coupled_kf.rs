@@ -40,8 +40,8 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::filter::nn_system::{CoupledNoiseSystem, DifferentiableMap};
+use crate::linalg::eig::symmetric_eigen;
 use crate::linalg::{check_finite, check_spd, symmetrize};
-use crate::linalg_eig::symmetric_eigen;
 use crate::{Real, Result};
 
 /// How the baseline treats the nonlinearity `f`.

@@ -5,21 +5,11 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::filter::prior;
 use crate::filter::time_update::{check_predicted, predict_raw};
+use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{all_finite, check_finite, symmetrize};
-use crate::linalg_small::{self as small, SmallLdl};
 use crate::model::LinearSystem;
+use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
-
-/// How the measurement update forms the posterior covariance.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum CovarianceUpdate {
-    /// `P⁺ = (I − KC) P (I − KC)ᵀ + K R Kᵀ`: stays positive semi-definite under rounding and
-    /// for any gain (the default).
-    #[default]
-    Joseph,
-    /// `P⁺ = (I − KC) P`: cheaper, only correct for the optimal gain, can lose definiteness.
-    Standard,
-}
 
 /// Kalman filter on `NX` states.
 ///
@@ -140,8 +130,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         let j = k.saturating_sub(1);
         // With `simd`, predict and update on lanes (the same bits as the scalar path); a
         // refusal there takes the scalar path, which names the error.
-        #[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
-        let lanes = crate::linalg_lanes::step(
+        #[cfg(simd_lanes)]
+        let lanes = crate::linalg::lanes::step(
             &self.x,
             &self.p,
             &model.a(j),
@@ -151,7 +141,7 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
             y,
             self.form,
         );
-        #[cfg(not(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64"))))]
+        #[cfg(not(simd_lanes))]
         let lanes = None;
         let (x, p, nis) = match lanes {
             Some(out) => out,
@@ -165,15 +155,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
 
     /// `step`'s scalar path: every target without `simd`, and the exact error after the
     /// lanes refused (then out of line and cold, so that the lanes' fast path stays small).
-    #[cfg_attr(
-        all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")),
-        cold,
-        inline(never)
-    )]
-    #[cfg_attr(
-        not(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64"))),
-        inline(always)
-    )]
+    #[cfg_attr(simd_lanes, cold, inline(never))]
+    #[cfg_attr(not(simd_lanes), inline(always))]
     #[allow(clippy::type_complexity)]
     fn step_scalar<const NY: usize, M: LinearSystem<T, NX, NY>>(
         &self,
@@ -210,14 +193,14 @@ pub fn kalman_update<T: Real, const NX: usize, const NY: usize>(
     y: &SVector<T, NY>,
     form: CovarianceUpdate,
 ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
-    #[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
-    if let Some(out) = crate::linalg_lanes::kalman_update(x, p, c, r, y, form) {
+    #[cfg(simd_lanes)]
+    if let Some(out) = crate::linalg::lanes::kalman_update(x, p, c, r, y, form) {
         return Ok(out); // the same bits as the scalar kernels, several entries at a time
     }
     kalman_update_scalar(x, p, c, r, y, form)
 }
 
-/// [`kalman_update`] on the scalar kernels of [`crate::linalg_small`] (every target; the
+/// [`kalman_update`] on the scalar kernels of [`crate::linalg::small`] (every target; the
 /// reference the SIMD lanes are tested against bit for bit).
 #[inline(always)]
 pub(crate) fn kalman_update_scalar<T: Real, const NX: usize, const NY: usize>(

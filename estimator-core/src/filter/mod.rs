@@ -6,8 +6,9 @@ pub mod kalman;
 pub mod prior;
 pub mod time_update;
 
+pub use crate::CovarianceUpdate;
 pub use intermittent::IntermittentKalmanFilter;
-pub use kalman::{CovarianceUpdate, KalmanFilter};
+pub use kalman::KalmanFilter;
 
 pub mod cce;
 pub use cce::CrossCoupledEstimator;

@@ -23,7 +23,7 @@ use nalgebra::SMatrix;
 use crate::filter::nn_bound::NnBoundConfig;
 use crate::filter::nn_system::Activation;
 use crate::filter::nn_tbcp::NnTbcpEstimator;
-use crate::linalg_eig::min_eigenvalue;
+use crate::linalg::eig::min_eigenvalue;
 use crate::{Error, Real};
 
 /// Token-bucket parameters as given (before validation).

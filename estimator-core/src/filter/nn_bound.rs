@@ -7,9 +7,9 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::linalg::eig::max_eigenvalue;
+use crate::linalg::kron::{solve_kron_spd, solve_two_sided_spd};
 use crate::linalg::{check_finite, symmetrize};
-use crate::linalg_eig::max_eigenvalue;
-use crate::linalg_kron::{solve_kron_spd, solve_two_sided_spd};
 use crate::{Error, Real, Result};
 
 /// Validated scalars of Theorems 1-2.

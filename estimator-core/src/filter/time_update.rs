@@ -3,8 +3,8 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::linalg::small;
 use crate::linalg::{all_finite, check_finite};
-use crate::linalg_small as small;
 use crate::model::LinearSystem;
 use crate::{Real, Result};
 
@@ -17,8 +17,8 @@ pub fn predict_raw<T: Real, const NX: usize>(
     a: &SMatrix<T, NX, NX>,
     q: &SMatrix<T, NX, NX>,
 ) -> (SVector<T, NX>, SMatrix<T, NX, NX>) {
-    #[cfg(all(feature = "simd", any(target_arch = "x86_64", target_arch = "aarch64")))]
-    if let Some(out) = crate::linalg_lanes::predict(x, p, a, q) {
+    #[cfg(simd_lanes)]
+    if let Some(out) = crate::linalg::lanes::predict(x, p, a, q) {
         return out; // the same bits as below, several entries at a time
     }
     (small::mul_vec(a, x), small::congruence_add(a, p, q))

@@ -6,7 +6,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::check_finite;
+use super::check_finite;
 use crate::{Error, Real, Result};
 
 /// Eigenvalues `λ` and orthonormal eigenvectors `U` (columns) with `A = U diag(λ) Uᵀ`.
@@ -18,7 +18,7 @@ pub fn symmetric_eigen<T: Real, const N: usize>(
     what: &'static str,
 ) -> Result<(SVector<T, N>, SMatrix<T, N, N>)> {
     check_finite(a, what)?;
-    let mut m = crate::linalg::symmetrize(a);
+    let mut m = super::symmetrize(a);
     let mut u = SMatrix::<T, N, N>::identity();
     let scale = m.amax();
     if scale == T::zero() {

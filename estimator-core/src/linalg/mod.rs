@@ -1,10 +1,26 @@
-//! Small dense linear algebra on fixed-size matrices: Cholesky solves and symmetrisation.
+//! Small dense linear algebra on fixed-size matrices.
+//!
+//! This file holds the finiteness checks, symmetrisation and the validated Cholesky solves;
+//! the submodules hold one family each:
+//!
+//! * [`small`]: unrolled kernels for the symmetric products of a Kalman step and the
+//!   square-root-free `L D Lᵀ` factor;
+//! * `lanes` (with the `simd` feature on x86-64 and AArch64): the same kernels on SIMD lanes,
+//!   bit-identical;
+//! * [`eig`]: symmetric eigendecomposition by cyclic Jacobi rotations;
+//! * [`kron`]: the two-sided matrix equation of seed 003's gain.
 //!
 //! Every routine returns [`Result`] and none forms an explicit inverse where a solve will do.
 
 use nalgebra::{Cholesky, Const, SMatrix};
 
 use crate::{Error, Real, Result};
+
+pub mod eig;
+pub mod kron;
+#[cfg(simd_lanes)]
+pub mod lanes;
+pub mod small;
 
 /// `true` when every entry is finite, in one pass without branches: `v − v` is `0` for a
 /// finite `v` and NaN otherwise, and NaN survives the sums. Four partial sums keep the

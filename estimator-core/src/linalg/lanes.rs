@@ -3,10 +3,10 @@
 //! Each column of a matrix with `NX ≤ 4` rows is one 4-lane vector (`wide::f32x4` or
 //! `wide::f64x4`, rows past `NX` zero), so a product `A B` is a few "column × broadcast
 //! scalar" steps instead of `NX²` dot products. LLVM does not find this form by itself in the
-//! generic kernels of [`crate::linalg_small`] (it vectorises their dot products with shuffles
+//! generic kernels of [`crate::linalg::small`] (it vectorises their dot products with shuffles
 //! that lengthen the dependency chain; `BENCHMARKS.md` has the measurements).
 //!
-//! **Bit-identical** to [`crate::linalg_small`]: every entry is the same sequence of IEEE
+//! **Bit-identical** to [`crate::linalg::small`]: every entry is the same sequence of IEEE
 //! operations in the same order (sums start from their first product and run over `k`
 //! ascending; symmetric results are computed on the upper triangle and mirrored; the same
 //! [`SmallLdl`] factor), only several entries at a time. So results, tests and the Cortex-M4
@@ -21,9 +21,8 @@ use core::any::Any;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::kalman::CovarianceUpdate;
-use crate::linalg_small::SmallLdl;
-use crate::Real;
+use super::small::SmallLdl;
+use crate::{CovarianceUpdate, Real};
 
 /// `&dyn Any` downcast: a compile-time constant `TypeId` test after monomorphisation.
 #[inline(always)]
@@ -327,7 +326,7 @@ lanes!(f64_lanes, f64, wide::f64x4);
 mod tests {
     use super::*;
     use crate::filter::kalman::kalman_update_scalar as scalar_update;
-    use crate::linalg_small as small;
+    use crate::linalg::small;
 
     /// A deterministic pseudo-random stream in [-1, 1).
     struct Lcg(u64);

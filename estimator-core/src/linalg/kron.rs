@@ -15,8 +15,8 @@
 
 use nalgebra::SMatrix;
 
-use crate::linalg::{check_finite, cholesky, solve_spd, symmetrize};
-use crate::linalg_eig::symmetric_eigen;
+use super::eig::symmetric_eigen;
+use super::{check_finite, cholesky, solve_spd, symmetrize};
 use crate::{Error, Real, Result};
 
 /// `vec(X)`: the columns of `X` stacked (Definition 1, (12)). `P` must equal `N·M`.

@@ -10,7 +10,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::all_finite;
+use super::all_finite;
 use crate::{Error, Real, Result};
 
 /// `M v`.
