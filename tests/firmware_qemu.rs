@@ -13,9 +13,8 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use estimator_core::filter::nn_bound::NnBoundConfig;
-use estimator_core::filter::nn_system::Seed003Example;
-use estimator_core::filter::nn_tbcp::Seed003Nn;
+use estimator_core::filter::nn::NnBoundConfig;
+use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::filter::{
     AssumedDensityFilter, CrossCoupledEstimator, IntermittentKalmanFilter, KalmanFilter, KfIo,
 };

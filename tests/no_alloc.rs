@@ -47,7 +47,7 @@ fn estimator_steps_do_not_allocate() {
 /// Seed 001 (issue 4): CCE, ADF and KF-IO steps on the paper's example, arrivals, dropouts
 /// and error paths.
 fn occlusion_section() {
-    use estimator_core::examples::Seed001Example;
+    use estimator_core::papers::Seed001Example;
     use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
     use estimator_core::gsum::GaussSum;
     let m = Seed001Example::model::<f64>().unwrap();
@@ -82,10 +82,8 @@ fn occlusion_section() {
 /// baselines, the token bucket and the run monitor, including an error path.
 fn nn_tbcp_section() {
     use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
-    use estimator_core::filter::nn_assumptions::RunMonitor;
-    use estimator_core::filter::nn_bound::{GainSolver, NnBoundConfig};
-    use estimator_core::filter::nn_system::Seed003Example;
-    use estimator_core::filter::nn_tbcp::Seed003Nn;
+    use estimator_core::filter::nn::{GainSolver, NnBoundConfig, RunMonitor};
+    use estimator_core::papers::{Seed003Example, Seed003Nn};
     use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
 
     // A configuration with δ₁ < 1 so the bound stays finite over 10 000 steps.

@@ -3,11 +3,10 @@
 //! so the host instruction counts and the criterion medians describe the same work under
 //! the same names.
 
-use estimator_core::examples::Seed001Example;
+use estimator_core::papers::Seed001Example;
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation};
-use estimator_core::filter::nn_bound::{GainSolver, NnBoundConfig};
-use estimator_core::filter::nn_system::Seed003Example;
-use estimator_core::filter::nn_tbcp::Seed003Nn;
+use estimator_core::filter::nn::{GainSolver, NnBoundConfig};
+use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, TobitFusion};
 use estimator_core::gsum::GaussSum;

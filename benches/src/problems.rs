@@ -1,6 +1,6 @@
 //! The benchmark problems: one Kalman step at the papers' dimensions, from a converged prior.
 
-use estimator_core::examples::Seed001Example;
+use estimator_core::papers::Seed001Example;
 use estimator_core::filter::{CovarianceUpdate, IntermittentKalmanFilter, KalmanFilter};
 use estimator_core::model::{LinearModel, LinearSystem};
 use estimator_core::{Real, Result};

@@ -6,7 +6,7 @@
 //! y_k     = C_k x_k + D_k w_k,          w_k ~ N(0, w̄²)  (DESIGN.md: w̄² = 0.1)
 //! ```
 //!
-//! The matrices and `f` come from `estimator_core::filter::nn_system::Seed003Example`, the
+//! The matrices and `f` come from `estimator_core::papers::Seed003Example`, the
 //! same code the estimators use. Because `w_k` enters `y_k` *and* `x_{k+1}`, one run keeps the
 //! `w_k` drawn for `y_k` and uses it in the next state transition. The framework has no
 //! measurement at k = 0, so `w_0` (which would also have produced `y_0`) is drawn at the first
@@ -15,7 +15,8 @@
 
 use std::any::Any;
 
-use estimator_core::filter::nn_system::{CoupledNoiseSystem, DifferentiableMap, Seed003Example};
+use estimator_core::filter::nn::{CoupledNoiseSystem, DifferentiableMap};
+use estimator_core::papers::Seed003Example;
 use nalgebra::SVector;
 use rand_distr::{Distribution, StandardNormal};
 

@@ -42,12 +42,12 @@ extern crate std;
 
 pub mod covariance_update;
 pub mod error;
-pub mod examples;
 pub mod filter;
 pub mod gauss;
 pub mod gsum;
 pub mod linalg;
 pub mod model;
+pub mod papers;
 pub mod protocol;
 pub mod real;
 

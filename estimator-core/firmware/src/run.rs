@@ -15,12 +15,9 @@
 
 use core::fmt;
 
-use estimator_core::filter::adf::AssumedDensityFilter;
-use estimator_core::filter::cce::CrossCoupledEstimator;
-use estimator_core::filter::kf_io::KfIo;
-use estimator_core::filter::nn_bound::NnBoundConfig;
-use estimator_core::filter::nn_system::Seed003Example;
-use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
+use estimator_core::filter::nn::NnBoundConfig;
+use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, NnTbcpEstimator};
+use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::{IntermittentKalmanFilter, KalmanFilter, TobitFusion};
 use estimator_core::gsum::GaussSum;

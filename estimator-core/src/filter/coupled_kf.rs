@@ -39,7 +39,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::nn_system::{CoupledNoiseSystem, DifferentiableMap};
+use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use crate::linalg::eig::symmetric_eigen;
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::{Real, Result};
@@ -236,7 +236,7 @@ fn project_psd<T: Real, const N: usize>(p: &SMatrix<T, N, N>) -> Result<SMatrix<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::nn_system::Seed003Example;
+    use crate::papers::Seed003Example;
     use crate::Error;
     use nalgebra::{matrix, vector};
 

@@ -354,7 +354,7 @@ mod tests {
 
     #[test]
     fn fused_step_is_bit_identical_to_predict_then_update() {
-        let m = crate::examples::Seed001Example::model::<f64>().unwrap();
+        let m = crate::papers::Seed001Example::model::<f64>().unwrap();
         let mut fused =
             KalmanFilter::new(vector![5.0, 5.0, 5.0], SMatrix::identity() * 4.0).unwrap();
         let mut split = fused;

@@ -1,30 +1,28 @@
-//! The estimators. One per file; each keeps its state private and changes it only when a step
-//! succeeds.
+//! The estimators, one per file, grouped by the paper whose problem they solve. Each keeps its
+//! state private and changes it only when a step succeeds.
+//!
+//! * Linear-Gaussian: [`kalman`] (the Kalman filter), [`intermittent`] (update only on
+//!   arrival), [`time_update`] (the prediction they all share), [`prior`] (the initial
+//!   estimate they start from).
+//! * [`occlusion`] (seed 001): state-dependent dropouts — the cross-coupled estimator, an
+//!   assumed-density filter and the KF-IO baseline.
+//! * [`nn`] (seed 003): the NN estimator under the token bucket; [`coupled_kf`] holds its
+//!   KF/EKF baselines for the same noise-coupled system.
+//! * [`tobit`] (seed 004): local Tobit filters of censored measurements and their fusion.
 
+pub mod coupled_kf;
 pub mod intermittent;
 pub mod kalman;
+pub mod nn;
+pub mod occlusion;
 pub mod prior;
 pub mod time_update;
-
-pub use crate::CovarianceUpdate;
-pub use intermittent::IntermittentKalmanFilter;
-pub use kalman::KalmanFilter;
-
-pub mod cce;
-pub use cce::CrossCoupledEstimator;
-
-pub mod adf;
-pub use adf::AssumedDensityFilter;
-
-pub mod kf_io;
-pub use kf_io::KfIo;
-pub mod coupled_kf;
-pub mod fusion;
-pub mod nn_assumptions;
-pub mod nn_bound;
-pub mod nn_system;
-pub mod nn_tbcp;
 pub mod tobit;
 
-pub use fusion::TobitFusion;
-pub use tobit::TobitFilter;
+pub use crate::CovarianceUpdate;
+pub use coupled_kf::CoupledNoiseKf;
+pub use intermittent::IntermittentKalmanFilter;
+pub use kalman::KalmanFilter;
+pub use nn::NnTbcpEstimator;
+pub use occlusion::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
+pub use tobit::{TobitFilter, TobitFusion};

@@ -54,7 +54,7 @@ pub fn check_predicted<T: Real, const NX: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::examples::Seed001Example;
+    use crate::papers::Seed001Example;
     use crate::Error;
     use nalgebra::{matrix, vector};
 

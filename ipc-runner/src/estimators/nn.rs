@@ -28,10 +28,10 @@ use channel_sim::scenario::ComposedScenario;
 use channel_sim::token_bucket::TokenBucketStage;
 use channel_sim::{Observation, Scenario};
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
-use estimator_core::filter::nn_assumptions::{check_before_run, BucketParams, PreRunVerdict};
-use estimator_core::filter::nn_bound::NnBoundConfig;
-use estimator_core::filter::nn_system::{Seed003Example, Tanh};
-use estimator_core::filter::nn_tbcp::{NnTbcpEstimator, Seed003Nn};
+use estimator_core::filter::nn::{
+    check_before_run, BucketParams, NnBoundConfig, NnTbcpEstimator, PreRunVerdict, Tanh,
+};
+use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::Error;
 use nalgebra::{matrix, SMatrix, SVector};
 

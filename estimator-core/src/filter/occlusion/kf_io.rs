@@ -1,7 +1,7 @@
 //! `kf-io`: a linear MMSE filter that treats packet arrival as a Bernoulli variable whose
 //! probability comes from the prior — the baseline the seed 001 paper compares against
 //! (its ref. \[37\], Thapliyal et al. 2019), which it cites without equations. The construction
-//! is fixed in DESIGN.md ("Seed 001 … KF-IO"):
+//! is fixed in docs/design.md ("Seed 001", KF-IO):
 //!
 //! ```text
 //! p_k = P(u_k in no region)                    under u_k ~ N(E x̂⁻, E P⁻ Eᵀ + Ψ)
@@ -132,9 +132,9 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::examples::Seed001Example;
     use crate::filter::KalmanFilter;
     use crate::model::LinearModel;
+    use crate::papers::Seed001Example;
     use nalgebra::{matrix, vector};
 
     fn setup() -> (LinearModel<f64, 3, 3, 2, 2>, Occlusion<f64, 3, 1, 4>) {
@@ -144,7 +144,7 @@ mod tests {
         )
     }
 
-    /// DESIGN.md's equations written literally (S_y, its inverse, K = p P Cᵀ S_y⁻¹).
+    /// docs/design.md's equations written literally (S_y, its inverse, K = p P Cᵀ S_y⁻¹).
     #[test]
     fn matches_the_design_equations_literally() {
         let (m, occ) = setup();

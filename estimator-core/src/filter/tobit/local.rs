@@ -21,260 +21,23 @@
 //!                  + ((1+d)(1+e⁻¹) + (1+d⁻¹)(1+χ⁻¹)) σ²,   Ḡ₀ = η₀².
 //! ```
 //!
-//! Since (30) is `κ₁(I − KQ̄C)P̄(…)ᵀ + K M Kᵀ`, the gain (37) is exactly its trace minimiser and
-//! (30) is evaluated in that Joseph-like form for any gain ([`GainProblem::bound`]).
+//! The gain (37) and the bound (30) are [`GainProblem`]'s; the configuration (κ, τ, Ξ, where
+//! Υ enters) is [`TobitFilterConfig`]'s.
 //!
-//! Decisions (DESIGN.md, "Seed 004"): `C(Υ∘Ω₁)Cᵀ` is read as written (it needs `n_x = n_y`);
-//! the product also offers the dimensionally general `Υ∘(CΩ₁Cᵀ)` — what the proof's
-//! `E{Q̃ C x xᵀ Cᵀ Q̃ᵀ}` is — as [`UpsilonPlacement::OutsideC`]. The `K_{t+1}` of the κ₇ term is
-//! `K_t`. The received measurement ȳ starts at τ; Ḡ starts at η₀² and the first processed
-//! instant uses Ξ(Ḡ₀), as the trigger's first instant uses η₀. The paper's `P_{t|t−1}` in Ω₁
-//! is the bound `P̄_{t|t−1}` (the true covariance is unknown to the filter). Only the
-//! variances `R_j` enter (eqs. 5-7 are per component), so a model's measurement covariance
-//! must be diagonal.
-//!
-//! Numerics: Φ scales like `Q̄²` in components whose prediction is far below the threshold,
-//! so the gain is solved on the Jacobi-equilibrated `D Φ D` (`D = diag(Φ)^{-1/2}`); a component
-//! whose `Φ_jj` underflowed to 0 (so `ϱ̄_j ≈ 0`) carries no information and gets a zero gain
-//! column.
+//! Decisions (docs/design.md, "Seed 004"): the `K_{t+1}` of the κ₇ term is `K_t`. The
+//! received measurement ȳ starts at τ; Ḡ starts at η₀² and the first processed instant uses
+//! Ξ(Ḡ₀), as the trigger's first instant uses η₀. The paper's `P_{t|t−1}` in Ω₁ is the bound
+//! `P̄_{t|t−1}` (the true covariance is unknown to the filter). Only the variances `R_j` enter
+//! (eqs. 5-7 are per component), so a model's measurement covariance must be diagonal.
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
+use super::config::{Kappas, TobitFilterConfig, UpsilonPlacement};
+use super::gain::GainProblem;
+use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
-use crate::protocol::event_trigger::EventTriggerConfig;
 use crate::protocol::tobit::TobitStats;
 use crate::{Error, Real, Result};
-
-/// The scalars ε₁ … ε₁₄ of Theorem 1 (all finite and positive).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BoundScalars<T: Real> {
-    eps: [T; 14],
-}
-
-/// κ₁ … κ₈ of Theorem 1 (index 0 is κ₁).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Kappas<T: Real>(pub [T; 8]);
-
-impl<T: Real> BoundScalars<T> {
-    /// `eps[j − 1]` is ε_j.
-    pub fn new(eps: [T; 14]) -> Result<Self> {
-        for e in eps {
-            if !e.finite() {
-                return Err(Error::NonFinite {
-                    what: "bound scalar epsilon",
-                });
-            }
-            if e <= T::zero() {
-                return Err(Error::InvalidConfig {
-                    field: "epsilon",
-                    reason: "Theorem 1 needs positive scalars epsilon_1..epsilon_14",
-                });
-            }
-        }
-        Ok(Self { eps })
-    }
-
-    /// The example's values (section 4): ε₁…ε₅ = 0.05, ε₆…ε₁₃ = 0.7, ε₁₄ = 1.
-    #[must_use]
-    pub fn paper_example() -> Self {
-        let mut eps = [T::lit(0.7); 14];
-        for e in eps.iter_mut().take(5) {
-            *e = T::lit(0.05);
-        }
-        eps[13] = T::one();
-        Self { eps }
-    }
-
-    /// ε_j for `j` in 1..=14.
-    #[inline]
-    pub fn eps(&self, j: usize) -> T {
-        self.eps[j - 1]
-    }
-
-    /// κ₁ … κ₈ (Theorem 1).
-    #[must_use]
-    pub fn kappas(&self) -> Kappas<T> {
-        let e = |j: usize| self.eps[j - 1];
-        let inv = |j: usize| T::one() / self.eps[j - 1];
-        let one = T::one();
-        Kappas([
-            one + e(1) + e(2) + e(3) + e(4) + e(5),
-            one + inv(1) + inv(7) + inv(10) + inv(12) + inv(13),
-            one + e(6),
-            one + e(7) + e(8) + e(9) + inv(2),
-            one + inv(3) + inv(8) + e(10) + e(11),
-            one + inv(4) + e(12),
-            one + inv(5) + inv(9) + inv(11) + e(13),
-            one + inv(6),
-        ])
-    }
-
-    fn cast<U: Real>(&self) -> BoundScalars<U> {
-        BoundScalars {
-            eps: self.eps.map(|e| U::lit(e.to_f64())),
-        }
-    }
-}
-
-/// Where Υ enters the κ₃ term.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum UpsilonPlacement {
-    /// `C (Υ∘Ω₁) Cᵀ` as printed in (30)/(37); needs `n_x = n_y` (the paper's default).
-    #[default]
-    AsWritten,
-    /// `Υ∘(C Ω₁ Cᵀ)`, the covariance of `(ϱ − ϱ̄) C x` that the proof bounds; any dimensions.
-    OutsideC,
-}
-
-/// Configuration of one node's local Tobit filter.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TobitFilterConfig<T: Real, const NY: usize> {
-    /// Censoring thresholds τ_m (eq. 2).
-    pub tau: SVector<T, NY>,
-    /// ε₁ … ε₁₄.
-    pub scalars: BoundScalars<T>,
-    /// The node's event-trigger parameters (σ, χ, λ, η₀ enter Ξ).
-    pub trigger: EventTriggerConfig<T>,
-    /// `d_t` of Ξ (positive).
-    pub d: T,
-    /// `e_t` of Ξ (positive).
-    pub e: T,
-    /// Placement of Υ in the κ₃ term.
-    pub placement: UpsilonPlacement,
-}
-
-impl<T: Real, const NY: usize> TobitFilterConfig<T, NY> {
-    /// Validates τ, d, e (the scalars and trigger are validated by their constructors).
-    pub fn new(
-        tau: SVector<T, NY>,
-        scalars: BoundScalars<T>,
-        trigger: EventTriggerConfig<T>,
-        d: T,
-        e: T,
-    ) -> Result<Self> {
-        check_finite(&tau, "censoring threshold")?;
-        for (v, field) in [(d, "d"), (e, "e")] {
-            if !v.finite() {
-                return Err(Error::NonFinite { what: field });
-            }
-            if v <= T::zero() {
-                return Err(Error::InvalidConfig {
-                    field,
-                    reason: "the scalars of Xi must be positive",
-                });
-            }
-        }
-        Ok(Self {
-            tau,
-            scalars,
-            trigger,
-            d,
-            e,
-            placement: UpsilonPlacement::AsWritten,
-        })
-    }
-
-    /// Selects where Υ enters the κ₃ term.
-    #[must_use]
-    pub fn with_placement(mut self, placement: UpsilonPlacement) -> Self {
-        self.placement = placement;
-        self
-    }
-
-    /// Ξ(Ḡ) (Theorem 1).
-    #[must_use]
-    pub fn xi(&self, g: T) -> T {
-        let one = T::one();
-        let (d, e) = (self.d, self.e);
-        let (lam, chi, sig) = (
-            self.trigger.lambda(),
-            self.trigger.chi(),
-            self.trigger.sigma(),
-        );
-        ((one + d) * (one + e) * lam * lam + (one + chi) * (one + one / d) / (chi * chi)) * g
-            + ((one + d) * (one + one / e) + (one + one / d) * (one + one / chi)) * sig * sig
-    }
-
-    /// Converts to another scalar type.
-    pub fn cast<U: Real>(&self) -> Result<TobitFilterConfig<U, NY>> {
-        let f = |x: T| U::lit(x.to_f64());
-        Ok(TobitFilterConfig::new(
-            self.tau.map(f),
-            self.scalars.cast(),
-            self.trigger.cast()?,
-            f(self.d),
-            f(self.e),
-        )?
-        .with_placement(self.placement))
-    }
-}
-
-/// The quadratic in K whose trace (30) the gain (37) minimises:
-/// `P̄(K) = κ₁ (I − K Q̄C) P̄⁻ (I − K Q̄C)ᵀ + K M Kᵀ`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GainProblem<T: Real, const NX: usize, const NY: usize> {
-    /// κ₁.
-    pub kappa1: T,
-    /// P̄_{t|t−1}.
-    pub p_prior: SMatrix<T, NX, NX>,
-    /// Q̄ C.
-    pub qc: SMatrix<T, NY, NX>,
-    /// M: every term of (30) that is `K (·) Kᵀ`.
-    pub m: SMatrix<T, NY, NY>,
-}
-
-impl<T: Real, const NX: usize, const NY: usize> GainProblem<T, NX, NY> {
-    /// Ψ of (37).
-    #[must_use]
-    pub fn psi(&self) -> SMatrix<T, NX, NY> {
-        self.p_prior * self.qc.transpose() * self.kappa1
-    }
-
-    /// Φ of (37).
-    #[must_use]
-    pub fn phi(&self) -> SMatrix<T, NY, NY> {
-        symmetrize(&(self.qc * self.p_prior * self.qc.transpose() * self.kappa1 + self.m))
-    }
-
-    /// Eq. (30) for an arbitrary gain.
-    #[must_use]
-    pub fn bound(&self, k: &SMatrix<T, NX, NY>) -> SMatrix<T, NX, NX> {
-        let i_kqc = SMatrix::<T, NX, NX>::identity() - k * self.qc;
-        symmetrize(
-            &(i_kqc * self.p_prior * i_kqc.transpose() * self.kappa1 + k * self.m * k.transpose()),
-        )
-    }
-
-    /// Eq. (37), `K = Ψ Φ⁻¹`, by a Cholesky solve on the equilibrated Φ.
-    pub fn gain(&self) -> Result<SMatrix<T, NX, NY>> {
-        let phi = self.phi();
-        let psi = self.psi();
-        check_finite(&phi, "gain denominator Phi")?;
-        let mut scale = SVector::<T, NY>::zeros();
-        for j in 0..NY {
-            let d = phi[(j, j)];
-            if d > T::zero() {
-                scale[j] = T::one() / d.sqrt();
-            } else if d < T::zero() {
-                return Err(Error::NotPositiveDefinite {
-                    what: "gain denominator Phi",
-                });
-            }
-        }
-        let mut phi_s = SMatrix::<T, NY, NY>::identity();
-        for i in 0..NY {
-            for j in 0..NY {
-                if scale[i] > T::zero() && scale[j] > T::zero() {
-                    phi_s[(i, j)] = phi[(i, j)] * scale[i] * scale[j];
-                }
-            }
-        }
-        let psi_s = SMatrix::<T, NX, NY>::from_fn(|r, c| psi[(r, c)] * scale[c]);
-        let x = solve_spd_right(&psi_s, &phi_s, "gain denominator Phi")?;
-        Ok(SMatrix::from_fn(|r, c| x[(r, c)] * scale[c]))
-    }
-}
 
 /// Everything one local step computes before the gain: the quantities of (23), (29), (30).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -541,7 +304,9 @@ pub fn diagonal_variances<T: Real, const NY: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filter::tobit::config::BoundScalars;
     use crate::filter::KalmanFilter;
+    use crate::protocol::event_trigger::EventTriggerConfig;
     use nalgebra::{matrix, vector};
 
     fn paper_cfg(lambda: f64, sigma: f64) -> TobitFilterConfig<f64, 2> {
@@ -562,24 +327,6 @@ mod tests {
         let a = matrix![w.cos(), w.sin(); -w.sin(), w.cos()];
         let b = vector![0.16, 0.18];
         (a, b * b.transpose() * 0.05)
-    }
-
-    #[test]
-    fn kappas_of_the_paper_example() {
-        let k = BoundScalars::<f64>::paper_example().kappas().0;
-        let want = [
-            1.25,
-            1.0 + 20.0 + 4.0 / 0.7,
-            1.7,
-            1.0 + 2.1 + 20.0,
-            1.0 + 20.0 + 1.0 / 0.7 + 1.4,
-            1.0 + 20.0 + 0.7,
-            1.0 + 20.0 + 2.0 / 0.7 + 0.7,
-            1.0 + 1.0 / 0.7,
-        ];
-        for i in 0..8 {
-            assert!((k[i] - want[i]).abs() < 1e-12, "κ{}", i + 1);
-        }
     }
 
     #[test]

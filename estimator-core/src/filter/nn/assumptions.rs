@@ -20,9 +20,9 @@ use core::fmt;
 
 use nalgebra::SMatrix;
 
-use crate::filter::nn_bound::NnBoundConfig;
-use crate::filter::nn_system::Activation;
-use crate::filter::nn_tbcp::NnTbcpEstimator;
+use super::bound::NnBoundConfig;
+use super::estimator::NnTbcpEstimator;
+use super::system::Activation;
 use crate::linalg::eig::min_eigenvalue;
 use crate::{Error, Real};
 
@@ -329,8 +329,8 @@ impl<T: Real> fmt::Display for RunMonitor<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::nn_system::{CoupledNoiseSystem, DifferentiableMap, Seed003Example, Tanh};
-    use crate::filter::nn_tbcp::Seed003Nn;
+    use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap, Tanh};
+    use crate::papers::{Seed003Example, Seed003Nn};
     use crate::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
     use std::format;
 

@@ -266,8 +266,8 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::examples::Seed001Example;
     use crate::model::LinearModel;
+    use crate::papers::Seed001Example;
     use crate::protocol::occlusion::OcclusionRegions;
     use nalgebra::{matrix, vector};
 

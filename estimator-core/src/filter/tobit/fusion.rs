@@ -18,7 +18,8 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::tobit::{diagonal_variances, TobitFilter, TobitFilterConfig};
+use super::config::TobitFilterConfig;
+use super::local::{diagonal_variances, TobitFilter};
 use crate::linalg::{check_finite, check_spd, inverse_spd, solve_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::{Error, Real, Result};
@@ -205,7 +206,7 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::tobit::BoundScalars;
+    use crate::filter::tobit::config::BoundScalars;
     use crate::protocol::event_trigger::EventTriggerConfig;
     use nalgebra::{matrix, vector};
 

@@ -1,9 +1,9 @@
-//! The papers' numerical examples as ready-made values, so that tests, benchmarks, firmware
-//! and users start from the same numbers. (Seed 003's example lives beside its system in
-//! [`crate::filter::nn_system::Seed003Example`].)
+//! Seed 001, Section IV: the unstable three-state plant observed through two measurements
+//! whose packets drop while `x₁` lies in one of four occlusion regions (docs/design.md,
+//! "Seed 001").
 //!
 //! ```
-//! use estimator_core::examples::Seed001Example;
+//! use estimator_core::papers::Seed001Example;
 //! use estimator_core::filter::CrossCoupledEstimator;
 //! use estimator_core::gsum::GaussSum;
 //! use nalgebra::vector;

@@ -343,8 +343,8 @@ pub(crate) fn truncated_std_normal<T: Real>(a: T, b: T) -> (T, T, T) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::examples::Seed001Example;
     use crate::model::LinearModel;
+    use crate::papers::Seed001Example;
     use nalgebra::{matrix, vector};
 
     /// Moments of a truncated standard normal by brute-force Simpson quadrature.

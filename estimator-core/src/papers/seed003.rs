@@ -1,64 +1,13 @@
-//! The system class of seed 003, eq. (1), and the pieces the NN estimator is generic over:
-//!
-//! ```text
-//! x_{k+1} = A_k x_k + f(x_k) + B_k w_k
-//! y_k     = C_k x_k + D_k w_k            (the same w_k in both equations)
-//! ```
-//!
-//! * [`CoupledNoiseSystem`]: the known, time-varying `A_k, B_k, C_k, D_k`;
-//! * [`Activation`]: the NN activation `φ` of `f(x) ≈ H φ(x) + ε` (II-C), with [`Tanh`];
-//! * [`DifferentiableMap`]: a nonlinearity with its Jacobian (the EKF baseline of section IV
-//!   uses `∂f/∂x`);
-//! * [`Seed003Example`]: the matrices and `f` of section IV.
+//! Seed 003, section IV: the noise-coupled system with the nonlinearity
+//! `f(x) = 8 [sin x₁ cos x₃, sin x₂, sin x₂ cos x₃]ᵀ` under the token bucket, the NN
+//! estimator's initial values and the bounds' configuration (docs/design.md, "Seed 003").
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::Real;
-
-/// Known time-varying matrices of (1). One noise `w_k ∈ R^NW` drives state and measurement,
-/// so the state and measurement noises are correlated (cross-covariance `B_k W D_kᵀ`).
-pub trait CoupledNoiseSystem<T: Real, const NX: usize, const NW: usize, const NY: usize> {
-    /// `A_k`.
-    fn a(&self, k: usize) -> SMatrix<T, NX, NX>;
-    /// `B_k`.
-    fn b(&self, k: usize) -> SMatrix<T, NX, NW>;
-    /// `C_k`.
-    fn c(&self, k: usize) -> SMatrix<T, NY, NX>;
-    /// `D_k`.
-    fn d(&self, k: usize) -> SMatrix<T, NY, NW>;
-}
-
-/// NN activation `φ: R^NX → R^NPHI` (seed 003, II-C: `f(·) = H φ(x) + ε`).
-pub trait Activation<T: Real, const NX: usize, const NPHI: usize> {
-    /// `φ(x)`.
-    fn eval(&self, x: &SVector<T, NX>) -> SVector<T, NPHI>;
-    /// `sup_x ‖φ(x)‖` (possibly approached but not attained). The paper assumes
-    /// `‖φ(·)‖ ≤ φ̄`; the assumption checker compares this with the configured `φ̄`.
-    fn sup_norm(&self) -> T;
-}
-
-/// Element-wise `tanh`, the activation of the section IV example. `sup ‖φ‖ = √NX`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Tanh;
-
-impl<T: Real, const N: usize> Activation<T, N, N> for Tanh {
-    #[inline]
-    fn eval(&self, x: &SVector<T, N>) -> SVector<T, N> {
-        x.map(|v| v.tanh())
-    }
-    #[inline]
-    fn sup_norm(&self) -> T {
-        T::lit(N as f64).sqrt()
-    }
-}
-
-/// A nonlinearity `f: R^N → R^N` with its Jacobian.
-pub trait DifferentiableMap<T: Real, const N: usize> {
-    /// `f(x)`.
-    fn eval(&self, x: &SVector<T, N>) -> SVector<T, N>;
-    /// `∂f/∂x` at `x`.
-    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, N, N>;
-}
+use crate::filter::nn::bound::NnBoundConfig;
+use crate::filter::nn::estimator::NnTbcpEstimator;
+use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap, Tanh};
+use crate::{Real, Result};
 
 /// The illustrative example of seed 003, section IV (3 states, 1 noise, 2 measurements).
 ///
@@ -93,7 +42,7 @@ impl Seed003Example {
             T::lit(1.35),
         )
     }
-    /// `w̄² = 0.1`: the noise variance (DESIGN: `w_k ~ N(0, 0.1)`).
+    /// `w̄² = 0.1`: the noise variance (docs/design.md, "Seed 003": `w_k ~ N(0, 0.1)`).
     pub const W_VAR: f64 = 0.1;
     /// Horizon `T = 300`.
     pub const HORIZON: usize = 300;
@@ -159,9 +108,45 @@ impl<T: Real> DifferentiableMap<T, 3> for Seed003Example {
     }
 }
 
+/// The section IV instance: 3 states, 1 noise, 2 measurements, `tanh` on 3 outputs.
+pub type Seed003Nn<T> = NnTbcpEstimator<T, 3, 1, 2, 3, 6, Tanh>;
+
+impl<T: Real> Seed003Nn<T> {
+    /// Seed 003's estimator from the paper's initial values (section IV: `x̂₀`, `Ĥ₀`, and
+    /// `P̄₀ = Q̄₀` = [`Seed003Example::p0`]) with
+    /// the bounds' configuration `cfg` (the paper's is [`NnBoundConfig::seed003_example`]).
+    pub fn seed003(cfg: NnBoundConfig<T>) -> Result<Self> {
+        Self::new(
+            cfg,
+            Tanh,
+            Seed003Example::xhat0(),
+            Seed003Example::h0(),
+            Seed003Example::p0(),
+            Seed003Example::p0(),
+        )
+    }
+}
+
+impl<T: Real> NnBoundConfig<T> {
+    /// Section IV: `α_i = 0.1`, `β_i = 0.9`, `θ_i = 0.001`, `H̄ = 8`, `φ̄ = 1`, `ε̄ = 0.1`,
+    /// `w̄² = 0.1`.
+    pub fn seed003_example() -> Self {
+        Self {
+            alpha: [T::lit(0.1); 4],
+            beta: [T::lit(0.9); 12],
+            theta: [T::lit(0.001); 2],
+            h_bar: T::lit(8.0),
+            phi_bar: T::lit(1.0),
+            eps_bar: T::lit(0.1),
+            w_bar_sq: T::lit(0.1),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filter::nn::system::Activation;
 
     #[test]
     fn jacobian_matches_central_differences() {

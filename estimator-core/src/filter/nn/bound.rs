@@ -15,13 +15,13 @@ use crate::{Error, Real, Result};
 /// Validated scalars of Theorems 1-2.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NnBoundConfig<T: Real> {
-    alpha: [T; 4],
-    beta: [T; 12],
-    theta: [T; 2],
-    h_bar: T,
-    phi_bar: T,
-    eps_bar: T,
-    w_bar_sq: T,
+    pub(crate) alpha: [T; 4],
+    pub(crate) beta: [T; 12],
+    pub(crate) theta: [T; 2],
+    pub(crate) h_bar: T,
+    pub(crate) phi_bar: T,
+    pub(crate) eps_bar: T,
+    pub(crate) w_bar_sq: T,
 }
 
 const ALPHA_NAMES: [&str; 4] = ["alpha[1]", "alpha[2]", "alpha[3]", "alpha[4]"];
@@ -76,20 +76,6 @@ impl<T: Real> NnBoundConfig<T> {
             eps_bar,
             w_bar_sq,
         })
-    }
-
-    /// Section IV: `α_i = 0.1`, `β_i = 0.9`, `θ_i = 0.001`, `H̄ = 8`, `φ̄ = 1`, `ε̄ = 0.1`,
-    /// `w̄² = 0.1`.
-    pub fn seed003_example() -> Self {
-        Self {
-            alpha: [T::lit(0.1); 4],
-            beta: [T::lit(0.9); 12],
-            theta: [T::lit(0.001); 2],
-            h_bar: T::lit(8.0),
-            phi_bar: T::lit(1.0),
-            eps_bar: T::lit(0.1),
-            w_bar_sq: T::lit(0.1),
-        }
     }
 
     /// `[θ₁, θ₂]`.
@@ -264,7 +250,7 @@ pub fn optimal_gain<T: Real, const NX: usize, const NW: usize, const NY: usize, 
 /// Theorem 1, (14)-(15): `(P̄_{k+1}, Q̄_{k+1})` from `(P̄_k, Q̄_k)` for a given gain `L_k`.
 ///
 /// In (15) the factor printed `C_{k+1} C_{k+1}` after `Ā P̄ Āᵀ` is read as `C_{k+1}ᵀ C_{k+1}`
-/// (DESIGN.md, the only dimensionally valid reading).
+/// (docs/design.md, "Seed 003": the only dimensionally valid reading).
 pub fn propagate_bounds<T: Real, const NX: usize, const NW: usize, const NY: usize>(
     cfg: &NnBoundConfig<T>,
     p: &SMatrix<T, NX, NX>,
@@ -322,7 +308,8 @@ pub fn normalised_regressor<T: Real, const NPHI: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::nn_system::{CoupledNoiseSystem, Seed003Example};
+    use crate::filter::nn::system::CoupledNoiseSystem;
+    use crate::papers::Seed003Example;
     use nalgebra::matrix;
 
     fn step_mats(k: usize, gamma_next: bool) -> StepMatrices<f64, 3, 1, 2> {

@@ -19,10 +19,10 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::nn_bound::{
+use super::bound::{
     normalised_regressor, optimal_gain, propagate_bounds, GainSolver, NnBoundConfig, StepMatrices,
 };
-use crate::filter::nn_system::{Activation, CoupledNoiseSystem};
+use super::system::{Activation, CoupledNoiseSystem};
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::{Real, Result};
 
@@ -50,26 +50,6 @@ pub struct NnTbcpEstimator<
     y: Option<SVector<T, NY>>,
     gain: SMatrix<T, NX, NY>,
     phi_norm: T,
-}
-
-/// The section IV instance: 3 states, 1 noise, 2 measurements, `tanh` on 3 outputs.
-pub type Seed003Nn<T> = NnTbcpEstimator<T, 3, 1, 2, 3, 6, crate::filter::nn_system::Tanh>;
-
-impl<T: Real> Seed003Nn<T> {
-    /// Seed 003's estimator from the paper's initial values (section IV: `x̂₀`, `Ĥ₀`, and
-    /// `P̄₀ = Q̄₀` = [`Seed003Example::p0`](crate::filter::nn_system::Seed003Example::p0)) with
-    /// the bounds' configuration `cfg` (the paper's is [`NnBoundConfig::seed003_example`]).
-    pub fn seed003(cfg: NnBoundConfig<T>) -> Result<Self> {
-        use crate::filter::nn_system::{Seed003Example, Tanh};
-        Self::new(
-            cfg,
-            Tanh,
-            Seed003Example::xhat0(),
-            Seed003Example::h0(),
-            Seed003Example::p0(),
-            Seed003Example::p0(),
-        )
-    }
 }
 
 impl<
@@ -245,7 +225,8 @@ impl<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::nn_system::{Seed003Example, Tanh};
+    use crate::filter::nn::system::Tanh;
+    use crate::papers::{Seed003Example, Seed003Nn};
     use crate::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
     use crate::Error;
     use nalgebra::{matrix, vector};
@@ -327,7 +308,7 @@ mod tests {
         solver: GainSolver,
         steps: usize,
     ) -> core::result::Result<Seed003Nn<T>, (usize, Error)> {
-        use crate::filter::nn_system::DifferentiableMap;
+        use crate::filter::nn::system::DifferentiableMap;
         let sys = Seed003Example;
         let mut nn = Seed003Nn::seed003(cfg).unwrap().with_gain_solver(solver);
         let mut tb = TokenBucket::new(TokenBucketConfig::new(2, 3, 10, 6).unwrap());

@@ -1,0 +1,17 @@
+//! Seed 001: estimation when a packet drops exactly while the state lies in an occlusion
+//! region, so that a dropout itself says where the state is.
+//!
+//! * [`cce`]: the paper's cross-coupled region-label / state estimator (Algorithms 1-2);
+//! * [`adf`]: an assumed-density filter with the exact interval likelihood;
+//! * [`kf_io`]: the linear MMSE baseline that treats arrival as a Bernoulli variable.
+//!
+//! The occlusion model is [`crate::protocol::occlusion`], the example
+//! [`crate::papers::Seed001Example`].
+
+pub mod adf;
+pub mod cce;
+pub mod kf_io;
+
+pub use adf::AssumedDensityFilter;
+pub use cce::CrossCoupledEstimator;
+pub use kf_io::KfIo;

@@ -1,0 +1,20 @@
+//! Seed 004: Tobit Kalman filtering of censored measurements under a dynamic event trigger
+//! and a shared token bucket, one local filter per sensor node and their federated fusion.
+//!
+//! * [`config`]: what configures a local filter (ε and κ of Theorem 1, τ, Ξ, where Υ enters);
+//! * [`gain`]: the bound (30) as a quadratic in the gain and its minimiser (37);
+//! * [`local`]: the local filter (21)-(23), (29)-(30) of one node;
+//! * [`fusion`]: the federated fusion (50)-(51) of `L` local filters.
+//!
+//! The section 4 example's scalars are [`BoundScalars::paper_example`], defined with the other
+//! papers' examples in [`crate::papers`].
+
+pub mod config;
+pub mod fusion;
+pub mod gain;
+pub mod local;
+
+pub use config::{BoundScalars, Kappas, TobitFilterConfig, UpsilonPlacement};
+pub use fusion::{federated_fuse, TobitFusion};
+pub use gain::GainProblem;
+pub use local::{diagonal_variances, LocalStepPlan, TobitFilter};
