@@ -8,26 +8,35 @@
 //!
 //! Needs `qemu-system-arm` and the `thumbv7em-none-eabihf` target; without them the QEMU test
 //! is skipped with a message, unless `REQUIRE_QEMU=1` (set by CI), which makes it fail.
-
-use std::fs::File;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+//!
+//! The driver source is the firmware's own (`estimator-core/firmware/src/run/`); finding,
+//! building and running QEMU is in `firmware_qemu/qemu.rs`, reading flash sizes from the ELF in
+//! `firmware_qemu/elf.rs`.
 
 use estimator_core::filter::nn::NnBoundConfig;
-use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::filter::{
     AssumedDensityFilter, CrossCoupledEstimator, IntermittentKalmanFilter, KalmanFilter, KfIo,
 };
 use estimator_core::gsum::GaussSum;
 use estimator_core::model::LinearModel;
+use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
 use nalgebra::{matrix, vector, Matrix3, SMatrix, Vector3};
 
-#[allow(dead_code)] // the firmware uses parts the host check does not
-#[path = "../estimator-core/firmware/src/run.rs"]
+// The firmware uses parts the host check does not (and `run` re-exports them all).
+#[allow(dead_code, unused_imports)]
+#[path = "../estimator-core/firmware/src/run/mod.rs"]
 mod run;
 
 use run::{Driven, Stream, Summary};
+
+#[path = "firmware_qemu/elf.rs"]
+mod elf;
+#[path = "firmware_qemu/qemu.rs"]
+mod qemu;
+
+use elf::flash_sizes;
+use qemu::{build_firmware, missing_tools, require_qemu, run_qemu};
 
 /// The whole run of one firmware binary, on the host (the same driver over the same bytes).
 type HostRun = fn() -> Summary;
@@ -82,10 +91,6 @@ const BINS: &[(&str, HostRun, usize, usize)] = &[
         8 * 1024,
     ),
 ];
-
-fn firmware_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../estimator-core/firmware")
-}
 
 fn stream() -> Stream<'static> {
     run::OCCLUSION.stream().expect("embedded vectors are valid")
@@ -498,122 +503,6 @@ fn host_f32_nn_matches_f64_until_f32_refuses() {
 /// Loose on purpose: the estimator's gain comes from an ill-conditioned Kronecker system
 /// near k = 44, which amplifies f32 rounding.
 const TOL_NN: f64 = 1e-2;
-
-fn require_qemu() -> bool {
-    std::env::var("REQUIRE_QEMU").is_ok_and(|v| v == "1")
-}
-
-/// Why the QEMU check cannot run here, if it cannot.
-fn missing_tools() -> Option<String> {
-    let qemu = Command::new("qemu-system-arm")
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status();
-    if !qemu.is_ok_and(|s| s.success()) {
-        return Some("qemu-system-arm not found".into());
-    }
-    if Command::new("timeout").arg("--version").output().is_err() {
-        return Some("`timeout` (coreutils) not found".into());
-    }
-    let sysroot = Command::new("rustc").args(["--print", "sysroot"]).output();
-    let has_target = sysroot.is_ok_and(|o| {
-        Path::new(String::from_utf8_lossy(&o.stdout).trim())
-            .join("lib/rustlib/thumbv7em-none-eabihf")
-            .is_dir()
-    });
-    if !has_target {
-        return Some("rust target thumbv7em-none-eabihf not installed".into());
-    }
-    None
-}
-
-/// Builds the firmware (release profile: opt-level "s", LTO, one codegen unit).
-fn build_firmware() -> PathBuf {
-    let dir = firmware_dir();
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    // Run in the firmware's directory so its .cargo/config.toml (target, linker script)
-    // applies; keep the outer build's settings out of it.
-    let status = Command::new(cargo)
-        .current_dir(&dir)
-        .args(["build", "--release", "--bins"])
-        .arg("--target-dir")
-        .arg(dir.join("target"))
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_TARGET")
-        .env_remove("CARGO_TARGET_DIR")
-        .status()
-        .expect("run cargo build for the firmware");
-    assert!(status.success(), "firmware build failed");
-    dir.join("target/thumbv7em-none-eabihf/release")
-}
-
-/// Runs an ELF on the emulated Cortex-M4F under `timeout`, output to a file (a semihosting
-/// write to a closed pipe would spin forever). Returns (exit status, output).
-fn run_qemu(elf: &Path, out: &Path) -> (i32, String) {
-    let file = File::create(out).expect("create QEMU output file");
-    let status = Command::new("timeout")
-        .arg("120")
-        .arg("qemu-system-arm")
-        .args(["-machine", "mps2-an386", "-cpu", "cortex-m4", "-nographic"])
-        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
-        .arg(elf)
-        .stdin(Stdio::null())
-        .stdout(Stdio::from(file))
-        .status()
-        .expect("run qemu-system-arm");
-    let text = std::fs::read_to_string(out).unwrap_or_default();
-    (status.code().unwrap_or(-1), text)
-}
-
-/// Sizes of the allocated sections of a 32-bit little-endian ELF file, by name.
-fn elf32_alloc_sections(bytes: &[u8]) -> Vec<(String, u32, bool)> {
-    let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]) as usize;
-    let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
-    assert_eq!(&bytes[..4], b"\x7fELF", "not an ELF file");
-    assert_eq!((bytes[4], bytes[5]), (1, 1), "not ELF32 little-endian");
-    let (shoff, shentsize, shnum, shstrndx) = (
-        u32_at(0x20) as usize,
-        u16_at(0x2E),
-        u16_at(0x30),
-        u16_at(0x32),
-    );
-    let sh = |i: usize| shoff + i * shentsize;
-    let strtab = u32_at(sh(shstrndx) + 16) as usize;
-    (0..shnum)
-        .filter_map(|i| {
-            let h = sh(i);
-            let (name, kind, flags, size) =
-                (u32_at(h), u32_at(h + 4), u32_at(h + 8), u32_at(h + 20));
-            const SHF_ALLOC: u32 = 2;
-            const SHT_NOBITS: u32 = 8;
-            (flags & SHF_ALLOC != 0).then(|| {
-                let start = strtab + name as usize;
-                let end = start + bytes[start..].iter().position(|&b| b == 0).unwrap();
-                let name = String::from_utf8_lossy(&bytes[start..end]).into_owned();
-                (name, size, kind != SHT_NOBITS)
-            })
-        })
-        .collect()
-}
-
-/// Flash figures: (code = .vector_table + .text, .rodata, .data load image, total).
-fn flash_sizes(elf: &Path) -> (u32, u32, u32, u32) {
-    let bytes = std::fs::read(elf).expect("read ELF");
-    let (mut code, mut rodata, mut data) = (0, 0, 0);
-    for (name, size, in_file) in elf32_alloc_sections(&bytes) {
-        match name.as_str() {
-            ".vector_table" | ".text" => code += size,
-            ".rodata" => rodata += size,
-            ".data" => data += size,
-            _ if in_file => code += size,
-            _ => {}
-        }
-    }
-    (code, rodata, data, code + rodata + data)
-}
 
 #[test]
 fn firmware_on_qemu_is_bit_exact_with_host() {
