@@ -23,9 +23,7 @@ fn main() {
         Cmd::Demo(a) => ipc_runner::demo::main(&a),
         Cmd::Run(a) => ipc_runner::run::main(&a),
         Cmd::Replay(a) => ipc_runner::replay::main(&a),
-        Cmd::ChannelSim(a) => {
-            channel_sim::publisher::run(&a, channel_sim::publisher::resolve_scenario).map(|_| 0)
-        }
+        Cmd::ChannelSim(a) => channel_sim::publisher::run(&a).map(|_| 0),
     };
     match result {
         Ok(code) => std::process::exit(code),

@@ -7,11 +7,11 @@
 //! ```
 //!
 //! `occlusion.bin` is run 0 of channel-sim's `occlusion` preset (seed 001's Section IV example,
-//! DESIGN.md's reading: x_{k+1} = A x_k + w_k, z_k = C x_k + v_k with Q = 0.3 I₃, R = 0.2 I₂,
-//! x₀ ~ N([5 5 5]ᵀ, 4 I₃); the packet of instant k is dropped iff u_k = x_{1,k} + n_k,
-//! n_k ~ N(0, 0.1), lies in one of the regions [20i − 5, 20i + 5], i = 1..4) with seed
-//! [`SEED`], k = 1..=T, T = 100, computed in f64 and stored as f32. The measurement stored on
-//! a dropped instant comes from the same run without its channel stage.
+//! as docs/design.md, Seed 001, reads it: x_{k+1} = A x_k + w_k, z_k = C x_k + v_k with
+//! Q = 0.3 I₃, R = 0.2 I₂, x₀ ~ N([5 5 5]ᵀ, 4 I₃); the packet of instant k is dropped iff
+//! u_k = x_{1,k} + n_k, n_k ~ N(0, 0.1), lies in one of the regions [20i − 5, 20i + 5],
+//! i = 1..4) with seed [`SEED`], k = 1..=T, T = 100, computed in f64 and stored as f32. The
+//! measurement stored on a dropped instant comes from the same run without its channel stage.
 //!
 //! `nn.bin` is run 0 of channel-sim's `nn-token-bucket` preset (seed 003's Section IV example:
 //! x_{k+1} = A_k x_k + f(x_k) + B_k w_k, y_k = C_k x_k + D_k w_k with one scalar

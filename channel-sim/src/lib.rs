@@ -1,20 +1,31 @@
 //! Plants, sensors and channel models that turn the papers' numerical examples into sample
-//! streams, plus the wire format shared with `ipc-runner`.
+//! streams, and the publisher that puts them on shared memory for `ipc-runner`.
 //!
-//! The data path reads top to bottom: plant → sensor → channel stages → [`sim::Instant`]
-//! (→ shared memory in the pipeline) → estimator.
+//! The data path reads top to bottom, and so do the modules:
+//!
+//! | step | module | what |
+//! |---|---|---|
+//! | plant | [`plant`] | the true state x_k and every node's raw measurement z_{m,k} |
+//! | channel | [`channel`] | what happens to a packet between sensor and estimator: occlusion, token buckets, Tobit censoring, event triggers, random loss |
+//! | instant | [`sim`] | the contract: one [`Instant`] per k, one [`Observation`] per node |
+//! | shared memory | [`wire`], [`publisher`] | the `#[repr(C)]` payloads and the `channel-sim` process that publishes them on iceoryx2 |
+//!
+//! [`scenario`] puts a plant, its channel stages and the initial distribution under a name
+//! (presets or TOML); [`scenario::resolve`] is what both processes call to get one. Beneath
+//! everything: [`error`] (the one error type of scenario construction), [`rng`] (the run's
+//! random streams) and [`validate`] (parameter checks naming the field). [`signal`] lets the
+//! publisher and `ipc-runner` ask for Ctrl-C without sleeping.
 
+pub mod channel;
+pub mod error;
+pub mod plant;
 pub mod publisher;
+pub mod rng;
+pub mod scenario;
 pub mod signal;
 pub mod sim;
+pub mod validate;
 pub mod wire;
 
+pub use error::ScenarioError;
 pub use sim::{Instant, Observation, Scenario, Simulation};
-pub mod loss;
-pub mod nn_plant;
-pub mod occlusion;
-pub mod plant;
-pub mod scenario;
-pub mod stage;
-pub mod tobit_channel;
-pub mod token_bucket;

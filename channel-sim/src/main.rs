@@ -15,7 +15,7 @@ struct Cli {
 fn main() {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cli = Cli::parse();
-    match channel_sim::publisher::run(&cli.args, channel_sim::publisher::resolve_scenario) {
+    match channel_sim::publisher::run(&cli.args) {
         Ok(_) => {}
         Err(e) => {
             eprintln!("channel-sim: error: {e:#}");

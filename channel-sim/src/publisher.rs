@@ -11,7 +11,8 @@
 //! port behind) and every 100 ms; if the subscriber is gone it pauses and waits for a new one.
 //! SIGINT/SIGTERM end the run cleanly with an ABORT marker.
 
-use crate::sim::{Scenario, MAX_NY};
+use crate::scenario;
+use crate::sim::MAX_NY;
 use crate::wire::{self, Slot, Truth, SLOT_ABORT, SLOT_END};
 use anyhow::{bail, Context, Result};
 use iceoryx2::node::NodeWaitFailure;
@@ -58,9 +59,6 @@ pub struct PublisherArgs {
     #[arg(long)]
     pub quiet: bool,
 }
-
-/// Resolves `--scenario`/`--config` and the default number of steps.
-pub type ScenarioResolver = fn(&PublisherArgs) -> Result<(Box<dyn Scenario>, u32)>;
 
 /// What a publisher run did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -111,17 +109,16 @@ fn wait_for_subscriber(
     Ok(true)
 }
 
-/// Runs the publisher. `resolve` maps the options to a scenario (the binary passes the preset
-/// registry).
-pub fn run(args: &PublisherArgs, resolve: ScenarioResolver) -> Result<PublisherReport> {
+/// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]).
+pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     if !(args.rate >= 0.0 && args.rate.is_finite()) {
         bail!(
             "--rate must be ≥ 0 (0 = as fast as possible), got {}",
             args.rate
         );
     }
-    let (scenario, default_steps) = resolve(args)?;
-    let steps = args.steps.unwrap_or(default_steps);
+    let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
+    let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let nodes = u8::try_from(scenario.nodes()).context("too many nodes")?;
     let nx = scenario.nx();
     let say = |m: &str| {
@@ -317,13 +314,3 @@ pub fn run(args: &PublisherArgs, resolve: ScenarioResolver) -> Result<PublisherR
 /// Instants published when `--steps` is not given: the same default horizon as
 /// `ipc-runner eval`, so the two compute the same experiment by default.
 pub const DEFAULT_STEPS: u32 = 100;
-
-/// Resolves `--scenario`/`--config` through the preset registry
-/// ([`crate::scenario::preset`]) or the TOML loader ([`crate::scenario::config::load`]).
-pub fn resolve_scenario(args: &PublisherArgs) -> Result<(Box<dyn Scenario>, u32)> {
-    let scenario: Box<dyn Scenario> = match &args.config {
-        Some(path) => Box::new(crate::scenario::config::load(path)?),
-        None => crate::scenario::preset(&args.scenario)?,
-    };
-    Ok((scenario, DEFAULT_STEPS))
-}

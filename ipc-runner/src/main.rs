@@ -77,9 +77,7 @@ fn main() {
         Command::Demo(a) => pipeline(ipc_runner::demo::main(&a)),
         Command::Run(a) => pipeline(ipc_runner::run::main(&a)),
         Command::Replay(a) => pipeline(ipc_runner::replay::main(&a)),
-        Command::ChannelSim(a) => pipeline(
-            channel_sim::publisher::run(&a, channel_sim::publisher::resolve_scenario).map(|_| 0),
-        ),
+        Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
     };
     if let Err(CommandError { code, message }) = result {
         eprintln!("ipc-runner: error: {message}");

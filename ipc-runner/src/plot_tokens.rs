@@ -8,10 +8,11 @@
 
 use std::path::{Path, PathBuf};
 
-use channel_sim::plant::{run_rng, Stream};
+use channel_sim::channel::event_trigger::TriggeredTokenBucket;
+use channel_sim::channel::tobit::TobitCensoring;
+use channel_sim::channel::Stage;
+use channel_sim::rng::{run_rng, Stream};
 use channel_sim::scenario::ComposedScenario;
-use channel_sim::stage::Stage;
-use channel_sim::tobit_channel::{TobitCensoring, TriggeredTokenBucket};
 use channel_sim::{Scenario, Simulation};
 use plotters::coord::Shift;
 use plotters::prelude::*;

@@ -33,12 +33,16 @@ use std::sync::Arc;
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 
-use super::{ComposedScenario, InitialDistribution, ScenarioError};
-use crate::loss::{BernoulliLoss, GilbertElliottLoss};
-use crate::plant::{LinearPlant, LinearSensor};
-use crate::stage::StageSpec;
-use crate::tobit_channel::{TobitCensoring, TriggerParams, TriggeredTokenBucket};
-use crate::token_bucket::TokenBucketStage;
+use super::composed::ComposedScenario;
+use super::initial::InitialDistribution;
+use crate::channel::event_trigger::{TriggerParams, TriggeredTokenBucket};
+use crate::channel::loss::{BernoulliLoss, GilbertElliottLoss};
+use crate::channel::tobit::TobitCensoring;
+use crate::channel::token_bucket::TokenBucketStage;
+use crate::channel::StageSpec;
+use crate::error::ScenarioError;
+use crate::plant::linear::{LinearPlant, LinearSensor};
+use crate::validate::check_finite;
 
 /// A matrix as an array of rows.
 pub type Rows = Vec<Vec<f64>>;
@@ -322,7 +326,7 @@ pub fn matrix(rows: &Rows, field: &str) -> Result<DMatrix<f64>, ScenarioError> {
         ));
     }
     let m = DMatrix::from_fn(rows.len(), cols, |i, j| rows[i][j]);
-    crate::plant::check_finite(&m, field)?;
+    check_finite(&m, field)?;
     Ok(m)
 }
 

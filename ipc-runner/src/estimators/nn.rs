@@ -23,9 +23,9 @@
 
 use std::path::Path;
 
-use channel_sim::nn_plant::Seed003Plant;
+use channel_sim::channel::token_bucket::TokenBucketStage;
+use channel_sim::plant::nn::Seed003Plant;
 use channel_sim::scenario::ComposedScenario;
-use channel_sim::token_bucket::TokenBucketStage;
 use channel_sim::{Observation, Scenario};
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
 use estimator_core::filter::nn::{

@@ -9,7 +9,7 @@
 
 use std::sync::Arc;
 
-use channel_sim::occlusion::OcclusionSpec;
+use channel_sim::channel::occlusion::OcclusionSpec;
 use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::{Observation, Scenario};

@@ -19,8 +19,9 @@
 
 use std::sync::Arc;
 
-use channel_sim::occlusion::OcclusionSpec;
-use channel_sim::plant::{splitmix64, LinearDescription, Plant};
+use channel_sim::channel::occlusion::OcclusionSpec;
+use channel_sim::plant::{LinearDescription, Plant};
+use channel_sim::rng::splitmix64;
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::sim::{MAX_NX, MAX_NY};
 use channel_sim::{Observation, Scenario};

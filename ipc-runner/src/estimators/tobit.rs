@@ -21,9 +21,10 @@
 
 use std::sync::{Arc, Mutex};
 
+use channel_sim::channel::event_trigger::TriggeredTokenBucket;
+use channel_sim::channel::tobit::TobitCensoring;
 use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
-use channel_sim::tobit_channel::{TobitCensoring, TriggeredTokenBucket};
 use channel_sim::{Observation, Scenario};
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::TobitFusion;

@@ -2,8 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use channel_sim::scenario::{self, config};
-use channel_sim::Scenario;
+use channel_sim::scenario;
 
 use super::{evaluate, RunConfig};
 use crate::estimators::{EvalOptions, FACTORIES};
@@ -78,11 +77,15 @@ impl CommandError {
 
 /// Runs `ipc-runner eval`.
 pub fn run(args: EvalArgs) -> Result<(), CommandError> {
-    let scenario: Box<dyn Scenario> = match (&args.scenario, &args.config) {
-        (Some(name), _) => scenario::preset(name).map_err(CommandError::usage)?,
-        (None, Some(path)) => Box::new(config::load(path).map_err(CommandError::usage)?),
-        (None, None) => return Err(CommandError::usage("give --scenario NAME or --config FILE")),
-    };
+    if args.scenario.is_none() && args.config.is_none() {
+        return Err(CommandError::usage("give --scenario NAME or --config FILE"));
+    }
+    // clap lets through one of the two, never both.
+    let scenario = scenario::resolve(
+        args.scenario.as_deref().unwrap_or_default(),
+        args.config.as_deref(),
+    )
+    .map_err(CommandError::usage)?;
     if let Some(plot) = &args.plot {
         crate::plot::check_extension(plot).map_err(CommandError::usage)?;
     }

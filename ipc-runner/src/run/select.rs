@@ -1,34 +1,22 @@
-//! Scenario and estimator lookup for `run`, `demo` and `replay`: the same registries as
-//! `eval` (`channel_sim::scenario::preset`, TOML configs, [`crate::estimators::FACTORIES`]),
-//! so the four commands can never disagree about what a name means.
+//! Scenario and estimator lookup for `run`, `demo` and `replay`: the same
+//! `channel_sim::scenario::resolve` (presets and TOML configs) and
+//! [`crate::estimators::FACTORIES`] as `eval` and the publisher, so the commands can never
+//! disagree about what a name means.
 
 use crate::estimators::{build_all, EvalOptions, FACTORIES};
 use crate::Estimator;
 use anyhow::{bail, Result};
-use channel_sim::publisher::{self, PublisherArgs};
+use channel_sim::publisher::DEFAULT_STEPS;
 use channel_sim::Scenario;
 use std::sync::Arc;
 
 /// A factory for a fresh set of estimators (called again when a stream restarts).
 pub type EstimatorFactory = Box<dyn Fn() -> Result<Vec<Box<dyn Estimator>>>>;
 
-/// The scenario `name` (or the TOML `config`) and its default number of instants.
+/// The scenario `name` (or the TOML `config`) and its default number of instants (the
+/// publisher's, so a demo's runner and publisher agree on the horizon).
 pub fn scenario(name: &str, config: Option<&std::path::Path>) -> Result<(Box<dyn Scenario>, u32)> {
-    let args = PublisherArgs {
-        scenario: name.to_string(),
-        config: config.map(Into::into),
-        seed: 0,
-        run: 0,
-        steps: None,
-        rate: 0.0,
-        prefix: String::new(),
-        connect_timeout: 0.0,
-        linger: 0.0,
-        debug_wire_version: None,
-        debug_nan_every: None,
-        quiet: true,
-    };
-    publisher::resolve_scenario(&args)
+    Ok((channel_sim::scenario::resolve(name, config)?, DEFAULT_STEPS))
 }
 
 /// What the estimator factories are built for (as in `eval`: estimators may depend on the

@@ -1,6 +1,6 @@
 //! `occlusion`: the numerical example of seed 001 (Liu, Wang, Dong, Jiang — cross-coupled
 //! estimation with state-dependent packet dropouts), Section IV, with the decisions of
-//! DESIGN.md where the paper is silent.
+//! docs/design.md, Seed 001, where the paper is silent.
 //!
 //! ```text
 //! x_{k+1} = A x_k + B w_k,  A = [1.01 0.1 0; 0 1.01 0.1; 0 0 −1.02],  B = I₃,  Q = 0.3 I₃
@@ -13,9 +13,11 @@ use std::sync::Arc;
 
 use nalgebra::{dmatrix, dvector, DMatrix};
 
-use super::{ComposedScenario, InitialDistribution, ScenarioError};
-use crate::occlusion::OcclusionSpec;
-use crate::plant::{LinearPlant, LinearSensor};
+use crate::channel::occlusion::OcclusionSpec;
+use crate::error::ScenarioError;
+use crate::plant::linear::{LinearPlant, LinearSensor};
+use crate::scenario::composed::ComposedScenario;
+use crate::scenario::initial::InitialDistribution;
 use crate::sim::Scenario;
 
 /// Number of occlusion regions of the preset.

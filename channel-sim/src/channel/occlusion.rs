@@ -13,10 +13,10 @@ use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
 use nalgebra::{SMatrix, SVector};
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::plant::SimRng;
-use crate::scenario::ScenarioError;
+use super::{drop_packet, Stage, StageSpec};
+use crate::error::ScenarioError;
+use crate::rng::SimRng;
 use crate::sim::{Observation, FLAG_OCCLUDED};
-use crate::stage::{drop_packet, Stage, StageSpec};
 
 /// Configuration of the occlusion stage with `S` interval regions on `u = e·x + n`.
 #[derive(Clone, Debug, PartialEq)]

@@ -10,10 +10,12 @@ use std::sync::Arc;
 
 use nalgebra::{dvector, DMatrix};
 
-use super::{ComposedScenario, InitialDistribution, ScenarioError};
-use crate::nn_plant::Seed003Plant;
+use crate::channel::token_bucket::TokenBucketStage;
+use crate::error::ScenarioError;
+use crate::plant::nn::Seed003Plant;
+use crate::scenario::composed::ComposedScenario;
+use crate::scenario::initial::InitialDistribution;
 use crate::sim::Scenario;
-use crate::token_bucket::TokenBucketStage;
 
 /// The bucket of section IV.
 pub const BUCKET: TokenBucketStage = TokenBucketStage {
@@ -49,7 +51,7 @@ mod tests {
 
     #[test]
     fn preset_runs_and_transmits_two_thirds() {
-        let s = super::super::preset("nn-token-bucket").unwrap();
+        let s = super::preset().unwrap();
         assert_eq!((s.nx(), s.ny(), s.nodes()), (3, 2, 1));
         let mut sim = s.start(0, 0);
         assert_eq!(&sim.initial_truth()[..3], &[3.1, -2.65, 4.0]);

@@ -10,11 +10,23 @@
 //! `delivered == true`. A stage may censor `y`, drop the packet ([`drop_packet`]) and set
 //! `FLAG_*` bits; it never resurrects a dropped packet. Stages should draw the same random
 //! numbers whatever happened upstream, so that runs stay comparable across channel settings.
+//!
+//! The stages: [`occlusion`] (seed 001, eqs. 2-3), [`token_bucket`] (one bucket per node,
+//! seed 003 eqs. 2-3), [`tobit`] censoring (seed 004 eq. 2), [`event_trigger`] (seed 004's
+//! triggers sharing one token bucket, eqs. 11-20) and random [`loss`] (Bernoulli,
+//! Gilbert–Elliott). Random numbers come from the run's channel stream
+//! ([`crate::rng::Stream::Channel`]), never from the plant's.
+
+pub mod event_trigger;
+pub mod loss;
+pub mod occlusion;
+pub mod tobit;
+pub mod token_bucket;
 
 use std::any::Any;
 use std::fmt::Debug;
 
-use crate::plant::SimRng;
+use crate::rng::SimRng;
 use crate::sim::{Observation, MAX_NY};
 
 /// Configuration of one channel stage; builds the per-run state.

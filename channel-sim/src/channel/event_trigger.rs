@@ -1,15 +1,15 @@
-//! The seed 004 channel: Tobit censoring at each sensor (eq. 2) and the dynamic event
-//! triggers of all nodes sharing one token bucket (eqs. 11-20), as channel stages.
+//! The dynamic event triggers of all seed 004 nodes sharing one token bucket (eqs. 11-20), as
+//! one channel stage: resources shared by nodes are why a stage sees every node's observation
+//! of an instant at once.
 //!
-//! Both stages run estimator-core's sensor-side state machines
-//! ([`estimator_core::protocol::tobit::censor`],
-//! [`estimator_core::protocol::shared_token_bucket::TriggeredBucketScheduler`]), so the
-//! simulation and a sensor node execute the same code. Neither stage draws random numbers.
+//! The stage runs estimator-core's sensor-side state machine
+//! ([`estimator_core::protocol::shared_token_bucket::TriggeredBucketScheduler`]), so the
+//! simulation and a sensor node execute the same code. It draws no random numbers.
 //!
-//! Flags: [`FLAG_CENSORED`] when any component was censored; [`FLAG_TRIGGERED`] when the node's
-//! trigger fired (α = 1); [`FLAG_TOKEN_BLOCKED`] when it fired but its share of the bucket did
-//! not cover its cost (β = 0). A node that did not transmit (α β = 0) is a dropped packet: the
-//! estimator then holds its last received measurement (eq. 19).
+//! Flags: [`FLAG_TRIGGERED`] when the node's trigger fired (α = 1); [`FLAG_TOKEN_BLOCKED`] when
+//! it fired but its share of the bucket did not cover its cost (β = 0). A node that did not
+//! transmit (α β = 0) is a dropped packet: the estimator then holds its last received
+//! measurement (eq. 19).
 
 use std::any::Any;
 
@@ -17,98 +17,12 @@ use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
 use estimator_core::protocol::shared_token_bucket::{
     NodeDecision, SharedTokenBucket, TriggeredBucketScheduler,
 };
-use estimator_core::protocol::tobit::censor;
 use nalgebra::SVector;
 
-use crate::plant::SimRng;
-use crate::scenario::ScenarioError;
-use crate::sim::{
-    Observation, FLAG_CENSORED, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, MAX_NODES, MAX_NY,
-};
-use crate::stage::{drop_packet, Stage, StageSpec};
-
-/// Padding for unused measurement components: never censors, never counts in a norm.
-const NO_THRESHOLD: f64 = -f64::MAX;
-
-/// Tobit censoring (eq. 2) with per-node thresholds τ_m.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TobitCensoring {
-    thresholds: Vec<Vec<f64>>,
-}
-
-impl TobitCensoring {
-    /// `thresholds[m]` is τ_m (finite, one entry per measurement component, ≤ MAX_NY).
-    pub fn new(thresholds: Vec<Vec<f64>>) -> Result<Self, ScenarioError> {
-        if thresholds.is_empty() || thresholds.len() > MAX_NODES {
-            return Err(ScenarioError::invalid(
-                "tobit.thresholds",
-                "need one threshold vector per node",
-            ));
-        }
-        let ny = thresholds[0].len();
-        for (m, t) in thresholds.iter().enumerate() {
-            if t.len() != ny || ny == 0 || ny > MAX_NY {
-                return Err(ScenarioError::invalid(
-                    format!("tobit.thresholds[{m}]"),
-                    format!("every node needs the same 1 ≤ ny ≤ {MAX_NY} thresholds"),
-                ));
-            }
-            if t.iter().any(|v| !v.is_finite()) {
-                return Err(ScenarioError::invalid(
-                    format!("tobit.thresholds[{m}]"),
-                    "contains NaN or ±∞",
-                ));
-            }
-        }
-        Ok(Self { thresholds })
-    }
-
-    /// τ_m of node `m`.
-    pub fn tau(&self, m: usize) -> &[f64] {
-        &self.thresholds[m]
-    }
-
-    /// Number of nodes.
-    pub fn nodes(&self) -> usize {
-        self.thresholds.len()
-    }
-
-    fn padded(&self, m: usize) -> SVector<f64, MAX_NY> {
-        let mut t = SVector::<f64, MAX_NY>::repeat(NO_THRESHOLD);
-        let tau = &self.thresholds[m];
-        t.as_mut_slice()[..tau.len()].copy_from_slice(tau);
-        t
-    }
-}
-
-impl StageSpec for TobitCensoring {
-    fn name(&self) -> &'static str {
-        "tobit-censoring"
-    }
-    fn build(&self, _nodes: usize) -> Box<dyn Stage> {
-        Box::new(self.clone())
-    }
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-}
-
-impl Stage for TobitCensoring {
-    fn apply(&mut self, _k: u32, _truth: &[f64], obs: &mut [Observation], _rng: &mut SimRng) {
-        for o in obs.iter_mut().filter(|o| o.delivered) {
-            let m = (o.node as usize).min(self.thresholds.len() - 1);
-            let z = SVector::<f64, MAX_NY>::from_column_slice(&o.y);
-            // A non-finite z would be the plant's bug; leave the observation as it is.
-            if let Ok((y, observed)) = censor(&z, &self.padded(m)) {
-                let ny = o.ny as usize;
-                o.y[..ny].copy_from_slice(&y.as_slice()[..ny]);
-                if observed[..ny].iter().any(|&v| !v) {
-                    o.flags |= FLAG_CENSORED;
-                }
-            }
-        }
-    }
-}
+use super::{drop_packet, Stage, StageSpec};
+use crate::error::ScenarioError;
+use crate::rng::SimRng;
+use crate::sim::{Observation, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, MAX_NODES, MAX_NY};
 
 /// Parameters of the dynamic event triggers (one per node) and the shared token bucket.
 #[derive(Clone, Debug, PartialEq)]
@@ -413,18 +327,6 @@ mod tests {
     }
 
     #[test]
-    fn censoring_sets_flag_and_threshold() {
-        let mut s = TobitCensoring::new(vec![vec![0.0, 0.5]; 2]).unwrap();
-        let mut o = [obs(0, [1.0, 0.2]), obs(1, [1.0, 0.7])];
-        let mut rng = crate::plant::run_rng(0, 0, crate::plant::Stream::Channel);
-        s.apply(1, &[], &mut o, &mut rng);
-        assert_eq!(&o[0].y[..2], &[1.0, 0.5]);
-        assert!(o[0].flags & FLAG_CENSORED != 0);
-        assert_eq!(o[1].flags, 0);
-        assert!(TobitCensoring::new(vec![vec![f64::NAN]]).is_err());
-    }
-
-    #[test]
     fn trigger_stage_flags_and_drops() {
         let p = TriggerParams {
             sigma: 0.0,
@@ -445,7 +347,7 @@ mod tests {
         .unwrap();
         assert!(spec.warnings().is_empty());
         let mut st = spec.build_stage();
-        let mut rng = crate::plant::run_rng(0, 0, crate::plant::Stream::Channel);
+        let mut rng = crate::rng::run_rng(0, 0, crate::rng::Stream::Channel);
         let mut o = [obs(0, [1.0, 0.0]), obs(1, [2.0, 0.0]), obs(2, [3.0, 0.0])];
         st.apply(1, &[], &mut o, &mut rng);
         assert!(o.iter().all(|o| o.delivered && o.flags == FLAG_TRIGGERED));

@@ -11,9 +11,11 @@ use std::sync::Arc;
 
 use nalgebra::{dmatrix, dvector, DMatrix};
 
-use super::{ComposedScenario, InitialDistribution, ScenarioError};
-use crate::loss::BernoulliLoss;
-use crate::plant::{LinearPlant, LinearSensor};
+use crate::channel::loss::BernoulliLoss;
+use crate::error::ScenarioError;
+use crate::plant::linear::{LinearPlant, LinearSensor};
+use crate::scenario::composed::ComposedScenario;
+use crate::scenario::initial::InitialDistribution;
 use crate::sim::Scenario;
 
 /// Loss probability of the preset's channel.

@@ -1,4 +1,4 @@
-//! `tobit-fusion`: the oscillator example of seed 004, section 4 (DESIGN.md "Seed 004").
+//! `tobit-fusion`: the oscillator example of seed 004, section 4 (docs/design.md, Seed 004).
 //!
 //! ```text
 //! x_{t+1} = [cos w  sin w; −sin w  cos w] x_t + [0.16; 0.18] ω_t,  w = 0.052π,  ω_t ~ N(0, 0.05)
@@ -11,7 +11,7 @@
 //!
 //! The example violates the paper's own requirement λ_m χ_m > 1 (λχ = 0.5, 1.0, 0.5), so the
 //! preset opts in explicitly and the evaluation prints the warning
-//! ([`crate::tobit_channel::TriggeredTokenBucket::warnings`]). The example's `a_m = 1.5`,
+//! ([`TriggeredTokenBucket::warnings`]). The example's `a_m = 1.5`,
 //! `b_m = 2` appear in no equation and are not used; `d_t = 1.5`, `e_t = 2` and the ε_j are
 //! the filter's, not the channel's.
 
@@ -19,10 +19,13 @@ use std::sync::Arc;
 
 use nalgebra::{dmatrix, dvector, DMatrix};
 
-use super::{ComposedScenario, InitialDistribution, ScenarioError};
-use crate::plant::{LinearPlant, LinearSensor};
+use crate::channel::event_trigger::{TriggerParams, TriggeredTokenBucket};
+use crate::channel::tobit::TobitCensoring;
+use crate::error::ScenarioError;
+use crate::plant::linear::{LinearPlant, LinearSensor};
+use crate::scenario::composed::ComposedScenario;
+use crate::scenario::initial::InitialDistribution;
 use crate::sim::Scenario;
-use crate::tobit_channel::{TobitCensoring, TriggerParams, TriggeredTokenBucket};
 
 /// Oscillator frequency w.
 pub const OMEGA: f64 = 0.052 * std::f64::consts::PI;

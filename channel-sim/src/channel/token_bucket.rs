@@ -11,10 +11,10 @@ use std::any::Any;
 use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
 use serde::Deserialize;
 
-use crate::plant::SimRng;
-use crate::scenario::ScenarioError;
+use super::{drop_packet, Stage, StageSpec};
+use crate::error::ScenarioError;
+use crate::rng::SimRng;
 use crate::sim::{Observation, FLAG_TOKEN_BLOCKED};
-use crate::stage::{drop_packet, Stage, StageSpec};
 
 /// Token-bucket parameters: rate `a`, cost `b`, capacity `s` (the paper's S), initial level
 /// `z0`. One bucket per sensor node.
@@ -81,7 +81,7 @@ impl Stage for TokenBucketRun {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::{run_rng, Stream};
+    use crate::rng::{run_rng, Stream};
 
     #[test]
     fn withholds_exactly_the_protocol_pattern() {

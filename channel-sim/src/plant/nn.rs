@@ -3,25 +3,26 @@
 //!
 //! ```text
 //! x_{k+1} = A_k x_k + f(x_k) + B_k w_k
-//! y_k     = C_k x_k + D_k w_k,          w_k ~ N(0, w̄²)  (DESIGN.md: w̄² = 0.1)
+//! y_k     = C_k x_k + D_k w_k,          w_k ~ N(0, w̄²)  (docs/design.md, Seed 003: w̄² = 0.1)
 //! ```
 //!
 //! The matrices and `f` come from `estimator_core::papers::Seed003Example`, the
 //! same code the estimators use. Because `w_k` enters `y_k` *and* `x_{k+1}`, one run keeps the
 //! `w_k` drawn for `y_k` and uses it in the next state transition. The framework has no
 //! measurement at k = 0, so `w_0` (which would also have produced `y_0`) is drawn at the first
-//! step. The plant offers no [`crate::plant::LinearDescription`]: it is neither linear nor has
-//! independent process and measurement noise.
+//! step. The plant offers no [`LinearDescription`](super::LinearDescription): it is neither
+//! linear nor has independent process and measurement noise.
 
 use std::any::Any;
 
-use estimator_core::filter::nn::{CoupledNoiseSystem, DifferentiableMap};
+use estimator_core::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use estimator_core::papers::Seed003Example;
 use nalgebra::SVector;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::plant::{Plant, PlantRun, SimRng};
-use crate::scenario::ScenarioError;
+use super::{Plant, PlantRun};
+use crate::error::ScenarioError;
+use crate::rng::SimRng;
 use crate::sim::MAX_NY;
 
 /// The section IV plant with noise variance `w_var` (= w̄²).
@@ -106,7 +107,7 @@ impl PlantRun for Seed003Run {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::{run_rng, Stream};
+    use crate::rng::{run_rng, Stream};
 
     #[test]
     fn same_noise_drives_measurement_and_next_state() {

@@ -6,25 +6,14 @@ use std::any::Any;
 use rand_distr::{Distribution, StandardUniform};
 use serde::Deserialize;
 
-use crate::plant::SimRng;
-use crate::scenario::ScenarioError;
+use super::{drop_packet, Stage, StageSpec};
+use crate::error::ScenarioError;
+use crate::rng::SimRng;
 use crate::sim::{Observation, FLAG_RANDOM_LOSS};
-use crate::stage::{drop_packet, Stage, StageSpec};
+use crate::validate::check_probability;
 
 fn uniform(rng: &mut SimRng) -> f64 {
     StandardUniform.sample(rng)
-}
-
-/// Errors unless `p` is a probability.
-pub fn check_probability(p: f64, field: &str) -> Result<(), ScenarioError> {
-    if (0.0..=1.0).contains(&p) {
-        Ok(())
-    } else {
-        Err(ScenarioError::invalid(
-            field,
-            format!("must be a probability in [0, 1], got {p}"),
-        ))
-    }
 }
 
 /// Each packet is lost independently with probability `p_loss`.
@@ -170,7 +159,7 @@ impl Stage for GilbertElliottState {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::{run_rng, Stream};
+    use crate::rng::{run_rng, Stream};
 
     fn fresh(nodes: usize, k: u32) -> Vec<Observation> {
         (0..nodes)
