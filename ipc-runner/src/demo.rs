@@ -236,7 +236,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     }
     let lat = &report.latency;
     let ladder = args.out.join("latency.svg");
-    if let Err(e) = crate::plot_latency::plot_ladder(
+    if let Err(e) = crate::plot::latency::plot_ladder(
         &format!(
             "{scenario_name}: latency per instant, {} wait",
             args.wait.as_str()
@@ -257,7 +257,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         eprintln!("demo: no latency plot ({e:#})");
     }
     let points: Vec<_> = traj.timing.iter().map(|t| traj.latency_point(t)).collect();
-    if let Err(e) = crate::plot_trace::plot_trace(
+    if let Err(e) = crate::plot::trace::plot_trace(
         &format!(
             "{scenario_name}: latency over the run, {} wait",
             args.wait.as_str()

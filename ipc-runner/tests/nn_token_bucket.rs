@@ -6,8 +6,9 @@
 //! √runs); the margins observed are far larger.
 
 use channel_sim::scenario;
-use ipc_runner::estimators::nn::{add_empirical_trace, verdict};
+use ipc_runner::estimators::nn::verdict;
 use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::eval::nn_bound::add_empirical_trace;
 use ipc_runner::eval::{evaluate, RunConfig};
 
 const RUNS: u64 = 200;

@@ -84,11 +84,11 @@ fn paper_example_what_holds() {
     }
 
     // The λχ ≤ 1 violation in numbers: the share of instants with η < 0 per node (first 200
-    // runs, replayed by plot_tokens). The paper's claim η ≥ 0 needs λχ > 1; here it fails.
+    // runs, replayed by plot::tokens). The paper's claim η ≥ 0 needs λχ > 1; here it fails.
     let mut neg = [0usize; 3];
     let replayed = runs.min(200);
     for run in 0..replayed {
-        let tr = ipc_runner::plot_tokens::trace(&*scenario, SEED, run, T)
+        let tr = ipc_runner::plot::tokens::trace(&*scenario, SEED, run, T)
             .unwrap()
             .unwrap();
         for m in 0..3 {

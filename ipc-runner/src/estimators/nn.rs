@@ -6,8 +6,8 @@
 //!   `θ = 0.001`, `H̄ = 8`, `φ̄ = 1`, `ε̄ = 0.1`), `tanh` activation, `Ĥ₀` of section IV,
 //!   `P̄₀ = Q̄₀ = 10 I`. Diagnostics: `bound_trace` = tr P̄_k, `bound_q_trace` = tr Q̄_k,
 //!   `phi_norm` = ‖φ(x̂_k)‖ and `phi_exceeds` = 1{‖φ(x̂_k)‖ > φ̄} (its mean over runs is the
-//!   fraction of runs violating the paper's `‖φ‖ ≤ φ̄` at k). [`after_eval`] adds
-//!   `empirical_trace` = tr E[e_k e_kᵀ] = MSE(k).
+//!   fraction of runs violating the paper's `‖φ‖ ≤ φ̄` at k). `eval` adds
+//!   `empirical_trace` = tr E[e_k e_kᵀ] = MSE(k) (`ipc_runner::eval::nn_bound`).
 //! * **`kf`** — the paper's KF: `A_k` only, `f` ignored.
 //! * **`ekf`** — the paper's EKF: `A_k + ∂f/∂x|_{x̂_{k|k−1}}` as the linear transition.
 //! * **`ekf-std`** — a standard EKF (mean `A_k x̂ + f(x̂)`), the product's option beside the
@@ -20,8 +20,6 @@
 //! All four produce `x̂_k` from `y_1 … y_{k−1}` (the paper's `x̂_k` is a one-step prediction).
 //! This scenario's plant has no linear description, so the framework's `kf`/`ikf` do not
 //! apply to it and the name `kf` means the paper's KF here.
-
-use std::path::Path;
 
 use channel_sim::channel::token_bucket::TokenBucketStage;
 use channel_sim::plant::nn::Seed003Plant;
@@ -36,7 +34,6 @@ use estimator_core::Error;
 use nalgebra::{matrix, SMatrix, SVector};
 
 use super::EvalOptions;
-use crate::eval::EvalResult;
 use crate::Estimator;
 
 /// The seed 003 scenario's parts, if `scenario` is one.
@@ -215,113 +212,4 @@ pub fn verdict(scenario: &dyn Scenario) -> anyhow::Result<Option<PreRunVerdict<f
         Some(f_sup),
         bucket,
     )?))
-}
-
-/// How the empirical covariance trace compares with the bound, per k.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BoundCheck {
-    /// Instants k = 0..=T where tr E[e eᵀ] > tr P̄_k (a necessary condition of P_k ≤ P̄_k
-    /// failing).
-    pub exceeded_at: Vec<usize>,
-    /// Instants k ≥ 1 where the bound is not finite.
-    pub non_finite_at: Vec<usize>,
-    /// Smallest tr P̄_k / tr E[e eᵀ] over k ≥ 1.
-    pub min_ratio_after_0: f64,
-}
-
-/// Adds `empirical_trace` (= MSE(k) = tr E[e_k e_kᵀ]) to the `nn` entry, prints the assumption
-/// checker's verdict and the bound check, and writes the bound plot beside `plot` (as
-/// `<stem>-bound.png`/`.svg`). Does nothing for other scenarios.
-pub fn after_eval(
-    result: &mut EvalResult,
-    scenario: &dyn Scenario,
-    plot: Option<&Path>,
-) -> anyhow::Result<()> {
-    let Some(v) = verdict(scenario)? else {
-        return Ok(());
-    };
-    println!("seed 003 assumption checker (before the run):\n{v}");
-    let Some(check) = add_empirical_trace(result) else {
-        return Ok(());
-    };
-    println!(
-        "bound check: tr E[e eᵀ] > tr P̄_k at {} of {} instants {:?}; min tr P̄/tr E[eeᵀ] over k ≥ 1: {:.3e}",
-        check.exceeded_at.len(),
-        result.horizon as usize + 1,
-        check.exceeded_at,
-        check.min_ratio_after_0
-    );
-    if let Some((_, r)) = result.estimators.iter().find(|(n, _)| n == "nn") {
-        if let Some((_, phi)) = r.diagnostics.iter().find(|(n, _)| n == "phi_exceeds") {
-            let mean = phi.iter().skip(1).sum::<f64>() / (phi.len().max(2) - 1) as f64;
-            println!(
-                "during the run: ||phi(x_hat_k)|| > phi_bar in {:.1} % of (run, k) pairs, k ≥ 1",
-                100.0 * mean
-            );
-        }
-    }
-    for (name, r) in &result.estimators {
-        let per_state: Vec<String> = r
-            .mse_per_state
-            .iter()
-            .map(|m| {
-                let v: Vec<f64> = m.iter().skip(1).copied().collect();
-                format!("{:.4e}", v.iter().sum::<f64>() / v.len().max(1) as f64)
-            })
-            .collect();
-        println!(
-            "{name}: per-state MSE (mean over k = 1..T) [{}]",
-            per_state.join(", ")
-        );
-    }
-    if let Some(path) = plot {
-        let ext = path
-            .extension()
-            .map(|e| e.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "png".into());
-        let stem = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "plot".into());
-        let out = path.with_file_name(format!("{stem}-bound.{ext}"));
-        crate::plot_bound::plot_bound(result, &out)?;
-        println!("wrote {}", out.display());
-    }
-    Ok(())
-}
-
-/// Adds `empirical_trace` to the `nn` entry and compares it with `bound_trace`.
-pub fn add_empirical_trace(result: &mut EvalResult) -> Option<BoundCheck> {
-    let (_, r) = result.estimators.iter_mut().find(|(n, _)| n == "nn")?;
-    let empirical = r.mse.clone();
-    let bound = r
-        .diagnostics
-        .iter()
-        .find(|(n, _)| n == "bound_trace")?
-        .1
-        .clone();
-    if !r.diagnostics.iter().any(|(n, _)| n == "empirical_trace") {
-        r.diagnostics
-            .push(("empirical_trace".to_owned(), empirical.clone()));
-    }
-    let mut check = BoundCheck {
-        exceeded_at: Vec::new(),
-        non_finite_at: Vec::new(),
-        min_ratio_after_0: f64::INFINITY,
-    };
-    for (k, (&e, &b)) in empirical.iter().zip(&bound).enumerate() {
-        if !b.is_finite() {
-            if k > 0 {
-                check.non_finite_at.push(k);
-            }
-            continue;
-        }
-        if e > b {
-            check.exceeded_at.push(k);
-        }
-        if k > 0 && e > 0.0 {
-            check.min_ratio_after_0 = check.min_ratio_after_0.min(b / e);
-        }
-    }
-    Some(check)
 }

@@ -1,7 +1,8 @@
 //! The seed 001 estimators for occlusion dropouts: `cce` (the paper's cross-coupled estimator,
-//! Algorithms 1-2), `kf-io` (the paper's linear MMSE baseline, built as DESIGN.md states) and
-//! `adf` (the product's exact-likelihood assumed-density filter). The paper's third curve,
-//! `ikf`, is the generic [`super::ikf`] family (prediction only on a dropout).
+//! Algorithms 1-2), `kf-io` (the paper's linear MMSE baseline, built as `docs/design.md`
+//! "Seed 001" states) and `adf` (the product's exact-likelihood assumed-density filter). The
+//! paper's third curve, `ikf`, is the generic [`super::ikf`] family (prediction only on a
+//! dropout).
 //!
 //! Applies to composed scenarios with one sensor node, a linear plant and an occlusion stage
 //! ([`OcclusionSpec`] with 1 to 4 intervals), for `n_x ≤ 4` and `n_y ≤ 2`. `cce` uses the

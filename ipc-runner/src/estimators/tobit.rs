@@ -11,7 +11,7 @@
 //! [`TriggeredTokenBucket`] stage (σ_m, χ_m, λ_m, η_{m,0} enter Ξ). A node whose packet was not
 //! delivered has θ = 1 (the filter holds its last received measurement, eq. 19). The filter's
 //! own scalars are the example's (ε₁…ε₅ = 0.05, ε₆…ε₁₃ = 0.7, ε₁₄ = 1, d = 1.5, e = 2),
-//! C(Υ∘Ω₁)Cᵀ as written, α_m = 1/l (DESIGN.md "Seed 004").
+//! C(Υ∘Ω₁)Cᵀ as written, α_m = 1/l (`docs/design.md` "Seed 004").
 //!
 //! Diagnostics: `trace_p` — tr P^g for `fused`, tr P̄_{m,k|k} for `tobit-m`; `fused` also
 //! reports `p11`, `p12`, `p22` (the entries of P^g). Against the truth (evaluation only):

@@ -104,7 +104,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     };
     let mut result = evaluate(&*scenario, &options, FACTORIES, &run_config)
         .map_err(|e| CommandError::failure(format!("{e:#}")))?;
-    crate::estimators::nn::after_eval(&mut result, &*scenario, args.plot.as_deref())
+    super::nn_bound::after_eval(&mut result, &*scenario, args.plot.as_deref())
         .map_err(|e| CommandError::failure(format!("{e:#}")))?;
     if let Some(c) = scenario
         .as_any()
@@ -128,8 +128,9 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     }
     // Scenarios with a shared token bucket (seed 004): Fig. 2 beside the plot.
     if let Some(path) = &args.plot {
-        let written = crate::plot_tokens::plot_for(&*scenario, options.seed, options.horizon, path)
-            .map_err(|e| CommandError::failure(format!("token plot: {e:#}")))?;
+        let written =
+            crate::plot::tokens::plot_for(&*scenario, options.seed, options.horizon, path)
+                .map_err(|e| CommandError::failure(format!("token plot: {e:#}")))?;
         if let Some(p) = written {
             println!("wrote {}", p.display());
         }

@@ -10,6 +10,9 @@
 //! an error (the estimator then no longer tracks instant k). Such runs are counted and left
 //! out of that estimator's means; the evaluation never stops for them.
 //!
+//! What a scenario adds to its evaluation lives here too, not in its estimators:
+//! [`nn_bound`] (seed 003's assumption check, bound check and bound plot).
+//!
 //! ```
 //! use ipc_runner::estimators::{EvalOptions, FACTORIES};
 //! use ipc_runner::eval::{evaluate, RunConfig};
@@ -24,6 +27,7 @@
 //! ```
 
 pub mod cli;
+pub mod nn_bound;
 pub mod report;
 
 use anyhow::Context as _;

@@ -40,8 +40,8 @@ pub fn rt_throttle_stall_us(realtime: bool, runtime_us: i64, period_us: i64) -> 
 }
 
 /// A warning for `--wait spin` when the calling thread runs under a real-time policy with
-/// throttling on (measured on this machine: `chrt -f 10` made the spin pipeline's p99
-/// ≈ 35 ms instead of ≈ 10 µs, the throttled 50 ms of each second).
+/// throttling on: the throttled part of every period becomes the spin pipeline's tail
+/// latency (measured under `chrt -f 10` in `docs/pipeline.md`).
 pub fn spin_under_rt_throttling() -> Option<String> {
     // SAFETY: sched_getscheduler(0) only reads the calling thread's policy.
     #[allow(unsafe_code)]

@@ -1,8 +1,16 @@
-//! Plots of an evaluation: MSE(k) of every estimator on a log axis (the papers' MSE figures)
-//! above one run's true and estimated trajectories, one panel per state.
+//! Plots. This module draws the evaluation's plot — MSE(k) of every estimator on a log axis
+//! (the papers' MSE figures) above one run's true and estimated trajectories, one panel per
+//! state — and holds what every plot shares (font, palette, legend, file check); the others
+//! are [`bound`] (seed 003's Fig. 3), [`tokens`] (seed 004's Fig. 2), [`latency`] (percentile
+//! ladders) and [`trace`] (latency over a run).
 //!
 //! `.svg` or `.png` by the file's extension. PNG text is rendered with DejaVu Sans, embedded
 //! from `assets/` (Bitstream Vera licence, `assets/DejaVuSans.LICENSE`).
+
+pub mod bound;
+pub mod latency;
+pub mod tokens;
+pub mod trace;
 
 use std::path::Path;
 
@@ -42,7 +50,7 @@ pub(crate) fn register_font() {
         let _ = plotters::style::register_font(
             FONT,
             FontStyle::Normal,
-            include_bytes!("../assets/DejaVuSans.ttf"),
+            include_bytes!("../../assets/DejaVuSans.ttf"),
         );
     });
 }

@@ -1,0 +1,184 @@
+//! The work of one instant, in latency order: step every estimator, publish its estimate,
+//! then — with the estimates out — record the histograms, score against the truth, record
+//! the trajectories and loan the next instant's samples.
+
+use crate::latency::Latency;
+use crate::transport::Transport;
+use crate::Estimator;
+use anyhow::Result;
+use channel_sim::sim::MAX_NX;
+use channel_sim::wire::{self, Estimate, WIRE_VERSION};
+use channel_sim::Observation;
+
+use super::args::RunArgs;
+use super::publish::Publisher;
+use super::report::EstimatorReport;
+use super::trajectories::Trajectories;
+use super::truth::Scores;
+
+/// The slot that completed the current instant, as the receive path saw it.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct SlotTimes {
+    /// channel-sim's send time of the last data slot.
+    pub(super) send_ns: u64,
+    /// When this runner received it.
+    pub(super) recv_ns: u64,
+    /// The stream of the last slot.
+    pub(super) stream_id: u64,
+}
+
+/// The estimators and everything that happens to their estimates.
+pub(super) struct Runner {
+    /// Replaced by a fresh set when a new stream starts.
+    pub(super) estimators: Vec<Box<dyn Estimator>>,
+    nx: usize,
+    /// The latest estimate of every estimator.
+    xhat: Vec<[f64; MAX_NX]>,
+    rejected: Vec<u64>,
+    names: Vec<[u8; 16]>,
+    /// Per estimator, when its step of the current instant started and ended (recorded in the
+    /// histogram after publishing).
+    step_ns: Vec<(u64, u64)>,
+    est_seq: u64,
+    pub(super) out: Publisher,
+    pub(super) latency: Latency,
+    pub(super) scores: Scores,
+    pub(super) traj: Trajectories,
+    record_cap: usize,
+    /// Streams followed so far (1 + restarts).
+    pub(super) session: u32,
+    /// Set per slot by the receive path.
+    pub(super) slot: SlotTimes,
+    /// The latest instant processed.
+    pub(super) last_k: u32,
+}
+
+impl Runner {
+    /// For `estimators` on a scenario with `nx` states and `nodes` nodes, publishing and
+    /// recording as `args` asks.
+    pub(super) fn new(
+        t: &Transport,
+        args: &RunArgs,
+        estimators: Vec<Box<dyn Estimator>>,
+        nx: usize,
+        nodes: u8,
+    ) -> Result<Self> {
+        let n_est = estimators.len();
+        let record_cap = args.steps as usize;
+        let names: Vec<[u8; 16]> = estimators
+            .iter()
+            .map(|e| Estimate::encode_name(e.name()))
+            .collect();
+        let traj = Trajectories::with_capacity(
+            record_cap,
+            nx,
+            estimators.iter().map(|e| e.name().to_string()).collect(),
+            if args.slots_csv.is_some() {
+                record_cap
+            } else {
+                0
+            },
+            usize::from(nodes),
+        );
+        let out = Publisher::new(t, args, &names)?;
+        Ok(Self {
+            estimators,
+            nx,
+            xhat: vec![[0.0; MAX_NX]; n_est],
+            rejected: vec![0; n_est],
+            names,
+            step_ns: vec![(0, 0); n_est],
+            est_seq: 0,
+            out,
+            latency: Latency::new(),
+            scores: Scores::new(n_est),
+            traj,
+            record_cap,
+            session: 1,
+            slot: SlotTimes::default(),
+            last_k: 0,
+        })
+    }
+
+    /// Steps every estimator on instant `k` and publishes the estimates; the evaluation
+    /// against truth (MSE, recording) runs after publishing, off the latency path.
+    #[inline]
+    pub(super) fn on_instant(&mut self, t: &Transport, k: u32, obs: &[Observation]) {
+        let nx = self.nx;
+        for (e, est) in self.estimators.iter_mut().enumerate() {
+            let t0 = wire::monotonic_ns();
+            let status = match est.step(k, obs) {
+                Ok(()) => 0,
+                Err(_) => {
+                    self.rejected[e] += 1;
+                    1
+                }
+            };
+            let xhat = &mut self.xhat[e];
+            est.estimate(&mut xhat[..nx]);
+            let t1 = wire::monotonic_ns();
+            self.step_ns[e] = (t0, t1);
+            let seq = self.est_seq;
+            self.est_seq += 1;
+            if !self.out.is_on() {
+                continue;
+            }
+            let msg = Estimate {
+                version: WIRE_VERSION,
+                k,
+                stream_id: self.slot.stream_id,
+                seq,
+                estimator: e as u32,
+                nx: nx as u32,
+                name: self.names[e],
+                status,
+                reserved: 0,
+                x: *xhat,
+                slot_send_ns: self.slot.send_ns,
+                receive_ns: self.slot.recv_ns,
+                step_done_ns: t1,
+            };
+            self.out.send(t, e, msg);
+        }
+        let done_ns = wire::monotonic_ns();
+        // Statistics after the estimates are out: a histogram bucket can be a cache miss.
+        for &(t0, t1) in &self.step_ns {
+            Latency::record(&mut self.latency.step, t0, t1);
+        }
+        Latency::record(&mut self.latency.end_to_end, self.slot.send_ns, done_ns);
+        self.last_k = k;
+        self.evaluate(t, k, done_ns);
+        self.out.loan_ahead(t);
+    }
+
+    /// Errors against truth and the recorded trajectories of instant `k`, whose estimates
+    /// were published at `done_ns`.
+    fn evaluate(&mut self, t: &Transport, k: u32, done_ns: u64) {
+        let truth = self.scores.truth(t, k, self.slot.stream_id);
+        if self.traj.keys.len() < self.record_cap {
+            self.traj.record(
+                (self.session, k),
+                [self.slot.send_ns, self.slot.recv_ns, done_ns],
+                truth.as_ref(),
+                &self.xhat,
+            );
+        }
+        if let Some(x) = &truth {
+            self.scores.score(x, &self.xhat, self.nx);
+        }
+    }
+
+    /// Per-estimator results so far.
+    pub(super) fn estimator_reports(&self) -> Vec<EstimatorReport> {
+        self.estimators
+            .iter()
+            .enumerate()
+            .map(|(e, est)| EstimatorReport {
+                name: est.name().to_string(),
+                mse: self.scores.mse(e),
+                mse_instants: self.scores.err_n[e],
+                rejected: self.rejected[e],
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,381 @@
+//! The loop over slots: drain the slot queue (every received slot goes through the
+//! [`Assembler`]; each instant it completes is handed to [`Runner::on_instant`]), follow a
+//! restarted publisher, and when nothing is pending check the data deadline and wait
+//! ([`super::wait`]).
+
+use crate::latency::Latency;
+use crate::transport::Transport;
+use crate::Estimator;
+use anyhow::{bail, Context, Result};
+use channel_sim::wire::{self, WIRE_VERSION};
+use channel_sim::Observation;
+use std::time::Duration;
+
+use super::args::{RunArgs, WaitMode};
+use super::assemble::{Assembler, Counts, Pushed};
+use super::instant::Runner;
+use super::report::{Ending, RunReport};
+use super::system;
+use super::trajectories::Trajectories;
+use super::wait::{self, Waiter, Woke};
+
+/// Progress callback: latest instant and the counts so far.
+pub type Progress<'a> = dyn FnMut(u32, &Counts) + 'a;
+
+/// Optional instrumentation of the loop.
+#[derive(Default)]
+pub struct Hooks<'a> {
+    /// Returns the process's running allocation count (a counting global allocator); read
+    /// after instant [`Hooks::warmup`] and at the end of the stream.
+    pub alloc_probe: Option<fn() -> usize>,
+    /// Instants before the allocation count starts (default 20).
+    pub warmup: u64,
+    /// Called at most every 100 ms with the latest instant and the counts.
+    pub progress: Option<&'a mut Progress<'a>>,
+}
+
+impl std::fmt::Debug for Hooks<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Hooks")
+            .field("warmup", &self.warmup)
+            .finish()
+    }
+}
+
+/// Longest single wait: the deadline is checked at least this often.
+const MAX_WAIT_NS: u64 = 50_000_000;
+
+/// Progress is reported at most this often.
+const PROGRESS_EVERY_NS: u64 = 100_000_000;
+
+/// Runs the loop with estimators from `make` (called again for every new stream) until the
+/// stream ends. Errors are configuration/transport failures; a lost publisher is reported in
+/// [`RunReport::ending`].
+pub fn run_loop(
+    args: &RunArgs,
+    nx: usize,
+    nodes: u8,
+    ny: u8,
+    make: &dyn Fn() -> Result<Vec<Box<dyn Estimator>>>,
+    mut hooks: Hooks<'_>,
+) -> Result<(RunReport, Trajectories)> {
+    let machine = Machine::set_up(args);
+    let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
+    let runner = Runner::new(&t, args, make()?, nx, nodes)?;
+    let mut asm = Assembler::new(nodes, ny);
+    asm.set_subscribed_ns(t.subscribed_ns);
+    let mut lp = Loop {
+        args,
+        t: &t,
+        make,
+        runner,
+        asm,
+        deadline: Deadline::new(args),
+        allocs: Allocs::new(&hooks),
+        publisher_losses: 0,
+        last_progress: 0,
+    };
+
+    // iceoryx2 installs its SIGINT/SIGTERM handler on the first `Node::wait`; do that before
+    // announcing the wait, so Ctrl-C ends the run cleanly in every wait mode from here on
+    // (the listener's wait would otherwise leave the signal to its default action, which
+    // kills the process without a report). Before this call a signal ends the process, so
+    // there is no earlier signal to carry over.
+    let _ = t.node.wait(Duration::ZERO);
+    lp.say(&format!(
+        "waiting for channel-sim on prefix {:?} ({} wait)",
+        args.prefix,
+        args.wait.as_str()
+    ));
+    let waitset = wait::waitset(args.wait, &t)?;
+    let mut waiter = Waiter::new(&t, waitset.as_ref())?;
+
+    let ending = loop {
+        if let Some(ending) = lp.drain(&mut hooks)? {
+            break ending;
+        }
+        // Nothing pending: check the deadline, then wait.
+        let Some(now) = waiter.now() else {
+            break Ending::Interrupted;
+        };
+        let due = lp.deadline.due();
+        if now > due {
+            match lp.missed(now) {
+                Some(ending) => break ending,
+                None => continue,
+            }
+        }
+        match waiter.wait(due.saturating_sub(now).min(MAX_WAIT_NS))? {
+            Woke::Ready => {}
+            Woke::Signal => break Ending::Interrupted,
+        }
+    };
+    Ok(lp.finish(ending, machine))
+}
+
+/// The loop's state between slots.
+struct Loop<'a> {
+    args: &'a RunArgs,
+    t: &'a Transport,
+    make: &'a dyn Fn() -> Result<Vec<Box<dyn Estimator>>>,
+    runner: Runner,
+    asm: Assembler,
+    deadline: Deadline,
+    allocs: Allocs,
+    publisher_losses: u32,
+    last_progress: u64,
+}
+
+impl Loop<'_> {
+    fn say(&self, m: &str) {
+        if !self.args.quiet {
+            eprintln!("ipc-runner: {m}");
+        }
+    }
+
+    /// Handles every slot that is there; `Some` when the stream ended.
+    #[inline]
+    fn drain(&mut self, hooks: &mut Hooks<'_>) -> Result<Option<Ending>> {
+        loop {
+            let sample = match self.t.slot_sub.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => return Ok(None),
+                Err(e) => bail!("receive failed: {e:?}"),
+            };
+            let recv_ns = wire::monotonic_ns();
+            let slot = sample.payload();
+            if slot.version != WIRE_VERSION {
+                bail!(
+                    "{}",
+                    wire::WireError::Version {
+                        found: slot.version
+                    }
+                );
+            }
+            self.deadline.last_data_ns = Some(recv_ns);
+            if slot.kind == wire::SLOT_DATA {
+                self.deadline.period_ns = slot.period_ns;
+                self.runner.slot.send_ns = slot.send_ns;
+                self.runner.slot.recv_ns = recv_ns;
+            }
+            self.runner.slot.stream_id = slot.stream_id;
+            let (t, runner) = (self.t, &mut self.runner);
+            let mut pushed = self.asm.push(slot, &mut |k, obs: &[Observation]| {
+                runner.on_instant(t, k, obs);
+            });
+            if pushed == Ok(Pushed::NewStream) {
+                self.new_stream()?;
+                let runner = &mut self.runner;
+                pushed = self.asm.push(slot, &mut |k, obs: &[Observation]| {
+                    runner.on_instant(t, k, obs);
+                });
+            }
+            let pushed = pushed.with_context(|| "refusing slot from channel-sim")?;
+            // After the instant this slot may have completed was published.
+            if slot.kind == wire::SLOT_DATA {
+                Latency::record(&mut self.runner.latency.transport, slot.send_ns, recv_ns);
+            }
+            if self.args.slots_csv.is_some() && pushed == Pushed::Data {
+                self.runner.traj.record_slot(slot);
+            }
+            drop(sample);
+            if let Some(e) = self.runner.out.take_error() {
+                return Err(e);
+            }
+            if let Some(us) = self.args.debug_slow_us {
+                std::thread::sleep(Duration::from_micros(us));
+            }
+            self.allocs
+                .after_slot(&self.asm.counts, self.runner.out.published);
+            match pushed {
+                Pushed::End | Pushed::Abort => {
+                    self.allocs.at_end = self.allocs.probe.map(|p| p());
+                    return Ok(Some(if pushed == Pushed::End {
+                        Ending::Completed
+                    } else {
+                        Ending::PublisherStopped
+                    }));
+                }
+                _ => {}
+            }
+            if let Some(p) = hooks.progress.as_mut() {
+                if recv_ns - self.last_progress > PROGRESS_EVERY_NS {
+                    self.last_progress = recv_ns;
+                    p(self.runner.last_k, &self.asm.counts);
+                }
+            }
+        }
+    }
+
+    /// channel-sim restarted: a new session with fresh estimators.
+    fn new_stream(&mut self) -> Result<()> {
+        let old = self.asm.stream();
+        self.asm.reset();
+        self.runner.session += 1;
+        self.runner.estimators = (self.make)()?;
+        self.say(&format!(
+            "new stream from channel-sim (restarted; was {old:x?}): session {} with fresh estimators",
+            self.runner.session
+        ));
+        Ok(())
+    }
+
+    /// The deadline passed at `now`: `Some` when the run ends, `None` when it waits for a
+    /// restarted publisher (`--wait-for-restart`).
+    fn missed(&mut self, now: u64) -> Option<Ending> {
+        let args = self.args;
+        let Some(t_last) = self.deadline.last_data_ns else {
+            self.say(&format!(
+                "no data from channel-sim on prefix {:?} within {} s",
+                args.prefix, args.connect_timeout
+            ));
+            return Some(Ending::PublisherLost);
+        };
+        self.publisher_losses += 1;
+        let cleaned = self.t.node.try_cleanup_dead_nodes();
+        self.say(&format!(
+            "publisher lost: no slot for {:.1} ms after instant {} (deadline {} ms past the \
+             expected slot); cleaned up {} dead node(s), {} publisher(s) remain",
+            (now - t_last) as f64 / 1e6,
+            self.runner.last_k,
+            args.deadline_ms,
+            cleaned.cleanups,
+            self.t.publishers()
+        ));
+        if !args.wait_for_restart {
+            return Some(Ending::PublisherLost);
+        }
+        self.say("waiting for channel-sim to restart (--wait-for-restart)");
+        self.deadline.last_data_ns = None;
+        self.deadline.waiting_since = now;
+        None
+    }
+
+    fn finish(self, ending: Ending, machine: Machine) -> (RunReport, Trajectories) {
+        let (runner, counts, allocs) = (self.runner, self.asm.counts, self.allocs);
+        let report = RunReport {
+            scenario: self.args.scenario.clone(),
+            wait: self.args.wait,
+            counts,
+            estimators: runner.estimator_reports(),
+            latency: runner.latency.summary(),
+            sessions: runner.session,
+            publisher_losses: self.publisher_losses,
+            truth_missing: runner.scores.truth_missing,
+            allocations_after_warmup: match (allocs.at_warmup, allocs.at_end) {
+                (Some(a), Some(b)) => Some(b - a),
+                _ => None,
+            },
+            slots_after_warmup: counts.received - allocs.slots_at_warmup,
+            published_after_warmup: runner.out.published - allocs.published_at_warmup,
+            cpu_pinning: machine.cpu_pinning,
+            memory_lock: machine.memory_lock,
+            warnings: machine.warnings,
+            ending,
+        };
+        (report, runner.traj)
+    }
+}
+
+/// When the next slot is due.
+struct Deadline {
+    deadline_ns: u64,
+    connect_ns: u64,
+    period_ns: u64,
+    /// `None` while waiting for the first slot of a stream (the connect timeout applies).
+    last_data_ns: Option<u64>,
+    waiting_since: u64,
+}
+
+impl Deadline {
+    fn new(args: &RunArgs) -> Self {
+        Self {
+            deadline_ns: (args.deadline_ms * 1e6) as u64,
+            connect_ns: (args.connect_timeout * 1e9) as u64,
+            period_ns: 0,
+            last_data_ns: None,
+            waiting_since: wire::monotonic_ns(),
+        }
+    }
+
+    fn due(&self) -> u64 {
+        match self.last_data_ns {
+            Some(t_last) => t_last + self.period_ns + self.deadline_ns,
+            None if self.connect_ns == 0 => u64::MAX,
+            None => self.waiting_since + self.connect_ns,
+        }
+    }
+}
+
+/// The allocation count of [`Hooks::alloc_probe`] at warm-up and at the end.
+struct Allocs {
+    probe: Option<fn() -> usize>,
+    warmup: u64,
+    at_warmup: Option<usize>,
+    at_end: Option<usize>,
+    slots_at_warmup: u64,
+    published_at_warmup: u64,
+}
+
+impl Allocs {
+    fn new(hooks: &Hooks<'_>) -> Self {
+        Self {
+            probe: hooks.alloc_probe,
+            warmup: if hooks.warmup == 0 { 20 } else { hooks.warmup },
+            at_warmup: None,
+            at_end: None,
+            slots_at_warmup: 0,
+            published_at_warmup: 0,
+        }
+    }
+
+    #[inline]
+    fn after_slot(&mut self, counts: &Counts, published: u64) {
+        if let Some(probe) = self.probe {
+            if self.at_warmup.is_none() && counts.instants >= self.warmup {
+                self.at_warmup = Some(probe());
+                self.slots_at_warmup = counts.received;
+                self.published_at_warmup = published;
+            }
+        }
+    }
+}
+
+/// What `--cpu` and `--mlock` achieved, and set-up conditions that will show in the latency.
+struct Machine {
+    cpu_pinning: Option<String>,
+    memory_lock: Option<String>,
+    warnings: Vec<String>,
+}
+
+impl Machine {
+    fn set_up(args: &RunArgs) -> Self {
+        let cpu_pinning = args.cpu.map(|c| match system::pin_to_cpu(c) {
+            Ok(()) => format!("pinned to CPU {c}"),
+            Err(e) => format!("not pinned ({e})"),
+        });
+        let memory_lock = args.mlock.then(|| match system::lock_memory() {
+            Ok(()) => "locked".to_string(),
+            Err(e) => format!("not locked ({e})"),
+        });
+        if !args.quiet {
+            for m in cpu_pinning.iter().chain(memory_lock.iter()) {
+                eprintln!("ipc-runner: {m}");
+            }
+        }
+        // After pinning: a warning, not a refusal (a machine with throttling off passes).
+        let warnings: Vec<String> = (args.wait == WaitMode::Spin)
+            .then(system::spin_under_rt_throttling)
+            .flatten()
+            .into_iter()
+            .collect();
+        for w in &warnings {
+            eprintln!("ipc-runner: {w}");
+        }
+        Self {
+            cpu_pinning,
+            memory_lock,
+            warnings,
+        }
+    }
+}

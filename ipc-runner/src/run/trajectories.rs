@@ -1,0 +1,142 @@
+//! What the loop records per instant, preallocated (recording stops when full): keys, truth,
+//! estimates, timing and the received slots; written at the end as CSV files.
+
+use anyhow::{Context, Result};
+use channel_sim::sim::MAX_NX;
+use channel_sim::wire::Slot;
+use channel_sim::Observation;
+
+/// Recorded trajectories (preallocated; recording stops when full).
+#[derive(Debug, Default)]
+pub struct Trajectories {
+    /// Session, k per recorded instant.
+    pub keys: Vec<(u32, u32)>,
+    /// Truth per instant (`nx` values, NaN when missing).
+    pub truth: Vec<f64>,
+    /// Estimates per instant and estimator (`n_est · nx` values).
+    pub estimates: Vec<f64>,
+    /// Per instant: the completing slot's send time, its receive time and the time the
+    /// instant's estimates were all published (`CLOCK_MONOTONIC` ns).
+    pub timing: Vec<[u64; 3]>,
+    /// Received slots (for `replay`), if requested.
+    pub slots: Vec<Observation>,
+    /// State dimension.
+    pub nx: usize,
+    /// Estimator names.
+    pub names: Vec<String>,
+}
+
+impl Trajectories {
+    /// Room for `instants` instants of `nx` states and the estimators `names`, and for the
+    /// slots of `slots` instants of `nodes` nodes.
+    pub(super) fn with_capacity(
+        instants: usize,
+        nx: usize,
+        names: Vec<String>,
+        slots: usize,
+        nodes: usize,
+    ) -> Self {
+        Self {
+            keys: Vec::with_capacity(instants),
+            truth: Vec::with_capacity(instants * nx),
+            estimates: Vec::with_capacity(instants * nx * names.len()),
+            timing: Vec::with_capacity(instants),
+            slots: Vec::with_capacity(slots * nodes),
+            nx,
+            names,
+        }
+    }
+
+    /// Records instant `k` of `session`: its `timing`, `truth` (NaN when missing) and every
+    /// estimator's estimate (first `nx` values of each in `xhat`).
+    pub(super) fn record(
+        &mut self,
+        (session, k): (u32, u32),
+        timing: [u64; 3],
+        truth: Option<&[f64; MAX_NX]>,
+        xhat: &[[f64; MAX_NX]],
+    ) {
+        let nx = self.nx;
+        self.keys.push((session, k));
+        self.timing.push(timing);
+        for j in 0..nx {
+            self.truth.push(truth.map_or(f64::NAN, |x| x[j]));
+        }
+        for x in xhat {
+            self.estimates.extend_from_slice(&x[..nx]);
+        }
+    }
+
+    /// Records a received data slot while there is room.
+    pub(super) fn record_slot(&mut self, slot: &Slot) {
+        if self.slots.len() < self.slots.capacity() {
+            if let Ok(o) = slot.observation() {
+                self.slots.push(o);
+            }
+        }
+    }
+
+    /// Writes `session,k,truth_0..,<est>_0..` rows.
+    pub fn write_estimates_csv(&self, path: &std::path::Path) -> Result<()> {
+        use std::io::Write;
+        let mut w = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
+        );
+        let mut head = String::from("session,k");
+        for j in 0..self.nx {
+            head.push_str(&format!(",truth_{j}"));
+        }
+        for n in &self.names {
+            for j in 0..self.nx {
+                head.push_str(&format!(",{n}_{j}"));
+            }
+        }
+        writeln!(w, "{head}")?;
+        let ne = self.names.len();
+        for (i, (session, k)) in self.keys.iter().enumerate() {
+            write!(w, "{session},{k}")?;
+            for v in &self.truth[i * self.nx..(i + 1) * self.nx] {
+                write!(w, ",{v:e}")?;
+            }
+            for v in &self.estimates[i * self.nx * ne..(i + 1) * self.nx * ne] {
+                write!(w, ",{v:e}")?;
+            }
+            writeln!(w)?;
+        }
+        Ok(())
+    }
+
+    /// Writes `session,k,t_s,transport_us,end_to_end_us` rows, one per instant: `t_s` is the
+    /// send time of the slot that completed the instant, in seconds since the first recorded
+    /// one; the latencies are that slot sent → received and sent → all estimates published.
+    /// The end-to-end column is the end-to-end histogram's samples in order; the transport
+    /// histogram also holds the other nodes' slots.
+    pub fn write_latency_csv(&self, path: &std::path::Path) -> Result<()> {
+        use std::io::Write;
+        let mut w = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
+        );
+        writeln!(w, "session,k,t_s,transport_us,end_to_end_us")?;
+        for ((session, k), tr) in self.keys.iter().zip(&self.timing) {
+            let (t_s, transport, e2e) = self.latency_point(tr);
+            writeln!(w, "{session},{k},{t_s:.6},{transport:.3},{e2e:.3}")?;
+        }
+        Ok(())
+    }
+
+    /// `(seconds since the first recorded send, transport µs, end to end µs)` of one
+    /// recorded instant.
+    pub fn latency_point(&self, tr: &[u64; 3]) -> (f64, f64, f64) {
+        let t0 = self.timing.first().map_or(0, |t| t[0]);
+        (
+            tr[0].saturating_sub(t0) as f64 * 1e-9,
+            tr[1].saturating_sub(tr[0]) as f64 * 1e-3,
+            tr[2].saturating_sub(tr[0]) as f64 * 1e-3,
+        )
+    }
+
+    /// Writes the received slots as a slot log ([`crate::slot_log`], what `replay` reads).
+    pub fn write_slots_csv(&self, path: &std::path::Path, ny: usize) -> Result<()> {
+        crate::slot_log::write_slots(path, &self.slots, ny)
+    }
+}
