@@ -9,7 +9,7 @@
 //! - **round trip**: ping send → pong received by the parent.
 //!
 //! Modes: `iox-spin` (busy-poll `receive()`), `iox-block` (pub/sub plus an event service, the
-//! receiver sleeps in a `WaitSet`; see DESIGN.md "iceoryx2 0.10 facts"), `uds-spin`
+//! receiver sleeps in a `WaitSet`; see `docs/design.md` "iceoryx2 0.10 facts"), `uds-spin`
 //! (non-blocking socket, busy-read), `uds-block` (blocking `read`). The payload is 128 bytes
 //! in every mode. Service names and socket paths contain the parent's pid, and both are
 //! removed at the end (the socket file also on error).

@@ -1,0 +1,60 @@
+//! The command line, and where things are.
+
+use anyhow::{anyhow, bail, Result};
+use std::path::PathBuf;
+
+const USAGE: &str =
+    "report [--quick] [--skip criterion,icount,firmware,ipc,pipeline,idle,eval] [--out FILE]";
+
+pub struct Opts {
+    pub quick: bool,
+    pub skip: Vec<String>,
+    pub out: PathBuf,
+    pub root: PathBuf,
+    pub target: PathBuf,
+}
+
+impl Opts {
+    /// Reads the command line; `None` if it asked for the usage (printed here).
+    pub fn from_args() -> Result<Option<Self>> {
+        let mut args = std::env::args().skip(1);
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .parent()
+            .ok_or_else(|| anyhow!("no workspace root"))?
+            .to_path_buf();
+        let mut o = Self {
+            quick: false,
+            skip: Vec::new(),
+            out: root.join("BENCHMARKS.md"),
+            target: std::env::var_os("CARGO_TARGET_DIR")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| root.join("target")),
+            root,
+        };
+        while let Some(a) = args.next() {
+            match a.as_str() {
+                "--quick" => o.quick = true,
+                "--skip" => {
+                    o.skip = args
+                        .next()
+                        .ok_or_else(|| anyhow!("--skip needs a list"))?
+                        .split(',')
+                        .map(str::to_string)
+                        .collect()
+                }
+                "--out" => o.out = PathBuf::from(args.next().ok_or_else(|| anyhow!("--out FILE"))?),
+                "-h" | "--help" => {
+                    println!("{USAGE}");
+                    return Ok(None);
+                }
+                x => bail!("unknown argument {x:?}"),
+            }
+        }
+        Ok(Some(o))
+    }
+
+    /// Whether `part` is to run (not in `--skip`).
+    pub fn runs(&self, part: &str) -> bool {
+        !self.skip.iter().any(|s| s == part)
+    }
+}
