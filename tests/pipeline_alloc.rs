@@ -41,7 +41,7 @@ const WARMUP: u64 = 20;
 
 /// Allocations of the estimators' own `step` + `estimate` over instants WARMUP+1..=STEPS.
 fn estimator_allocations(name: &str) -> usize {
-    let (scenario, _) = select::scenario(name, None).unwrap();
+    let scenario = channel_sim::scenario::resolve(name, None).unwrap();
     let nx = scenario.nx();
     let mut sim = scenario.start(0, 0);
     let exp = select::Experiment {

@@ -212,7 +212,7 @@ impl LoopSetup {
 
 pub fn loop_setup(scenario: &str, prefix: &str, steps: u32) -> LoopSetup {
     use ipc_runner::run::select;
-    let (sc, _) = select::scenario(scenario, None).unwrap();
+    let sc = channel_sim::scenario::resolve(scenario, None).unwrap();
     let (nx, nodes, ny) = (sc.nx(), sc.nodes() as u8, sc.ny() as u8);
     let exp = select::Experiment {
         seed: 0,

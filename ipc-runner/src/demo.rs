@@ -13,6 +13,8 @@
 
 use crate::run::{self, select, Hooks, RunArgs, WaitMode};
 use anyhow::{anyhow, bail, Context, Result};
+use channel_sim::publisher::DEFAULT_STEPS;
+use channel_sim::scenario::resolve;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
@@ -111,13 +113,10 @@ fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
 
 /// `ipc-runner demo`. Returns the exit code.
 pub fn main(args: &DemoArgs) -> Result<i32> {
-    let (scenario_name, (scenario, horizon)) = match (&args.scenario, &args.config) {
-        (Some(n), _) => (n.clone(), select::scenario(n, None)?),
-        (None, Some(c)) => (
-            c.display().to_string(),
-            select::scenario(DEFAULT_SCENARIO, Some(c))?,
-        ),
-        (None, None) => match select::scenario(DEFAULT_SCENARIO, None) {
+    let (scenario_name, scenario) = match (&args.scenario, &args.config) {
+        (Some(n), _) => (n.clone(), resolve(n, None)?),
+        (None, Some(c)) => (c.display().to_string(), resolve(DEFAULT_SCENARIO, Some(c))?),
+        (None, None) => match resolve(DEFAULT_SCENARIO, None) {
             Ok(s) => (DEFAULT_SCENARIO.to_string(), s),
             Err(e) => {
                 let fallback = FALLBACK_SCENARIO;
@@ -125,11 +124,12 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
                     "demo: the default scenario {DEFAULT_SCENARIO:?} is not available in this \
                      build ({e:#}); running {fallback:?} instead"
                 );
-                (fallback.to_string(), select::scenario(fallback, None)?)
+                (fallback.to_string(), resolve(fallback, None)?)
             }
         },
     };
-    let steps = args.steps.unwrap_or(horizon);
+    // Without --steps, the default horizon of `channel-sim` and `eval`.
+    let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators(
         scenario.clone(),

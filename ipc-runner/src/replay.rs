@@ -61,7 +61,7 @@ pub fn run_estimators(
 
 /// `ipc-runner replay`.
 pub fn main(args: &ReplayArgs) -> Result<i32> {
-    let (scenario, _) = select::scenario(&args.scenario, args.config.as_deref())?;
+    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
     let instants = read_slots(&args.input, nodes, ny)?;
     let make = select::estimators(

@@ -63,7 +63,7 @@ use std::sync::Arc;
 /// `ipc-runner run`: resolves scenario and estimators, runs the loop, prints the summary.
 /// Returns the process exit code.
 pub fn main(args: &RunArgs) -> Result<i32> {
-    let (scenario, _) = select::scenario(&args.scenario, args.config.as_deref())?;
+    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let scenario: Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators(
         scenario.clone(),

@@ -1,23 +1,15 @@
-//! Scenario and estimator lookup for `run`, `demo` and `replay`: the same
-//! `channel_sim::scenario::resolve` (presets and TOML configs) and
-//! [`crate::estimators::FACTORIES`] as `eval` and the publisher, so the commands can never
-//! disagree about what a name means.
+//! Estimator lookup for `run`, `demo` and `replay`: the same [`crate::estimators::FACTORIES`]
+//! as `eval`, so the commands can never disagree about what a name means (scenarios: every
+//! command and the publisher call `channel_sim::scenario::resolve`).
 
 use crate::estimators::{build_all, EvalOptions, FACTORIES};
 use crate::Estimator;
 use anyhow::{bail, Result};
-use channel_sim::publisher::DEFAULT_STEPS;
 use channel_sim::Scenario;
 use std::sync::Arc;
 
 /// A factory for a fresh set of estimators (called again when a stream restarts).
 pub type EstimatorFactory = Box<dyn Fn() -> Result<Vec<Box<dyn Estimator>>>>;
-
-/// The scenario `name` (or the TOML `config`) and its default number of instants (the
-/// publisher's, so a demo's runner and publisher agree on the horizon).
-pub fn scenario(name: &str, config: Option<&std::path::Path>) -> Result<(Box<dyn Scenario>, u32)> {
-    Ok((channel_sim::scenario::resolve(name, config)?, DEFAULT_STEPS))
-}
 
 /// What the estimator factories are built for (as in `eval`: estimators may depend on the
 /// seed, the run and the horizon).
