@@ -312,7 +312,10 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
             .nodes
             .map(|slot| slot.delivered.then(|| nalgebra::Vector2::from(slot.y)));
         Driven::step(&mut f32_run, r.k as usize, y.each_ref().map(Option::as_ref)).unwrap();
-        let (x32, p32) = (f32_run.fusion.state(), f32_run.fusion.covariance());
+        let (x32, p32) = (
+            f32_run.fusion.estimate().state(),
+            f32_run.fusion.estimate().covariance(),
+        );
         worst_x = worst_x.max((x32.map(f64::from) - x64).norm() / x64.norm().max(1.0));
         worst_p = worst_p.max((p32.map(f64::from) - p64).norm() / p64.norm());
 
@@ -340,7 +343,7 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
     // The whole-stream driver is this very computation.
     let full = run::run_tobit(&s, usize::MAX);
     assert_eq!((full.errors, full.steps), (0, 200));
-    assert_eq!(&full.x()[..2], f32_run.fusion.state().as_slice());
+    assert_eq!(&full.x()[..2], f32_run.fusion.estimate().state().as_slice());
     assert_eq!(full.arrivals + full.dropouts, 600);
     // P^g is an upper bound (Theorem 5), so the mean NEES of one run of 200 correlated
     // instants should not exceed n_x = 2 by much; 3 allows for the spread of one run and
@@ -381,8 +384,8 @@ fn host_f32_runs_match_f64_filters() {
         kf.step(&m, r.k as usize, &y).unwrap();
         ikf.step(&m, r.k as usize, r.delivered.then_some(&y))
             .unwrap();
-        let e = Vector3::from(r.truth.map(f64::from)) - kf.state();
-        nees += e.dot(&kf.covariance().cholesky().unwrap().solve(&e));
+        let e = Vector3::from(r.truth.map(f64::from)) - kf.estimate().state();
+        nees += e.dot(&kf.estimate().covariance().cholesky().unwrap().solve(&e));
     }
     nees /= f64::from(s.steps);
     // Mean NEES of a consistent 3-state filter is 3. Over 100 time-correlated steps of one run
@@ -397,7 +400,7 @@ fn host_f32_runs_match_f64_filters() {
     // f32 carries 24 bits; the filters are stable, so rounding does not accumulate beyond a few
     // hundred ulps of the state's magnitude (|x| ≈ 100 here): 1e-3 relative is loose enough for
     // that and far tighter than any real difference between the filters.
-    for (sum, reference) in [(k32, kf.state()), (i32_, ikf.state())] {
+    for (sum, reference) in [(k32, kf.estimate().state()), (i32_, ikf.estimate().state())] {
         for i in 0..3 {
             let (a, b) = (f64::from(sum.x()[i]), reference[i]);
             assert!(
@@ -450,9 +453,9 @@ fn host_f32_occlusion_estimators_match_f64() {
     // than a few dropouts would mean the label estimator is broken.
     assert!(right * 10 >= drops * 9, "{right} of {drops}");
     let runs = [
-        (run::run_cce(&s, usize::MAX), *cce.state()),
-        (run::run_adf(&s, usize::MAX), *adf.state()),
-        (run::run_kf_io(&s, usize::MAX), *kfio.state()),
+        (run::run_cce(&s, usize::MAX), *cce.estimate().state()),
+        (run::run_adf(&s, usize::MAX), *adf.estimate().state()),
+        (run::run_kf_io(&s, usize::MAX), *kfio.estimate().state()),
     ];
     for (sum, reference) in runs {
         assert_eq!(sum.errors, 0, "{}", sum.name);
@@ -491,7 +494,7 @@ fn host_f32_nn_matches_f64_until_f32_refuses() {
     let part = run::run_nn(&s, ok_steps);
     assert_eq!(part.errors, 0);
     for i in 0..3 {
-        let (a, b) = (f64::from(part.x()[i]), nn.state()[i]);
+        let (a, b) = (f64::from(part.x()[i]), nn.estimate().state()[i]);
         println!("nn x[{i}] at k = {ok_steps}: f32 {a} f64 {b}");
         assert!(
             (a - b).abs() <= TOL_NN * b.abs().max(1.0),

@@ -47,9 +47,9 @@ fn estimator_steps_do_not_allocate() {
 /// Seed 001 (issue 4): CCE, ADF and KF-IO steps on the paper's example, arrivals, dropouts
 /// and error paths.
 fn occlusion_section() {
-    use estimator_core::papers::Seed001Example;
     use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
     use estimator_core::gsum::GaussSum;
+    use estimator_core::papers::Seed001Example;
     let m = Seed001Example::model::<f64>().unwrap();
     let occ = Seed001Example::occlusion::<f64>().unwrap();
     let g = GaussSum::<f64, 1, 15>::uniform().unwrap();

@@ -96,8 +96,8 @@ where
             r: conv(&p.model.measurement_cov(0)),
         };
         let prior = StateAndCovariance::<T, Const<NX>>::new(
-            conv::<T, NX, 1>(p.prior.state()),
-            conv::<T, NX, NX>(p.prior.covariance()),
+            conv::<T, NX, 1>(p.prior.estimate().state()),
+            conv::<T, NX, NX>(p.prior.estimate().covariance()),
         );
         Self {
             model,

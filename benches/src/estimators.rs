@@ -3,13 +3,13 @@
 //! so the host instruction counts and the criterion medians describe the same work under
 //! the same names.
 
-use estimator_core::papers::Seed001Example;
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation};
 use estimator_core::filter::nn::{GainSolver, NnBoundConfig};
-use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, TobitFusion};
 use estimator_core::gsum::GaussSum;
+use estimator_core::papers::Seed001Example;
+use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
 use estimator_core::protocol::shared_token_bucket::{SharedTokenBucket, TriggeredBucketScheduler};
 use estimator_core::{Real, Result};

@@ -1,8 +1,8 @@
 //! The benchmark problems: one Kalman step at the papers' dimensions, from a converged prior.
 
-use estimator_core::papers::Seed001Example;
 use estimator_core::filter::{CovarianceUpdate, IntermittentKalmanFilter, KalmanFilter};
 use estimator_core::model::{LinearModel, LinearSystem};
+use estimator_core::papers::Seed001Example;
 use estimator_core::{Real, Result};
 use nalgebra::{matrix, vector, SMatrix, SVector};
 
@@ -41,12 +41,13 @@ impl<T: Real, const NX: usize, const NY: usize> KfProblem<T, NX, NY> {
             y
         };
         for k in 1..400 {
-            let y = meas(k, kf.state());
+            let y = meas(k, kf.estimate().state());
             kf.step(&model, k, &y).expect("convergence run");
         }
-        let y = meas(400, kf.state());
+        let y = meas(400, kf.estimate().state());
         let prior_ikf =
-            IntermittentKalmanFilter::new(*kf.state(), *kf.covariance()).expect("valid prior");
+            IntermittentKalmanFilter::new(*kf.estimate().state(), *kf.estimate().covariance())
+                .expect("valid prior");
         Self {
             name,
             model,

@@ -24,13 +24,21 @@ where
         }
         .expect("our step");
         let (x, pp) = a.posterior(joseph).expect("adskalman step");
-        let dx = (ours.state() - x).amax().to_f64();
-        let dp = (ours.covariance() - pp).amax().to_f64();
+        let dx = (ours.estimate().state() - x).amax().to_f64();
+        let dp = (ours.estimate().covariance() - pp).amax().to_f64();
         let sx = x.amax().to_f64().max(1.0);
         let sp = pp.amax().to_f64().max(sp);
-        assert!(dx < rel * sx, "joseph={joseph}: {} vs {}", ours.state(), x);
+        assert!(
+            dx < rel * sx,
+            "joseph={joseph}: {} vs {}",
+            ours.estimate().state(),
+            x
+        );
         assert!(dp < rel * sp, "joseph={joseph}: covariance off by {dp}");
-        assert_eq!(ours.covariance(), &ours.covariance().transpose());
+        assert_eq!(
+            ours.estimate().covariance(),
+            &ours.estimate().covariance().transpose()
+        );
     }
 }
 
@@ -53,10 +61,10 @@ fn the_two_forms_differ_only_by_rounding_at_the_optimal_gain() {
     let p = occlusion_3x2_f64();
     let j = p.kf_step().unwrap();
     let s = p.kf_standard_step().unwrap();
-    assert_eq!(j.state(), s.state());
-    assert!((j.covariance() - s.covariance()).amax() < 1e-12);
+    assert_eq!(j.estimate().state(), s.estimate().state());
+    assert!((j.estimate().covariance() - s.estimate().covariance()).amax() < 1e-12);
     assert!(
-        j.covariance() != s.covariance(),
+        j.estimate().covariance() != s.estimate().covariance(),
         "the forms must be different code paths"
     );
 }
@@ -66,6 +74,7 @@ fn the_prior_is_converged_so_every_timed_step_does_the_same_work() {
     // One more step from the steady state barely moves the covariance.
     let p = occlusion_3x2_f64();
     let post = p.kf_step().expect("step");
-    let rel = (post.covariance() - p.prior.covariance()).amax() / p.prior.covariance().amax();
+    let rel = (post.estimate().covariance() - p.prior.estimate().covariance()).amax()
+        / p.prior.estimate().covariance().amax();
     assert!(rel < 1e-9, "covariance still moving: {rel}");
 }

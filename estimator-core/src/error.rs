@@ -31,6 +31,14 @@ pub enum Error {
         /// What went wrong.
         what: &'static str,
     },
+    /// A step for another instant than the one an estimator that counts its own instants
+    /// expects next.
+    OutOfOrder {
+        /// The instant the estimator expects.
+        expected: usize,
+        /// The instant it was given.
+        got: usize,
+    },
 }
 
 /// Result alias used throughout the crate.
@@ -45,6 +53,9 @@ impl fmt::Display for Error {
             }
             Error::InvalidConfig { field, reason } => write!(f, "invalid {field}: {reason}"),
             Error::Numerical { what } => write!(f, "numerical failure: {what}"),
+            Error::OutOfOrder { expected, got } => {
+                write!(f, "step for instant {got}, expected instant {expected}")
+            }
         }
     }
 }

@@ -31,6 +31,29 @@ pub trait LinearSystem<T: Real, const NX: usize, const NY: usize> {
     fn measurement_cov(&self, k: usize) -> SMatrix<T, NY, NY>;
 }
 
+/// A borrowed system is the system (so that an [`OnModel`](crate::OnModel) can borrow its
+/// model).
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY> + ?Sized>
+    LinearSystem<T, NX, NY> for &M
+{
+    #[inline]
+    fn a(&self, k: usize) -> SMatrix<T, NX, NX> {
+        (**self).a(k)
+    }
+    #[inline]
+    fn c(&self, k: usize) -> SMatrix<T, NY, NX> {
+        (**self).c(k)
+    }
+    #[inline]
+    fn process_cov(&self, k: usize) -> SMatrix<T, NX, NX> {
+        (**self).process_cov(k)
+    }
+    #[inline]
+    fn measurement_cov(&self, k: usize) -> SMatrix<T, NY, NY> {
+        (**self).measurement_cov(k)
+    }
+}
+
 /// Time-invariant linear model with explicit noise input matrices.
 ///
 /// `NW` process-noise inputs, `NV` measurement-noise inputs.

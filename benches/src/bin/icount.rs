@@ -37,9 +37,10 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
     // Profiling parts of the 3x2 f64 step (not a product API): where the instructions go.
     let pp = p64;
     let c = pp.model.c;
-    let s = c * pp.prior.covariance() * c.transpose() + nalgebra::SMatrix::<f64, 2, 2>::identity();
+    let s = c * pp.prior.estimate().covariance() * c.transpose()
+        + nalgebra::SMatrix::<f64, 2, 2>::identity();
     let s = (s + s.transpose()) * 0.5;
-    let m3 = *pp.prior.covariance();
+    let m3 = *pp.prior.estimate().covariance();
     let mut out: Vec<(&'static str, Kernel)> = Vec::from([
         (
             "parts/validated_cholesky_2x2",

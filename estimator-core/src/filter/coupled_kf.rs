@@ -39,10 +39,13 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use crate::linalg::eig::symmetric_eigen;
 use crate::linalg::{check_finite, check_spd, symmetrize};
-use crate::{Real, Result};
+use crate::packet::Packet;
+use crate::{Error, Real, Result};
 
 /// How the baseline treats the nonlinearity `f`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -60,8 +63,8 @@ pub enum Linearisation {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CoupledNoiseKf<T: Real, const NX: usize, const NW: usize, const NY: usize> {
     k: usize,
-    x: SVector<T, NX>,
-    p: SMatrix<T, NX, NX>,
+    /// `x̂_{k|k−1}` with `P_{k|k−1}`.
+    est: Estimate<T, NX>,
     w: SMatrix<T, NW, NW>,
     y: Option<SVector<T, NY>>,
     mode: Linearisation,
@@ -89,13 +92,11 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> CoupledNoiseKf<
         w: SMatrix<T, NW, NW>,
         mode: Linearisation,
     ) -> Result<Self> {
-        check_finite(&x0, "x̂₀")?;
-        check_spd(&p0, "P₀")?;
+        let est = Estimate::named(x0, p0, "x̂₀", "P₀")?;
         check_spd(&w, "W")?;
         Ok(Self {
             k: 0,
-            x: x0,
-            p: symmetrize(&p0),
+            est,
             w: symmetrize(&w),
             y: None,
             mode,
@@ -110,15 +111,10 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> CoupledNoiseKf<
         Ok(self)
     }
 
-    /// Estimate `x̂_{k|k−1}`.
+    /// Estimate `x̂_{k|k−1}` with the filter's own covariance `P_{k|k−1}`.
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.x
-    }
-    /// The filter's own covariance `P_{k|k−1}`.
-    #[inline]
-    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
-        &self.p
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
     /// Instant `k`.
     #[inline]
@@ -142,35 +138,36 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> CoupledNoiseKf<
             check_finite(y, "measurement")?;
         }
         let k = self.k;
+        let (x, p) = (*self.est.state(), *self.est.covariance());
         let (a, b, c, d) = (sys.a(k), sys.b(k), sys.c(k), sys.d(k));
         check_finite(&a, "A_k")?;
         let (trans, mean) = match self.mode {
-            Linearisation::None => (a, a * self.x),
+            Linearisation::None => (a, a * x),
             Linearisation::PaperJacobian => {
-                let t = a + f.jacobian(&self.x);
-                (t, t * self.x)
+                let t = a + f.jacobian(&x);
+                (t, t * x)
             }
-            Linearisation::Ekf => (a + f.jacobian(&self.x), a * self.x + f.eval(&self.x)),
+            Linearisation::Ekf => (a + f.jacobian(&x), a * x + f.eval(&x)),
         };
         check_finite(&trans, "transition Jacobian")?;
         let (x_next, p_next, rank) = match &self.y {
             None => (
                 mean,
-                trans * self.p * trans.transpose() + b * self.w * b.transpose(),
+                trans * p * trans.transpose() + b * self.w * b.transpose(),
                 0u8,
             ),
             Some(y) => {
-                let s = symmetrize(&(c * self.p * c.transpose() + d * self.w * d.transpose()));
-                let g = trans * self.p * c.transpose() + b * self.w * d.transpose();
+                let s = symmetrize(&(c * p * c.transpose() + d * self.w * d.transpose()));
+                let g = trans * p * c.transpose() + b * self.w * d.transpose();
                 let (lam, u) = symmetric_eigen(&s, "innovation covariance")?;
                 let lmax = lam.max();
                 if !lmax.finite() {
-                    return Err(crate::Error::NonFinite {
+                    return Err(Error::NonFinite {
                         what: "innovation covariance",
                     });
                 }
                 if lmax <= T::zero() {
-                    return Err(crate::Error::NotPositiveDefinite {
+                    return Err(Error::NotPositiveDefinite {
                         what: "innovation covariance (all directions noise-free and certain)",
                     });
                 }
@@ -193,12 +190,12 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> CoupledNoiseKf<
                     }
                 }
                 let kgain = gul * u.transpose();
-                let x_next = mean + kgain * (y - c * self.x);
+                let x_next = mean + kgain * (y - c * x);
                 let fa = trans - kgain * c;
                 let fb = b - kgain * d;
                 (
                     x_next,
-                    fa * self.p * fa.transpose() + fb * self.w * fb.transpose(),
+                    fa * p * fa.transpose() + fb * self.w * fb.transpose(),
                     rank,
                 )
             }
@@ -207,11 +204,38 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> CoupledNoiseKf<
         check_finite(&p_next, "covariance")?;
         let p_next = project_psd(&p_next)?;
         self.k = k + 1;
-        self.x = x_next;
-        self.p = p_next;
+        self.est = Estimate::trusted(x_next, p_next);
         self.y = y_next.copied();
         self.rank_used = rank;
         Ok(())
+    }
+}
+
+/// The model is the system and the nonlinearity `(sys, f)`. Delivered: the update with
+/// `y_{k+1}`; dropped (withheld by the token bucket) or lost: prediction only (`K = 0`). The
+/// filter counts its instants: `k` must be [`CoupledNoiseKf::instant`] + 1.
+impl<T: Real, const NX: usize, const NW: usize, const NY: usize, S, F> Estimator<T, NX>
+    for OnModel<(S, F), CoupledNoiseKf<T, NX, NW, NY>, NY>
+where
+    S: CoupledNoiseSystem<T, NX, NW, NY>,
+    F: DifferentiableMap<T, NX>,
+{
+    type Measurement = Packet<T, NY>;
+
+    /// [`CoupledNoiseKf::step`] with the observation of instant `k`; refused with
+    /// [`Error::OutOfOrder`] unless `k` is the next instant.
+    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
+        let expected = self.filter.instant() + 1;
+        if k != expected {
+            return Err(Error::OutOfOrder { expected, got: k });
+        }
+        let (sys, f) = &self.model;
+        self.filter.step(sys, f, y.delivered())
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
     }
 }
 
@@ -237,7 +261,6 @@ fn project_psd<T: Real, const N: usize>(p: &SMatrix<T, N, N>) -> Result<SMatrix<
 mod tests {
     use super::*;
     use crate::papers::Seed003Example;
-    use crate::Error;
     use nalgebra::{matrix, vector};
 
     /// A time-invariant linear coupled system (f = 0) with D of full rank, so the standard
@@ -293,8 +316,8 @@ mod tests {
             p = a2 * pf * a2.transpose() + q;
             kf.step(&sys, &NoNonlinearity, Some(&vector![ys[t + 1]]))
                 .unwrap();
-            assert!((kf.state() - x).amax() < 1e-12, "t={t}");
-            assert!((kf.covariance() - p).amax() < 1e-12, "t={t}");
+            assert!((kf.estimate().state() - x).amax() < 1e-12, "t={t}");
+            assert!((kf.estimate().covariance() - p).amax() < 1e-12, "t={t}");
         }
     }
 
@@ -322,7 +345,7 @@ mod tests {
             }
         }
         // With the model exact (linear plant, w = 0) the predictor recovers x exactly.
-        assert!((kf.state() - x).amax() < 1e-6 * x.amax().max(1.0));
+        assert!((kf.estimate().state() - x).amax() < 1e-6 * x.amax().max(1.0));
         // S_k was numerically rank 1 at some updates: the pseudo-inverse path was exercised.
         assert!(rank_one_updates > 0);
     }
@@ -356,7 +379,7 @@ mod tests {
         for e in [&mut e1, &mut e2, &mut e3] {
             e.step(&sys, &sys, None).unwrap();
         }
-        assert!((e1.state() - e2.state()).amax() > 1e-3);
-        assert!((e2.state() - e3.state()).amax() > 1e-3);
+        assert!((e1.estimate().state() - e2.estimate().state()).amax() > 1e-3);
+        assert!((e2.estimate().state() - e3.estimate().state()).amax() > 1e-3);
     }
 }

@@ -4,8 +4,11 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::filter::kalman::KalmanFilter;
 use crate::model::LinearSystem;
+use crate::packet::Packet;
 use crate::{Real, Result};
 
 /// Kalman filter that skips the update when no measurement arrived.
@@ -17,7 +20,8 @@ pub struct IntermittentKalmanFilter<T: Real, const NX: usize> {
 }
 
 impl<T: Real, const NX: usize> IntermittentKalmanFilter<T, NX> {
-    /// Starts from `x0`, `p0` (validated as in [`KalmanFilter::new`]).
+    /// Starts from `x0`, `p0` (validated as in [`KalmanFilter::new`]). To run it with another
+    /// covariance form, configure a [`KalmanFilter`] and convert it (`From`).
     pub fn new(x0: SVector<T, NX>, p0: SMatrix<T, NX, NX>) -> Result<Self> {
         Ok(Self {
             kf: KalmanFilter::new(x0, p0)?,
@@ -26,16 +30,10 @@ impl<T: Real, const NX: usize> IntermittentKalmanFilter<T, NX> {
         })
     }
 
-    /// Current estimate.
+    /// Current estimate and covariance.
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        self.kf.state()
-    }
-
-    /// Current covariance.
-    #[inline]
-    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
-        self.kf.covariance()
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        self.kf.estimate()
     }
 
     /// Number of instants with and without a measurement so far.
@@ -65,6 +63,34 @@ impl<T: Real, const NX: usize> IntermittentKalmanFilter<T, NX> {
     }
 }
 
+/// The Kalman filter's estimate and covariance form, with no instants counted yet.
+impl<T: Real, const NX: usize> From<KalmanFilter<T, NX>> for IntermittentKalmanFilter<T, NX> {
+    fn from(kf: KalmanFilter<T, NX>) -> Self {
+        Self {
+            kf,
+            arrivals: 0,
+            dropouts: 0,
+        }
+    }
+}
+
+/// A delivered packet is a Kalman step; a dropped or lost one a prediction.
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Estimator<T, NX>
+    for OnModel<M, IntermittentKalmanFilter<T, NX>, NY>
+{
+    type Measurement = Packet<T, NY>;
+
+    #[inline]
+    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
+        self.filter.step(&self.model, k, y.delivered())
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -84,12 +110,13 @@ mod tests {
         .unwrap();
         let mut ikf = IntermittentKalmanFilter::new(vector![2.0], matrix![1.0]).unwrap();
         ikf.step::<1, _>(&m, 1, None).unwrap();
-        assert!((ikf.state()[0] - 1.8).abs() < 1e-15);
-        assert!((ikf.covariance()[(0, 0)] - 1.31).abs() < 1e-15);
-        let mut kf = KalmanFilter::new(*ikf.state(), *ikf.covariance()).unwrap();
+        assert!((ikf.estimate().state()[0] - 1.8).abs() < 1e-15);
+        assert!((ikf.estimate().covariance()[(0, 0)] - 1.31).abs() < 1e-15);
+        let mut kf =
+            KalmanFilter::new(*ikf.estimate().state(), *ikf.estimate().covariance()).unwrap();
         ikf.step(&m, 2, Some(&vector![1.0])).unwrap();
         kf.step(&m, 2, &vector![1.0]).unwrap();
-        assert_eq!(ikf.state(), kf.state());
+        assert_eq!(ikf.estimate().state(), kf.estimate().state());
         assert_eq!(ikf.counts(), (1, 1));
         let before = ikf;
         assert!(ikf.step(&m, 3, Some(&vector![f64::NAN])).is_err());

@@ -3,7 +3,8 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::prior;
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::filter::time_update::{check_predicted, predict_raw};
 use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{all_finite, check_finite, symmetrize};
@@ -17,8 +18,7 @@ use crate::{Error, Real, Result};
 /// measurements of different sizes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KalmanFilter<T: Real, const NX: usize> {
-    x: SVector<T, NX>,
-    p: SMatrix<T, NX, NX>,
+    est: Estimate<T, NX>,
     form: CovarianceUpdate,
     nis: T,
 }
@@ -27,10 +27,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
     /// Starts from the estimate `x0` with covariance `p0` (finite, symmetric positive
     /// definite).
     pub fn new(x0: SVector<T, NX>, p0: SMatrix<T, NX, NX>) -> Result<Self> {
-        let (x, p) = prior::validated(x0, p0)?;
         Ok(Self {
-            x,
-            p,
+            est: Estimate::new(x0, p0)?,
             form: CovarianceUpdate::Joseph,
             nis: T::zero(),
         })
@@ -43,16 +41,10 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         self
     }
 
-    /// Current estimate x̂.
+    /// Current estimate x̂ and error covariance P.
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.x
-    }
-
-    /// Current error covariance P.
-    #[inline]
-    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
-        &self.p
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
 
     /// Normalised innovation squared `νᵀ S⁻¹ ν` of the last successful update (0 before any).
@@ -80,10 +72,9 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
     /// Time update with explicit matrices `A` and effective process covariance `Q`.
     /// `Q` is symmetrised first (the model path trusts [`LinearSystem`]'s symmetric `Q`).
     pub fn predict_with(&mut self, a: &SMatrix<T, NX, NX>, q: &SMatrix<T, NX, NX>) -> Result<()> {
-        let (x, p) = predict_raw(&self.x, &self.p, a, &symmetrize(q));
+        let (x, p) = predict_raw(self.est.state(), self.est.covariance(), a, &symmetrize(q));
         check_predicted(&x, &p)?;
-        self.x = x;
-        self.p = p;
+        self.est = Estimate::trusted(x, p);
         Ok(())
     }
 
@@ -106,9 +97,15 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         y: &SVector<T, NY>,
     ) -> Result<()> {
         check_finite(y, "measurement")?;
-        let (x, p, nis) = kalman_update(&self.x, &self.p, c, &symmetrize(r), y, self.form)?;
-        self.x = x;
-        self.p = p;
+        let (x, p, nis) = kalman_update(
+            self.est.state(),
+            self.est.covariance(),
+            c,
+            &symmetrize(r),
+            y,
+            self.form,
+        )?;
+        self.est = Estimate::trusted(x, p);
         self.nis = nis;
         Ok(())
     }
@@ -132,8 +129,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         // refusal there takes the scalar path, which names the error.
         #[cfg(simd_lanes)]
         let lanes = crate::linalg::lanes::step(
-            &self.x,
-            &self.p,
+            self.est.state(),
+            self.est.covariance(),
             &model.a(j),
             &model.process_cov(j),
             &model.c(k),
@@ -147,8 +144,7 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
             Some(out) => out,
             None => self.step_scalar(model, j, k, y)?,
         };
-        self.x = x;
-        self.p = p;
+        self.est = Estimate::trusted(x, p);
         self.nis = nis;
         Ok(())
     }
@@ -165,7 +161,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         k: usize,
         y: &SVector<T, NY>,
     ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
-        let (x_pred, p_pred) = predict_raw(&self.x, &self.p, &model.a(j), &model.process_cov(j));
+        let (x, p) = (self.est.state(), self.est.covariance());
+        let (x_pred, p_pred) = predict_raw(x, p, &model.a(j), &model.process_cov(j));
         kalman_update_scalar(
             &x_pred,
             &p_pred,
@@ -175,6 +172,23 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
             self.form,
         )
         .map_err(|e| check_predicted(&x_pred, &p_pred).err().unwrap_or(e))
+    }
+}
+
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Estimator<T, NX>
+    for OnModel<M, KalmanFilter<T, NX>, NY>
+{
+    type Measurement = SVector<T, NY>;
+
+    /// [`KalmanFilter::step`] on the pair's model.
+    #[inline]
+    fn step(&mut self, k: usize, y: &SVector<T, NY>) -> Result<()> {
+        self.filter.step(&self.model, k, y)
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
     }
 }
 
@@ -279,8 +293,8 @@ mod tests {
         let mut kf = KalmanFilter::new(vector![2.0], matrix![1.0]).unwrap();
         kf.step(&m, 1, &vector![3.0]).unwrap();
         let k = 1.31 / 3.31;
-        assert!((kf.state()[0] - (1.8 + k * 1.2)).abs() < 1e-15);
-        assert!((kf.covariance()[(0, 0)] - (1.0 - k) * 1.31).abs() < 1e-15);
+        assert!((kf.estimate().state()[0] - (1.8 + k * 1.2)).abs() < 1e-15);
+        assert!((kf.estimate().covariance()[(0, 0)] - (1.0 - k) * 1.31).abs() < 1e-15);
         assert!((kf.last_nis() - 1.2 * 1.2 / 3.31).abs() < 1e-15);
     }
 
@@ -297,7 +311,7 @@ mod tests {
         for k in 1..200 {
             kf.step(&m, k, &vector![0.0]).unwrap();
         }
-        assert!((kf.covariance()[(0, 0)] - p_post).abs() < 1e-12);
+        assert!((kf.estimate().covariance()[(0, 0)] - p_post).abs() < 1e-12);
     }
 
     #[test]
@@ -319,8 +333,8 @@ mod tests {
             j.step(&m, k, &y).unwrap();
             s.step(&m, k, &y).unwrap();
         }
-        assert!((j.covariance() - s.covariance()).amax() < 1e-12);
-        assert!((j.state() - s.state()).amax() < 1e-12);
+        assert!((j.estimate().covariance() - s.estimate().covariance()).amax() < 1e-12);
+        assert!((j.estimate().state() - s.estimate().state()).amax() < 1e-12);
     }
 
     #[test]
@@ -345,9 +359,13 @@ mod tests {
         // f32 carries ~7 digits; a stable filter forgets rounding, so the gap stays at the
         // level of a few thousand ulps of the state's magnitude (≈3): 1e-4 absolute.
         for i in 0..2 {
-            assert!((a.state()[i] - b.state()[i] as f64).abs() < 1e-4);
+            assert!((a.estimate().state()[i] - b.estimate().state()[i] as f64).abs() < 1e-4);
             for j in 0..2 {
-                assert!((a.covariance()[(i, j)] - b.covariance()[(i, j)] as f64).abs() < 1e-5);
+                assert!(
+                    (a.estimate().covariance()[(i, j)] - b.estimate().covariance()[(i, j)] as f64)
+                        .abs()
+                        < 1e-5
+                );
             }
         }
     }

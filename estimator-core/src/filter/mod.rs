@@ -2,8 +2,7 @@
 //! state private and changes it only when a step succeeds.
 //!
 //! * Linear-Gaussian: [`kalman`] (the Kalman filter), [`intermittent`] (update only on
-//!   arrival), [`time_update`] (the prediction they all share), [`prior`] (the initial
-//!   estimate they start from).
+//!   arrival), [`time_update`] (the prediction they all share).
 //! * [`occlusion`] (seed 001): state-dependent dropouts — the cross-coupled estimator, an
 //!   assumed-density filter and the KF-IO baseline.
 //! * [`nn`] (seed 003): the NN estimator under the token bucket; [`coupled_kf`] holds its
@@ -15,7 +14,6 @@ pub mod intermittent;
 pub mod kalman;
 pub mod nn;
 pub mod occlusion;
-pub mod prior;
 pub mod time_update;
 pub mod tobit;
 

@@ -199,11 +199,11 @@ impl<const NX: usize, const NY: usize> Estimator for LinearKf<NX, NY> {
     }
 
     fn estimate(&self, out: &mut [f64]) {
-        out[..NX].copy_from_slice(self.kf.state().as_slice());
+        out[..NX].copy_from_slice(self.kf.estimate().state().as_slice());
     }
 
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        sink("trace_p", self.kf.covariance().trace());
+        sink("trace_p", self.kf.estimate().covariance().trace());
     }
 
     fn full_information(&self) -> bool {

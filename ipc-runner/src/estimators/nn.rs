@@ -127,11 +127,11 @@ impl Estimator for Nn {
     }
 
     fn estimate(&self, out: &mut [f64]) {
-        out[..3].copy_from_slice(self.nn.state().as_slice());
+        out[..3].copy_from_slice(self.nn.estimate().state().as_slice());
     }
 
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        sink("bound_trace", self.nn.bound_p().trace());
+        sink("bound_trace", self.nn.estimate().covariance().trace());
         sink("bound_q_trace", self.nn.bound_q().trace());
         let phi = self.nn.phi_norm();
         sink("phi_norm", phi);
@@ -173,11 +173,11 @@ impl Estimator for Baseline {
     }
 
     fn estimate(&self, out: &mut [f64]) {
-        out[..3].copy_from_slice(self.kf.state().as_slice());
+        out[..3].copy_from_slice(self.kf.estimate().state().as_slice());
     }
 
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        sink("trace_p", self.kf.covariance().trace());
+        sink("trace_p", self.kf.estimate().covariance().trace());
     }
 }
 

@@ -142,7 +142,7 @@ trait OcclusionFilter<const NX: usize, const NY: usize>: Send {
     fn p(&self) -> &SMatrix<f64, NX, NX>;
 }
 
-/// The three core filters share `state`/`covariance` accessors and a `step` of the same
+/// The three core filters share the `estimate` accessor and a `step` of the same
 /// shape; only `cce` and `adf` return a region label.
 macro_rules! occlusion_filter {
     ($ty:ty, [$($g:tt)*], $label:expr) => {
@@ -156,10 +156,10 @@ macro_rules! occlusion_filter {
                 self.step(m, k, y).map($label)
             }
             fn x(&self) -> &SVector<f64, NX> {
-                self.state()
+                self.estimate().state()
             }
             fn p(&self) -> &SMatrix<f64, NX, NX> {
-                self.covariance()
+                self.estimate().covariance()
             }
         }
     };

@@ -278,8 +278,8 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn estimate(&self, out: &mut [f64]) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let x = match self.node {
-            Some(m) => s.fusion.local_state(m).copied(),
-            None => Some(*s.fusion.state()),
+            Some(m) => s.fusion.local_estimate(m).map(|e| *e.state()),
+            None => Some(*s.fusion.estimate().state()),
         };
         match x {
             Some(x) => out[..NX].copy_from_slice(x.as_slice()),
@@ -290,11 +290,11 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn diagnostics_vs_truth(&self, truth: &[f64], sink: &mut dyn FnMut(&'static str, f64)) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let (x, p) = match self.node {
-            Some(m) => match (s.fusion.local_state(m), s.fusion.local_bound(m)) {
-                (Some(x), Some(p)) => (*x, *p),
-                _ => return,
+            Some(m) => match s.fusion.local_estimate(m) {
+                Some(e) => e.into_parts(),
+                None => return,
             },
-            None => (*s.fusion.state(), *s.fusion.covariance()),
+            None => s.fusion.estimate().into_parts(),
         };
         let e = SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
         if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "bound") {
@@ -308,12 +308,12 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         match self.node {
             Some(m) => {
-                if let Some(p) = s.fusion.local_bound(m) {
+                if let Some(p) = s.fusion.local_estimate(m).map(|e| e.covariance()) {
                     sink("trace_p", p.trace());
                 }
             }
             None => {
-                let p = s.fusion.covariance();
+                let p = s.fusion.estimate().covariance();
                 sink("trace_p", p.trace());
                 if NX == 2 {
                     sink("p11", p[(0, 0)]);
@@ -363,9 +363,12 @@ mod tests {
             .unwrap();
             let mut out = [0.0; 2];
             v[3].estimate(&mut out);
-            assert_eq!(out, [alone.state()[0], alone.state()[1]]);
+            assert_eq!(
+                out,
+                [alone.estimate().state()[0], alone.estimate().state()[1]]
+            );
             v[1].estimate(&mut out);
-            let l1 = alone.local_state(1).unwrap();
+            let l1 = alone.local_estimate(1).unwrap().state();
             assert_eq!(out, [l1[0], l1[1]]);
         }
     }

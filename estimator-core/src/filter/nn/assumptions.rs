@@ -251,9 +251,9 @@ impl<T: Real> RunMonitor<T> {
             phi_max: T::zero(),
             max_growth: T::zero(),
             mean_log_growth: T::zero(),
-            last_trace: nn.bound_p().trace(),
+            last_trace: nn.estimate().covariance().trace(),
             first_error: None,
-            first_trace: nn.bound_p().trace(),
+            first_trace: nn.estimate().covariance().trace(),
             first_k: nn.instant(),
         };
         m.check_phi(nn.instant(), nn.phi_norm(), nn.config().phi_bar());
@@ -286,7 +286,7 @@ impl<T: Real> RunMonitor<T> {
     {
         self.steps += 1;
         self.check_phi(nn.instant(), nn.phi_norm(), nn.config().phi_bar());
-        let tr = nn.bound_p().trace();
+        let tr = nn.estimate().covariance().trace();
         if self.last_trace > T::zero() {
             let g = tr / self.last_trace;
             if g > self.max_growth {

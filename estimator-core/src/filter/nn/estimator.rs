@@ -23,8 +23,11 @@ use super::bound::{
     normalised_regressor, optimal_gain, propagate_bounds, GainSolver, NnBoundConfig, StepMatrices,
 };
 use super::system::{Activation, CoupledNoiseSystem};
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::linalg::{check_finite, check_spd, symmetrize};
-use crate::{Real, Result};
+use crate::packet::Packet;
+use crate::{Error, Real, Result};
 
 /// The seed 003 estimator on `NX` states, `NW` noises, `NY` measurements and `NPHI` activation
 /// outputs. `NP` must equal `NX·NY` (the Kronecker dimension of (35), checked at compile
@@ -43,9 +46,9 @@ pub struct NnTbcpEstimator<
     act: Act,
     solver: GainSolver,
     k: usize,
-    x: SVector<T, NX>,
+    /// `x̂_k` with the bound `P̄_k`.
+    est: Estimate<T, NX>,
     h: SMatrix<T, NX, NPHI>,
-    p: SMatrix<T, NX, NX>,
     q: SMatrix<T, NX, NX>,
     y: Option<SVector<T, NY>>,
     gain: SMatrix<T, NX, NY>,
@@ -75,7 +78,7 @@ impl<
     ) -> Result<Self> {
         check_finite(&x0, "x̂₀")?;
         check_finite(&h0, "Ĥ₀")?;
-        check_spd(&p0, "P̄₀")?;
+        let est = Estimate::named(x0, p0, "x̂₀", "P̄₀")?;
         check_spd(&q0, "Q̄₀")?;
         let phi_norm = act.eval(&x0).norm();
         Ok(Self {
@@ -83,9 +86,8 @@ impl<
             act,
             solver: GainSolver::Kronecker,
             k: 0,
-            x: x0,
+            est,
             h: h0,
-            p: symmetrize(&p0),
             q: symmetrize(&q0),
             y: None,
             gain: SMatrix::zeros(),
@@ -112,20 +114,16 @@ impl<
     pub fn instant(&self) -> usize {
         self.k
     }
-    /// `x̂_k` (uses measurements up to `k − 1`).
+    /// `x̂_k` (uses measurements up to `k − 1`) with `P̄_k`, the bound on the
+    /// estimation-error covariance.
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.x
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
     /// `Ĥ_k`.
     #[inline]
     pub fn weights(&self) -> &SMatrix<T, NX, NPHI> {
         &self.h
-    }
-    /// `P̄_k`, the bound on the estimation-error covariance.
-    #[inline]
-    pub fn bound_p(&self) -> &SMatrix<T, NX, NX> {
-        &self.p
     }
     /// `Q̄_k`, the bound on the NN-weight-error covariance.
     #[inline]
@@ -167,6 +165,7 @@ impl<
             check_finite(y, "measurement")?;
         }
         let k = self.k;
+        let (x, p) = (*self.est.state(), *self.est.covariance());
         let s = StepMatrices {
             a: sys.a(k),
             b: sys.b(k),
@@ -185,19 +184,19 @@ impl<
         check_finite(&s.d_next, "D_{k+1}")?;
         // Theorem 2; L_k does not enter (5) or (14) when y_k was not transmitted.
         let l = match self.y {
-            Some(_) => optimal_gain::<T, NX, NW, NY, NP>(&self.cfg, &self.p, &s, self.solver)?,
+            Some(_) => optimal_gain::<T, NX, NW, NY, NP>(&self.cfg, &p, &s, self.solver)?,
             None => SMatrix::zeros(),
         };
         // (5).
-        let phi = self.act.eval(&self.x);
+        let phi = self.act.eval(&x);
         check_finite(&phi, "activation φ(x̂_k)")?;
-        let mut x_next = s.a * self.x + self.h * phi;
+        let mut x_next = s.a * x + self.h * phi;
         if let Some(y) = &self.y {
-            x_next += l * (y - s.c * self.x);
+            x_next += l * (y - s.c * x);
         }
         check_finite(&x_next, "state estimate")?;
         // Theorem 1.
-        let (p_next, q_next) = propagate_bounds(&self.cfg, &self.p, &self.q, &l, &s)?;
+        let (p_next, q_next) = propagate_bounds(&self.cfg, &p, &self.q, &l, &s)?;
         // (6), with ȳ_{k+1} = y_{k+1} − C_{k+1} x̂_{k+1}.
         let [t1, t2] = self.cfg.theta();
         let (_, m_norm) = s.m_and_norm()?;
@@ -211,14 +210,44 @@ impl<
         let phi_norm = self.act.eval(&x_next).norm();
         // Commit.
         self.k = k + 1;
-        self.x = x_next;
+        self.est = Estimate::trusted(x_next, p_next);
         self.h = h_next;
-        self.p = p_next;
         self.q = q_next;
         self.y = y_next.copied();
         self.gain = l;
         self.phi_norm = phi_norm;
         Ok(())
+    }
+}
+
+/// Delivered: `γ_{k+1} = 1`; dropped (withheld by the token bucket) or lost: `γ_{k+1} = 0`.
+/// The estimator counts its instants: `k` must be [`NnTbcpEstimator::instant`] + 1.
+impl<
+        T: Real,
+        const NX: usize,
+        const NW: usize,
+        const NY: usize,
+        const NPHI: usize,
+        const NP: usize,
+        Act: Activation<T, NX, NPHI>,
+        S: CoupledNoiseSystem<T, NX, NW, NY>,
+    > Estimator<T, NX> for OnModel<S, NnTbcpEstimator<T, NX, NW, NY, NPHI, NP, Act>, NY>
+{
+    type Measurement = Packet<T, NY>;
+
+    /// [`NnTbcpEstimator::step`] with the observation of instant `k`; refused with
+    /// [`Error::OutOfOrder`] unless `k` is the next instant.
+    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
+        let expected = self.filter.instant() + 1;
+        if k != expected {
+            return Err(Error::OutOfOrder { expected, got: k });
+        }
+        self.filter.step(&self.model, y.delivered())
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
     }
 }
 
@@ -228,7 +257,6 @@ mod tests {
     use crate::filter::nn::system::Tanh;
     use crate::papers::{Seed003Example, Seed003Nn};
     use crate::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
-    use crate::Error;
     use nalgebra::{matrix, vector};
 
     fn example_f64() -> Seed003Nn<f64> {
@@ -241,7 +269,7 @@ mod tests {
         // Ĥ₁ = (1 − θ₁θ₂) Ĥ₀ + θ₁ C₁ᵀ y₁ φ̄ᵀ(x̂₀) = (1 − 1e-6) Ĥ₀ since φ(0) = 0.
         let mut nn = example_f64();
         nn.step(&Seed003Example, Some(&vector![1.0, 2.0])).unwrap();
-        assert_eq!(nn.state(), &SVector::<f64, 3>::zeros());
+        assert_eq!(nn.estimate().state(), &SVector::<f64, 3>::zeros());
         assert!((nn.weights() - Seed003Example::h0::<f64>() * (1.0 - 1e-6)).amax() < 1e-15);
         // P̄₁ = 1.2 A₀ P̄₀ A₀ᵀ + (1 + 10 + 0.2) Q̄₀ + 11 w̄² B₀B₀ᵀ + 21 (16.1)² I.
         let a0: SMatrix<f64, 3, 3> = Seed003Example.a(0);
@@ -249,7 +277,7 @@ mod tests {
         let p1 = a0 * a0.transpose() * 12.0
             + SMatrix::<f64, 3, 3>::identity() * (11.2 * 10.0 + 21.0 * 16.1 * 16.1)
             + b0 * b0.transpose() * 1.1;
-        assert!((nn.bound_p() - p1).amax() < 1e-10);
+        assert!((nn.estimate().covariance() - p1).amax() < 1e-10);
         assert_eq!(nn.instant(), 1);
     }
 
@@ -263,11 +291,11 @@ mod tests {
         nn.step(&Seed003Example, Some(&y2)).unwrap();
         // Independent recomputation of (5) and (6) for this step.
         let sys = Seed003Example;
-        let x1 = *before.state();
+        let x1 = *before.estimate().state();
         let phi = x1.map(|v| v.tanh());
         let l = *nn.last_gain();
         let x2 = sys.a(1) * x1 + before.weights() * phi + l * (y1 - sys.c(1) * x1);
-        assert!((nn.state() - x2).amax() < 1e-12);
+        assert!((nn.estimate().state() - x2).amax() < 1e-12);
         let c2: SMatrix<f64, 2, 3> = sys.c(2);
         let mnorm = (c2.transpose() * c2).symmetric_eigenvalues().max();
         let phib = phi / ((1.0 + phi.dot(&phi)) * mnorm);
@@ -327,8 +355,8 @@ mod tests {
         let cfg = NnBoundConfig::<f64>::seed003_example();
         let a = run(cfg, GainSolver::Kronecker, 40).unwrap();
         let b = run(cfg, GainSolver::TwoSided, 40).unwrap();
-        let scale = a.state().amax().max(1.0);
-        assert!((a.state() - b.state()).amax() < 1e-9 * scale);
+        let scale = a.estimate().state().amax().max(1.0);
+        assert!((a.estimate().state() - b.estimate().state()).amax() < 1e-9 * scale);
     }
 
     #[test]
@@ -346,11 +374,13 @@ mod tests {
         // κ(Θ̄) ≈ 1e7 exceeds what f32 resolves; the Cholesky solve then refuses (tested below).
         let a = run(cfg64, GainSolver::Kronecker, 40).unwrap();
         let b = run(cfg32, GainSolver::Kronecker, 40).unwrap();
-        assert!(a.bound_p().trace().is_finite());
-        assert!(b.bound_p().trace().is_finite());
+        assert!(a.estimate().covariance().trace().is_finite());
+        assert!(b.estimate().covariance().trace().is_finite());
         // Bounds are deterministic functions of the configuration and transmission pattern:
         // f32 tracks f64 to single precision.
-        let rel = (a.bound_p().trace() - b.bound_p().trace() as f64).abs() / a.bound_p().trace();
+        let rel = (a.estimate().covariance().trace() - b.estimate().covariance().trace() as f64)
+            .abs()
+            / a.estimate().covariance().trace();
         assert!(rel < 1e-4, "{rel}");
         // f64 runs the whole horizon; f32 reports the ill-conditioned gain system instead of
         // returning a meaningless gain.

@@ -29,6 +29,31 @@ pub trait CoupledNoiseSystem<T: Real, const NX: usize, const NW: usize, const NY
     fn d(&self, k: usize) -> SMatrix<T, NY, NW>;
 }
 
+/// A borrowed system is the system (so that an [`OnModel`](crate::OnModel) can borrow it).
+impl<T, const NX: usize, const NW: usize, const NY: usize, S> CoupledNoiseSystem<T, NX, NW, NY>
+    for &S
+where
+    T: Real,
+    S: CoupledNoiseSystem<T, NX, NW, NY> + ?Sized,
+{
+    #[inline]
+    fn a(&self, k: usize) -> SMatrix<T, NX, NX> {
+        (**self).a(k)
+    }
+    #[inline]
+    fn b(&self, k: usize) -> SMatrix<T, NX, NW> {
+        (**self).b(k)
+    }
+    #[inline]
+    fn c(&self, k: usize) -> SMatrix<T, NY, NX> {
+        (**self).c(k)
+    }
+    #[inline]
+    fn d(&self, k: usize) -> SMatrix<T, NY, NW> {
+        (**self).d(k)
+    }
+}
+
 /// NN activation `φ: R^NX → R^NPHI` (seed 003, II-C: `f(·) = H φ(x) + ε`).
 pub trait Activation<T: Real, const NX: usize, const NPHI: usize> {
     /// `φ(x)`.
@@ -59,4 +84,16 @@ pub trait DifferentiableMap<T: Real, const N: usize> {
     fn eval(&self, x: &SVector<T, N>) -> SVector<T, N>;
     /// `∂f/∂x` at `x`.
     fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, N, N>;
+}
+
+/// A borrowed map is the map.
+impl<T: Real, const N: usize, F: DifferentiableMap<T, N> + ?Sized> DifferentiableMap<T, N> for &F {
+    #[inline]
+    fn eval(&self, x: &SVector<T, N>) -> SVector<T, N> {
+        (**self).eval(x)
+    }
+    #[inline]
+    fn jacobian(&self, x: &SVector<T, N>) -> SMatrix<T, N, N> {
+        (**self).jacobian(x)
+    }
 }

@@ -43,12 +43,14 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::filter::kalman::kalman_update;
-use crate::filter::prior;
 use crate::filter::time_update::predict;
 use crate::gauss::{cdf, inv_mills, inv_mills_delta, ln_sf, pdf, sf};
 use crate::linalg::{check_finite, symmetrize};
 use crate::model::LinearSystem;
+use crate::packet::Packet;
 use crate::protocol::occlusion::Occlusion;
 use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
@@ -56,8 +58,7 @@ use crate::{Error, Real, Result};
 /// Assumed-density filter with the exact occlusion likelihood (`n_e = 1`, `S` regions).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AssumedDensityFilter<T: Real, const NX: usize, const S: usize> {
-    x: SVector<T, NX>,
-    p: SMatrix<T, NX, NX>,
+    est: Estimate<T, NX>,
     occ: Occlusion<T, NX, 1, S>,
     /// Regions as sorted intervals `(lower, upper, index)`.
     sorted: [(T, T, usize); S],
@@ -74,10 +75,9 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         p0: SMatrix<T, NX, NX>,
         occ: Occlusion<T, NX, 1, S>,
     ) -> Result<Self> {
-        let (x, p) = prior::validated(x0, p0)?;
+        let est = Estimate::new(x0, p0)?;
         Ok(Self {
-            x,
-            p,
+            est,
             sorted: occ.regions.sorted_intervals(),
             occ,
             label: 0,
@@ -95,16 +95,10 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         self
     }
 
-    /// Current estimate.
+    /// Current estimate and covariance.
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.x
-    }
-
-    /// Current covariance.
-    #[inline]
-    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
-        &self.p
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
 
     /// The most probable region at the last dropout (1..=S; 0 after an arrival).
@@ -131,7 +125,7 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         if let Some(y) = y {
             check_finite(y, "measurement")?;
         }
-        let (xp, pp) = predict(model, k, &self.x, &self.p)?;
+        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
         let inf = T::one() / T::zero();
         match y {
             Some(y) => {
@@ -155,8 +149,7 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
                 } else {
                     (x1, p1)
                 };
-                self.x = x;
-                self.p = p;
+                self.est = Estimate::trusted(x, p);
                 self.label = 0;
             }
             None => {
@@ -167,13 +160,24 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
                 };
                 let mut lp = [-inf; S];
                 let (x, p, best) = self.truncate(&xp, &pp, S, region, |i, l| lp[i] = l)?;
-                self.x = x;
-                self.p = p;
+                self.est = Estimate::trusted(x, p);
                 self.label = best + 1;
                 self.region_log_probs = lp;
             }
         }
         Ok(self.label)
+    }
+
+    /// Instant `k ≥ 1` without information (a packet lost in transport,
+    /// [`Packet::Lost`]): the prediction (11) only; the label and the region probabilities keep the values of the last update. On error nothing changes.
+    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+    ) -> Result<()> {
+        let (x, p) = predict(model, k, self.est.state(), self.est.covariance())?;
+        self.est = Estimate::trusted(x, p);
+        Ok(())
     }
 
     /// Moments of `N(mx, p)` conditioned on `u = E x + n` lying in one of the `n` disjoint
@@ -340,6 +344,26 @@ pub(crate) fn truncated_std_normal<T: Real>(a: T, b: T) -> (T, T, T) {
     (lnz, mean, var.max(T::zero()))
 }
 
+/// Delivered: the arrival update; dropped: the exact dropout update; lost: prediction only.
+impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
+    Estimator<T, NX> for OnModel<M, AssumedDensityFilter<T, NX, S>, NY>
+{
+    type Measurement = Packet<T, NY>;
+
+    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
+        match y {
+            Packet::Delivered(y) => self.filter.step(&self.model, k, Some(y)).map(|_label| ()),
+            Packet::Dropped => self.filter.step(&self.model, k, None).map(|_label| ()),
+            Packet::Lost => self.filter.predict_to(&self.model, k),
+        }
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -483,8 +507,8 @@ mod tests {
         let (mu, vu) = (m1 / z, m2 / z - (m1 / z).powi(2));
         let want_x = xp + k * (mu - xp[0]);
         let want_p = pp - k * k.transpose() * s2 + k * k.transpose() * vu;
-        assert!((f.state() - want_x).amax() < 1e-8);
-        assert!((f.covariance() - want_p).amax() < 1e-8);
+        assert!((f.estimate().state() - want_x).amax() < 1e-8);
+        assert!((f.estimate().covariance() - want_p).amax() < 1e-8);
         assert_eq!(h, 1);
     }
 
@@ -500,8 +524,8 @@ mod tests {
         let mut g = f.with_arrival_truncation(false);
         f.step(&m, 1, Some(&z)).unwrap();
         g.step(&m, 1, Some(&z)).unwrap();
-        assert!(f.state()[0] > g.state()[0]);
-        assert!(f.covariance()[(0, 0)] > 0.0);
+        assert!(f.estimate().state()[0] > g.estimate().state()[0]);
+        assert!(f.estimate().covariance()[(0, 0)] > 0.0);
     }
 
     #[test]
@@ -519,13 +543,13 @@ mod tests {
         let gain = pp[(0, 0)] / (pp[(0, 0)] + 0.1);
         let want = xp + gain * (85.0 - xp);
         assert!(
-            (f.state()[0] - want).abs() < 0.01,
+            (f.estimate().state()[0] - want).abs() < 0.01,
             "{} vs {want}",
-            f.state()[0]
+            f.estimate().state()[0]
         );
         // u is pinned (variance ~ s²/α²), so P₁₁ → P⁻₁₁ Ψ / (P⁻₁₁ + Ψ).
         let want_p = pp[(0, 0)] * 0.1 / (pp[(0, 0)] + 0.1);
-        assert!((f.covariance()[(0, 0)] - want_p).abs() < 1e-3 * want_p);
+        assert!((f.estimate().covariance()[(0, 0)] - want_p).abs() < 1e-3 * want_p);
         let before = f;
         assert!(f.step(&m, 2, Some(&vector![f64::NAN, 0.0])).is_err());
         assert_eq!(f, before);
@@ -538,6 +562,6 @@ mod tests {
         let m32 = m.cast::<f32>().unwrap();
         g.step::<2, _>(&m32, 1, None).unwrap();
         g.step(&m32, 2, Some(&vector![70.0f32, 30.0])).unwrap();
-        assert!(g.state().iter().all(|v| v.is_finite()));
+        assert!(g.estimate().state().iter().all(|v| v.is_finite()));
     }
 }

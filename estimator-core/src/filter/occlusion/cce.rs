@@ -24,14 +24,16 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::filter::kalman::kalman_update;
-use crate::filter::prior;
 use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
 use crate::gsum::GaussSum;
 use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{check_finite, symmetrize};
 use crate::model::LinearSystem;
+use crate::packet::Packet;
 use crate::protocol::occlusion::Occlusion;
 use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
@@ -46,8 +48,7 @@ pub struct CrossCoupledEstimator<
     const S: usize,
     const N: usize,
 > {
-    x: SVector<T, NX>,
-    p: SMatrix<T, NX, NX>,
+    est: Estimate<T, NX>,
     label: usize,
     occ: Occlusion<T, NX, NE, S>,
     /// `ũ_i^s`: component means scaled onto each region.
@@ -72,7 +73,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         occ: Occlusion<T, NX, NE, S>,
         gsum: &GaussSum<T, NE, N>,
     ) -> Result<Self> {
-        let (x, p) = prior::validated(x0, p0)?;
+        let est = Estimate::new(x0, p0)?;
         let mut means = [[SVector::<T, NE>::zeros(); N]; S];
         let mut sigma = [SMatrix::<T, NE, NE>::zeros(); S];
         let mut ln_vol = [T::zero(); S];
@@ -86,8 +87,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             ln_vol[i] = occ.regions.volume(i).ln();
         }
         Ok(Self {
-            x,
-            p,
+            est,
             label: 0,
             occ,
             means,
@@ -105,16 +105,10 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         self
     }
 
-    /// Current estimate `x̂_k`.
+    /// Current estimate `x̂_k` and covariance `P_k`.
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.x
-    }
-
-    /// Current covariance `P_k`.
-    #[inline]
-    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
-        &self.p
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
 
     /// Last region-label estimate `ĥ_k` (0 on arrival, `1..=S` on a dropout).
@@ -143,7 +137,7 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         if let Some(y) = y {
             check_finite(y, "measurement")?;
         }
-        let (xp, pp) = predict(model, k, &self.x, &self.p)?;
+        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
         match y {
             Some(y) => {
                 let (x, p, _) = kalman_update(
@@ -154,19 +148,29 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
                     y,
                     self.form,
                 )?;
-                self.x = x;
-                self.p = p;
+                self.est = Estimate::trusted(x, p);
                 self.label = 0;
             }
             None => {
                 let (x, p, label, lw) = self.dropout_update(&xp, &pp)?;
-                self.x = x;
-                self.p = p;
+                self.est = Estimate::trusted(x, p);
                 self.label = label;
                 self.region_log_weights = lw;
             }
         }
         Ok(self.label)
+    }
+
+    /// Instant `k ≥ 1` without information (a packet lost in transport,
+    /// [`Packet::Lost`]): the prediction (11) only; the label and the region weights keep the values of the last update. On error nothing changes.
+    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+    ) -> Result<()> {
+        let (x, p) = predict(model, k, self.est.state(), self.est.covariance())?;
+        self.est = Estimate::trusted(x, p);
+        Ok(())
     }
 
     /// Algorithm 1 (dropout branch) and Algorithm 2 steps 5-6 on the prediction.
@@ -263,6 +267,34 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
     }
 }
 
+/// Delivered: arrival (Kalman update, label 0); dropped: the dropout update of Algorithms 1-2;
+/// lost: prediction only.
+impl<
+        T: Real,
+        const NX: usize,
+        const NE: usize,
+        const S: usize,
+        const N: usize,
+        const NY: usize,
+        M: LinearSystem<T, NX, NY>,
+    > Estimator<T, NX> for OnModel<M, CrossCoupledEstimator<T, NX, NE, S, N>, NY>
+{
+    type Measurement = Packet<T, NY>;
+
+    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
+        match y {
+            Packet::Delivered(y) => self.filter.step(&self.model, k, Some(y)).map(|_label| ()),
+            Packet::Dropped => self.filter.step(&self.model, k, None).map(|_label| ()),
+            Packet::Lost => self.filter.predict_to(&self.model, k),
+        }
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -354,12 +386,12 @@ mod tests {
             let (xl, pl, hl) = literal(x0, p0, &m, &occ, &g);
             assert_eq!(label, hl);
             for j in 0..3 {
-                assert!((f.state()[j] - xl[j]).abs() <= 1e-12 * xl[j].abs().max(1.0));
+                assert!((f.estimate().state()[j] - xl[j]).abs() <= 1e-12 * xl[j].abs().max(1.0));
                 for l in 0..3 {
                     assert!(
-                        (f.covariance()[(j, l)] - pl[(j, l)]).abs() <= 1e-12,
+                        (f.estimate().covariance()[(j, l)] - pl[(j, l)]).abs() <= 1e-12,
                         "P[{j},{l}] {} vs {}",
-                        f.covariance()[(j, l)],
+                        f.estimate().covariance()[(j, l)],
                         pl[(j, l)]
                     );
                 }
@@ -377,8 +409,8 @@ mod tests {
         let y = vector![30.0, 10.0];
         assert_eq!(f.step(&m, 1, Some(&y)).unwrap(), 0);
         kf.step(&m, 1, &y).unwrap();
-        assert_eq!(f.state(), kf.state());
-        assert_eq!(f.covariance(), kf.covariance());
+        assert_eq!(f.estimate().state(), kf.estimate().state());
+        assert_eq!(f.estimate().covariance(), kf.estimate().covariance());
     }
 
     #[test]
@@ -389,7 +421,7 @@ mod tests {
             let x0 = vector![(centre - 0.1 * 0.5) / 1.01, 0.5, 0.0];
             let mut f = cce(x0, SMatrix::identity() * 0.05);
             assert_eq!(f.step::<2, _>(&m, 1, None).unwrap(), want);
-            assert!((f.state()[0] - centre).abs() < 1.0);
+            assert!((f.estimate().state()[0] - centre).abs() < 1.0);
         }
     }
 
@@ -400,7 +432,8 @@ mod tests {
         for far in [-600.0, 700.0] {
             let mut f = cce(vector![far, 0.0, 0.0], SMatrix::identity() * 0.01);
             let sd = (f.occ.e
-                * (m.a * f.p * m.a.transpose() + m.b * m.q * m.b.transpose())
+                * (m.a * f.estimate().covariance() * m.a.transpose()
+                    + m.b * m.q * m.b.transpose())
                 * f.occ.e.transpose())[(0, 0)]
                 .sqrt();
             let dist = if far < 0.0 {
@@ -412,8 +445,8 @@ mod tests {
             let h = f.step::<2, _>(&m, 1, None).unwrap();
             // The nearest region wins and the estimate moves onto it.
             assert_eq!(h, if far < 0.0 { 1 } else { 4 });
-            assert!(f.state().iter().all(|v| v.is_finite()));
-            assert!(f.covariance().iter().all(|v| v.is_finite()));
+            assert!(f.estimate().state().iter().all(|v| v.is_finite()));
+            assert!(f.estimate().covariance().iter().all(|v| v.is_finite()));
             // All the weight sits on the nearest component mean (the region's edge), and the
             // state moves toward it by the scalar gain P⁻₁₁ / (P⁻₁₁ + V + Ψ) — the paper's
             // Gaussian-sum region is "soft", so it does not jump all the way.
@@ -427,9 +460,9 @@ mod tests {
                     + 0.1);
             let want = xp + gain * (edge - xp);
             assert!(
-                (f.state()[0] - want).abs() < 1e-9 * want.abs(),
+                (f.estimate().state()[0] - want).abs() < 1e-9 * want.abs(),
                 "{} vs {want}",
-                f.state()[0]
+                f.estimate().state()[0]
             );
             // The naive linear-domain weights are all exactly zero here.
             assert!(f.region_log_weights().iter().all(|w| w.exp() == 0.0));
@@ -513,7 +546,8 @@ mod tests {
         }
         for j in 0..3 {
             assert!(
-                (a.state()[j] - b.state()[j] as f64).abs() < 1e-3 * a.state()[j].abs().max(1.0)
+                (a.estimate().state()[j] - b.estimate().state()[j] as f64).abs()
+                    < 1e-3 * a.estimate().state()[j].abs().max(1.0)
             );
         }
     }

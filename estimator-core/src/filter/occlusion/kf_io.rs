@@ -21,19 +21,20 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::filter::prior;
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob, LogSumExp};
 use crate::linalg::{check_finite, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
+use crate::packet::Packet;
 use crate::protocol::occlusion::Occlusion;
 use crate::{Error, Real, Result};
 
 /// The KF-IO-style linear MMSE filter on `NX` states with `S` occlusion intervals.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KfIo<T: Real, const NX: usize, const S: usize> {
-    x: SVector<T, NX>,
-    p: SMatrix<T, NX, NX>,
+    est: Estimate<T, NX>,
     occ: Occlusion<T, NX, 1, S>,
     sorted: [(T, T, usize); S],
     arrival_prob: T,
@@ -46,26 +47,19 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         p0: SMatrix<T, NX, NX>,
         occ: Occlusion<T, NX, 1, S>,
     ) -> Result<Self> {
-        let (x, p) = prior::validated(x0, p0)?;
+        let est = Estimate::new(x0, p0)?;
         Ok(Self {
-            x,
-            p,
+            est,
             sorted: occ.regions.sorted_intervals(),
             occ,
             arrival_prob: T::one(),
         })
     }
 
-    /// Current estimate.
+    /// Current estimate and covariance (the filter's own, unconditional-in-γ recursion).
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.x
-    }
-
-    /// Current covariance (the filter's own, unconditional-in-γ recursion).
-    #[inline]
-    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
-        &self.p
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
 
     /// `p_k` used by the last step.
@@ -101,7 +95,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             }
             None => SVector::<T, NY>::zeros(),
         };
-        let (xp, pp) = predict(model, k, &self.x, &self.p)?;
+        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
         let e = &self.occ.e;
         let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
         let p = self.prob_outside((e * xp)[0], s2.sqrt());
@@ -122,10 +116,41 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
         check_finite(&x, "updated state")?;
         check_finite(&p_new, "updated covariance")?;
-        self.x = x;
-        self.p = p_new;
+        self.est = Estimate::trusted(x, p_new);
         self.arrival_prob = p;
         Ok(())
+    }
+
+    /// Instant `k ≥ 1` without information (a packet lost in transport,
+    /// [`Packet::Lost`]): the prediction only; the arrival probability keeps its last value. On error nothing changes.
+    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+    ) -> Result<()> {
+        let (x, p) = predict(model, k, self.est.state(), self.est.covariance())?;
+        self.est = Estimate::trusted(x, p);
+        Ok(())
+    }
+}
+
+/// Delivered or dropped: the linear MMSE update (`ỹ = z_k` or `0`); lost: prediction only.
+impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
+    Estimator<T, NX> for OnModel<M, KfIo<T, NX, S>, NY>
+{
+    type Measurement = Packet<T, NY>;
+
+    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
+        match y {
+            Packet::Delivered(y) => self.filter.step(&self.model, k, Some(y)),
+            Packet::Dropped => self.filter.step(&self.model, k, None),
+            Packet::Lost => self.filter.predict_to(&self.model, k),
+        }
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
     }
 }
 
@@ -173,8 +198,8 @@ mod tests {
             let yt = y.unwrap_or_else(SVector::zeros);
             let want_x = xp + k * (yt - c * xp * p);
             let want_p = pp - k * sy * k.transpose();
-            assert!((f.state() - want_x).amax() < 1e-10 * want_x.amax().max(1.0));
-            assert!((f.covariance() - want_p).amax() < 1e-10 * want_p.amax().max(1.0));
+            assert!((f.estimate().state() - want_x).amax() < 1e-10 * want_x.amax().max(1.0));
+            assert!((f.estimate().covariance() - want_p).amax() < 1e-10 * want_p.amax().max(1.0));
         }
     }
 
@@ -187,7 +212,7 @@ mod tests {
         f.step(&m, 1, Some(&y)).unwrap();
         kf.step(&m, 1, &y).unwrap();
         assert_eq!(f.arrival_prob(), 1.0);
-        assert!((f.state() - kf.state()).amax() < 1e-9);
+        assert!((f.estimate().state() - kf.estimate().state()).amax() < 1e-9);
         let before = f;
         assert!(f.step(&m, 2, Some(&vector![f64::NAN, 0.0])).is_err());
         assert_eq!(f, before);

@@ -20,8 +20,11 @@ use nalgebra::{SMatrix, SVector};
 
 use super::config::TobitFilterConfig;
 use super::local::{diagonal_variances, TobitFilter};
-use crate::linalg::{check_finite, check_spd, inverse_spd, solve_spd, symmetrize};
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
+use crate::linalg::{check_finite, inverse_spd, solve_spd, symmetrize};
 use crate::model::LinearSystem;
+use crate::packet::Packet;
 use crate::{Error, Real, Result};
 
 /// Eq. (50): fuses local estimates with their bounds. Returns `(x̂^g, P^g)`.
@@ -47,10 +50,10 @@ pub fn federated_fuse<T: Real, const NX: usize, const L: usize>(
 pub struct TobitFusion<T: Real, const NX: usize, const NY: usize, const L: usize> {
     locals: [TobitFilter<T, NX, NY>; L],
     alpha: [T; L],
-    xg: SVector<T, NX>,
-    pg: SMatrix<T, NX, NX>,
-    local_x: [SVector<T, NX>; L],
-    local_p: [SMatrix<T, NX, NX>; L],
+    /// `(x̂^g, P^g)`.
+    est: Estimate<T, NX>,
+    /// Every node's `(x̂_m, P̄_m)` of the last step, before the reset (51).
+    local_est: [Estimate<T, NX>; L],
 }
 
 impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, NX, NY, L> {
@@ -97,43 +100,32 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
                 reason: "information weights must sum to 1 (eq. 51)",
             });
         }
-        check_finite(&x0, "x0")?;
-        check_spd(&p0, "P0")?;
+        let est = Estimate::new(x0, p0)?;
         let mut locals = [TobitFilter::new(cfgs[0], x0, p0)?; L];
-        let mut local_p = [p0; L];
+        let mut local_est = [est; L];
         for m in 0..L {
-            local_p[m] = symmetrize(&(p0 / alpha[m]));
-            locals[m] = TobitFilter::new(cfgs[m], x0, local_p[m])?;
+            let p_m = symmetrize(&(p0 / alpha[m]));
+            locals[m] = TobitFilter::new(cfgs[m], x0, p_m)?;
+            local_est[m] = Estimate::trusted(x0, p_m);
         }
         Ok(Self {
             locals,
             alpha,
-            xg: x0,
-            pg: symmetrize(&p0),
-            local_x: [x0; L],
-            local_p,
+            est,
+            local_est,
         })
     }
 
-    /// x̂^g_{t|t}.
+    /// The fused estimate x̂^g_{t|t} with P^g_{t|t} (a bound, fused from the local bounds).
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.xg
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
-    /// P^g_{t|t}.
+    /// Node `m`'s local estimate x̂_{m,t|t} and bound P̄_{m,t|t} of the last step, before the
+    /// reset (51).
     #[inline]
-    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
-        &self.pg
-    }
-    /// Node `m`'s local estimate x̂_{m,t|t} of the last step, before the reset (51).
-    #[inline]
-    pub fn local_state(&self, m: usize) -> Option<&SVector<T, NX>> {
-        self.local_x.get(m)
-    }
-    /// Node `m`'s bound P̄_{m,t|t} of the last step, before the reset (51).
-    #[inline]
-    pub fn local_bound(&self, m: usize) -> Option<&SMatrix<T, NX, NX>> {
-        self.local_p.get(m)
+    pub fn local_estimate(&self, m: usize) -> Option<&Estimate<T, NX>> {
+        self.local_est.get(m)
     }
     /// Node `m`'s local filter (after the reset).
     #[inline]
@@ -158,23 +150,20 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         received: [Option<&SVector<T, NY>>; L],
     ) -> Result<()> {
         let mut locals = self.locals;
-        let mut xs = self.local_x;
-        let mut ps = self.local_p;
+        let mut xs = [SVector::<T, NX>::zeros(); L];
+        let mut ps = [SMatrix::<T, NX, NX>::zeros(); L];
         for m in 0..L {
             let q_m = bqb / self.alpha[m];
             locals[m].step(a, &q_m, &c[m], &r[m], received[m])?;
-            xs[m] = *locals[m].state();
-            ps[m] = *locals[m].bound();
+            (xs[m], ps[m]) = locals[m].estimate().into_parts();
         }
         let (xg, pg) = federated_fuse(&xs, &ps)?;
         for m in 0..L {
             locals[m].reset(xg, pg / self.alpha[m])?;
         }
         self.locals = locals;
-        self.local_x = xs;
-        self.local_p = ps;
-        self.xg = xg;
-        self.pg = pg;
+        self.local_est = core::array::from_fn(|m| Estimate::trusted(xs[m], ps[m]));
+        self.est = Estimate::trusted(xg, pg);
         Ok(())
     }
 
@@ -200,6 +189,25 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
             &r,
             received,
         )
+    }
+}
+
+/// Every node's packet as [`TobitFilter`]'s [`Estimator`] impl reads it (lost is treated like
+/// dropped, provisionally); A and B Q Bᵀ from node 0's model.
+impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<T, NX, NY>>
+    Estimator<T, NX> for OnModel<[M; L], TobitFusion<T, NX, NY, L>, NY>
+{
+    type Measurement = [Packet<T, NY>; L];
+
+    #[inline]
+    fn step(&mut self, k: usize, y: &[Packet<T, NY>; L]) -> Result<()> {
+        let received = core::array::from_fn(|m| y[m].delivered());
+        self.filter.step_models(&self.model, k, received)
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
     }
 }
 
@@ -261,21 +269,23 @@ mod tests {
                 .unwrap();
         // Initialisation (51): P̄_m = 3 P₀.
         assert!(
-            (f.local(1).unwrap().bound() - SMatrix::<f64, 2, 2>::identity() * 3.0).amax() < 1e-15
+            (f.local(1).unwrap().estimate().covariance() - SMatrix::<f64, 2, 2>::identity() * 3.0)
+                .amax()
+                < 1e-15
         );
         let y = [vector![4.8, 0.2], vector![5.3, 0.0], vector![4.9, 0.4]];
         f.step(&a, &bqb, &c, &r, [Some(&y[0]), None, Some(&y[2])])
             .unwrap();
         // (50) from the pre-reset locals.
-        let xs = [0, 1, 2].map(|m| *f.local_state(m).unwrap());
-        let ps = [0, 1, 2].map(|m| *f.local_bound(m).unwrap());
+        let xs = [0, 1, 2].map(|m| *f.local_estimate(m).unwrap().state());
+        let ps = [0, 1, 2].map(|m| *f.local_estimate(m).unwrap().covariance());
         let (xg, pg) = federated_fuse(&xs, &ps).unwrap();
-        assert_eq!(f.state(), &xg);
-        assert_eq!(f.covariance(), &pg);
+        assert_eq!(f.estimate().state(), &xg);
+        assert_eq!(f.estimate().covariance(), &pg);
         // (51): every local filter restarts from x̂^g and 3 P^g.
         for m in 0..3 {
-            assert_eq!(f.local(m).unwrap().state(), &xg);
-            assert!((f.local(m).unwrap().bound() - pg * 3.0).amax() < 1e-14);
+            assert_eq!(f.local(m).unwrap().estimate().state(), &xg);
+            assert!((f.local(m).unwrap().estimate().covariance() - pg * 3.0).amax() < 1e-14);
         }
         // The fused bound is tighter than every local one (information adds).
         for m in 0..3 {
@@ -287,7 +297,7 @@ mod tests {
         alone
             .step(&a, &(bqb * 3.0), &c[0], &r[0], Some(&y[0]))
             .unwrap();
-        assert!((alone.state() - xs[0]).amax() < 1e-14);
+        assert!((alone.estimate().state() - xs[0]).amax() < 1e-14);
     }
 
     #[test]
@@ -307,7 +317,7 @@ mod tests {
         assert!(TobitFusion::<f64, 2, 2, 3>::new(cfgs(), x0, -p0).is_err());
         let ok =
             TobitFusion::<f64, 2, 2, 3>::with_weights(cfgs(), x0, p0, [0.5, 0.25, 0.25]).unwrap();
-        assert!((ok.local(0).unwrap().bound() - p0 * 2.0).amax() < 1e-15);
+        assert!((ok.local(0).unwrap().estimate().covariance() - p0 * 2.0).amax() < 1e-15);
 
         let (a, bqb) = oscillator();
         let c = [SMatrix::<f64, 2, 2>::identity(); 3];
@@ -371,10 +381,10 @@ mod tests {
         }
         // Stated tolerance: f32 rounding (6e-8) amplified by the 100-step recursion stays
         // below 1e-3 on states of size 5.
-        assert!((f.state() - g.state().cast::<f64>()).amax() < 1e-3);
+        assert!((f.estimate().state() - g.estimate().state().cast::<f64>()).amax() < 1e-3);
         assert!(
-            (f.covariance() - g.covariance().cast::<f64>()).amax()
-                < 1e-3 * f.covariance().amax().max(1.0)
+            (f.estimate().covariance() - g.estimate().covariance().cast::<f64>()).amax()
+                < 1e-3 * f.estimate().covariance().amax().max(1.0)
         );
     }
 }

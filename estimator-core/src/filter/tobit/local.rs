@@ -34,8 +34,11 @@ use nalgebra::{SMatrix, SVector};
 
 use super::config::{Kappas, TobitFilterConfig, UpsilonPlacement};
 use super::gain::GainProblem;
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
+use crate::packet::Packet;
 use crate::protocol::tobit::TobitStats;
 use crate::{Error, Real, Result};
 
@@ -66,8 +69,7 @@ pub struct LocalStepPlan<T: Real, const NX: usize, const NY: usize> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TobitFilter<T: Real, const NX: usize, const NY: usize> {
     cfg: TobitFilterConfig<T, NY>,
-    x: SVector<T, NX>,
-    p: SMatrix<T, NX, NX>,
+    est: Estimate<T, NX>,
     y_held: SVector<T, NY>,
     g: T,
     last_theta: T,
@@ -86,28 +88,21 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
                 reason: "C(Upsilon o Omega1)C^T as written needs n_x = n_y; use OutsideC",
             });
         }
-        check_finite(&x0, "x0")?;
-        check_spd(&p0, "P0")?;
+        let est = Estimate::new(x0, p0)?;
         let eta0 = cfg.trigger.eta0();
         Ok(Self {
             cfg,
-            x: x0,
-            p: symmetrize(&p0),
+            est,
             y_held: cfg.tau,
             g: eta0 * eta0,
             last_theta: T::one(),
         })
     }
 
-    /// x̂_{t|t}.
+    /// x̂_{t|t} with P̄_{t|t}, the bound on the error covariance.
     #[inline]
-    pub fn state(&self) -> &SVector<T, NX> {
-        &self.x
-    }
-    /// P̄_{t|t}, the bound on the error covariance.
-    #[inline]
-    pub fn bound(&self) -> &SMatrix<T, NX, NX> {
-        &self.p
+    pub fn estimate(&self) -> &Estimate<T, NX> {
+        &self.est
     }
     /// ȳ the filter holds (the last measurement received; τ before any).
     #[inline]
@@ -132,10 +127,7 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
 
     /// Overwrites x̂ and P̄ (the fusion reset (51)); validated, unchanged on error.
     pub fn reset(&mut self, x: SVector<T, NX>, p: SMatrix<T, NX, NX>) -> Result<()> {
-        check_finite(&x, "reset state")?;
-        check_spd(&p, "reset bound")?;
-        self.x = x;
-        self.p = symmetrize(&p);
+        self.est = Estimate::named(x, p, "reset state", "reset bound")?;
         Ok(())
     }
 
@@ -160,8 +152,9 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             }
             None => (T::one(), self.y_held),
         };
-        let x_prior = a * self.x;
-        let p_prior = symmetrize(&(a * self.p * a.transpose() + bqb));
+        let (x, p) = (*self.est.state(), *self.est.covariance());
+        let x_prior = a * x;
+        let p_prior = symmetrize(&(a * p * a.transpose() + bqb));
         check_finite(&p_prior, "predicted bound")?;
         let tau = self.cfg.tau;
         let stats = TobitStats::new(&(c * x_prior), &tau, r)?;
@@ -246,8 +239,7 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         if !g.finite() {
             return Err(Error::NonFinite { what: "G bar" });
         }
-        self.x = x;
-        self.p = p;
+        self.est = Estimate::trusted(x, p);
         self.y_held = plan.y_bar;
         self.g = g;
         self.last_theta = plan.theta;
@@ -272,6 +264,27 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             &r,
             received,
         )
+    }
+}
+
+/// Delivered: θ = 0; dropped: θ = 1 (the held ȳ and the trigger's bound enter (30)).
+/// Lost is treated like dropped, provisionally: the estimator cannot tell whether the
+/// trigger fired (see [`crate::estimator`]).
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Estimator<T, NX>
+    for OnModel<M, TobitFilter<T, NX, NY>, NY>
+{
+    type Measurement = Packet<T, NY>;
+
+    /// [`TobitFilter::step_model`] with the model's own process noise (`q_scale = 1`).
+    #[inline]
+    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
+        self.filter
+            .step_model(&self.model, k, T::one(), y.delivered())
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.estimate()
     }
 }
 
@@ -457,8 +470,14 @@ mod tests {
             tf.step(&a, &bqb, &c, &r, Some(&y)).unwrap();
             kf.predict_with(&a, &bqb).unwrap();
             kf.update_with(&c, &SMatrix::from_diagonal(&r), &y).unwrap();
-            assert!((tf.state() - kf.state()).amax() < 1e-9, "t = {t}");
-            assert!((tf.bound() - kf.covariance()).amax() < 1e-9, "t = {t}");
+            assert!(
+                (tf.estimate().state() - kf.estimate().state()).amax() < 1e-9,
+                "t = {t}"
+            );
+            assert!(
+                (tf.estimate().covariance() - kf.estimate().covariance()).amax() < 1e-9,
+                "t = {t}"
+            );
         }
     }
 
@@ -519,7 +538,7 @@ mod tests {
             let rec = (t % 2 == 0).then_some(vector![3.0, 0.0]);
             f.step(&a, &bqb, &c, &vector![0.5, 0.5], rec.as_ref())
                 .unwrap();
-            assert!(f.state().iter().all(|v| v.is_finite()));
+            assert!(f.estimate().state().iter().all(|v| v.is_finite()));
         }
         let cfg32 = cfg.cast::<f32>().unwrap();
         let mut g =
@@ -544,7 +563,7 @@ mod tests {
             .unwrap();
         }
         // f32 vs f64 of a stable recursion: 1e-3 relative to the state's scale (5).
-        assert!((h.state() - g.state().cast::<f64>()).amax() < 5e-3);
+        assert!((h.estimate().state() - g.estimate().state().cast::<f64>()).amax() < 5e-3);
     }
 
     #[test]

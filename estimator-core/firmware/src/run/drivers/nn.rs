@@ -22,10 +22,10 @@ impl Driven<1> for Nn {
         NnTbcpEstimator::step(self, &Seed003Example, y).map(|()| 0)
     }
     fn digest(&self, h: &mut Fnv1a64) {
-        h.estimate(self.state(), self.bound_p());
+        h.estimate(self.estimate().state(), self.estimate().covariance());
     }
     fn x(&self) -> &[f32] {
-        self.state().as_slice()
+        self.estimate().state().as_slice()
     }
 }
 

@@ -71,10 +71,10 @@ impl OcclusionEstimator for KalmanFilter<f32, NX> {
         .map(|()| 0)
     }
     fn state(&self) -> &Vector3<f32> {
-        KalmanFilter::state(self)
+        self.estimate().state()
     }
     fn covariance(&self) -> &Matrix3<f32> {
-        KalmanFilter::covariance(self)
+        self.estimate().covariance()
     }
 }
 
@@ -83,10 +83,10 @@ impl OcclusionEstimator for IntermittentKalmanFilter<f32, NX> {
         IntermittentKalmanFilter::step(self, m, k, y).map(|()| 0)
     }
     fn state(&self) -> &Vector3<f32> {
-        IntermittentKalmanFilter::state(self)
+        self.estimate().state()
     }
     fn covariance(&self) -> &Matrix3<f32> {
-        IntermittentKalmanFilter::covariance(self)
+        self.estimate().covariance()
     }
 }
 
@@ -115,10 +115,10 @@ impl OcclusionEstimator for Cce {
         Cce::step(self, m, k, y)
     }
     fn state(&self) -> &Vector3<f32> {
-        Cce::state(self)
+        self.estimate().state()
     }
     fn covariance(&self) -> &Matrix3<f32> {
-        Cce::covariance(self)
+        self.estimate().covariance()
     }
 }
 
@@ -139,10 +139,10 @@ impl OcclusionEstimator for Adf {
         Adf::step(self, m, k, y)
     }
     fn state(&self) -> &Vector3<f32> {
-        Adf::state(self)
+        self.estimate().state()
     }
     fn covariance(&self) -> &Matrix3<f32> {
-        Adf::covariance(self)
+        self.estimate().covariance()
     }
 }
 
@@ -162,10 +162,10 @@ impl OcclusionEstimator for KfIoF32 {
         KfIoF32::step(self, m, k, y).map(|()| 0)
     }
     fn state(&self) -> &Vector3<f32> {
-        KfIoF32::state(self)
+        self.estimate().state()
     }
     fn covariance(&self) -> &Matrix3<f32> {
-        KfIoF32::covariance(self)
+        self.estimate().covariance()
     }
 }
 

@@ -67,15 +67,18 @@ impl Driven<NODES> for Tobit {
         self.fusion.step(&m.a, &m.bqb, &m.c, &m.r, y).map(|()| 0)
     }
     fn digest(&self, h: &mut Fnv1a64) {
-        h.estimate(self.fusion.state(), self.fusion.covariance());
+        h.estimate(
+            self.fusion.estimate().state(),
+            self.fusion.estimate().covariance(),
+        );
         for m in 0..NODES {
-            if let (Some(x), Some(p)) = (self.fusion.local_state(m), self.fusion.local_bound(m)) {
-                h.estimate(x, p);
+            if let Some(e) = self.fusion.local_estimate(m) {
+                h.estimate(e.state(), e.covariance());
             }
         }
     }
     fn x(&self) -> &[f32] {
-        self.fusion.state().as_slice()
+        self.fusion.estimate().state().as_slice()
     }
 }
 
