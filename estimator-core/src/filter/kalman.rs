@@ -438,3 +438,97 @@ mod tests {
         );
     }
 }
+
+/// The SIMD lanes of [`crate::linalg::lanes`] against the scalar kernels, bit for bit.
+#[cfg(all(test, simd_lanes))]
+mod lanes_tests {
+    use super::kalman_update_scalar as scalar_update;
+    use crate::linalg::lanes::{kalman_update, predict, step};
+    use crate::linalg::small;
+    use crate::{CovarianceUpdate, Real};
+    use nalgebra::{SMatrix, SVector};
+
+    /// A deterministic pseudo-random stream in [-1, 1).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        }
+    }
+
+    fn spd<T: Real, const N: usize>(g: &mut Lcg, shift: f64) -> SMatrix<T, N, N> {
+        let b = SMatrix::<f64, N, N>::from_fn(|_, _| g.next());
+        let m = b * b.transpose() + SMatrix::identity() * shift;
+        let m = (m + m.transpose()) * 0.5;
+        m.map(T::lit)
+    }
+
+    /// Bit for bit (on the bits, so that −0 ≠ +0 and NaN would be caught too).
+    fn same<T: Real>(a: &[T], b: &[T]) -> bool {
+        a.len() == b.len()
+            && a.iter()
+                .zip(b)
+                .all(|(u, v)| u.to_f64().to_bits() == v.to_f64().to_bits())
+    }
+
+    fn case<T: Real, const NX: usize, const NY: usize>(g: &mut Lcg) {
+        let x = SVector::<T, NX>::from_fn(|_, _| T::lit(g.next() * 10.0));
+        let p = spd::<T, NX>(g, 0.5);
+        let a = SMatrix::<T, NX, NX>::from_fn(|_, _| T::lit(g.next()));
+        let q = spd::<T, NX>(g, 0.1);
+        let c = SMatrix::<T, NY, NX>::from_fn(|_, _| T::lit(g.next()));
+        let r = spd::<T, NY>(g, 0.2);
+        let y = SVector::<T, NY>::from_fn(|_, _| T::lit(g.next() * 5.0));
+        let (xs, ps) = (small::mul_vec(&a, &x), small::congruence_add(&a, &p, &q));
+        let (xl, pl) = predict(&x, &p, &a, &q).expect("lanes apply");
+        assert!(same(xs.as_slice(), xl.as_slice()), "predicted x, NX={NX}");
+        assert!(same(ps.as_slice(), pl.as_slice()), "predicted P, NX={NX}");
+        for form in [CovarianceUpdate::Joseph, CovarianceUpdate::Standard] {
+            let want = scalar_update(&xs, &ps, &c, &r, &y, form).expect("valid problem");
+            let got = kalman_update(&xs, &ps, &c, &r, &y, form).expect("lanes apply");
+            let fused = step(&x, &p, &a, &q, &c, &r, &y, form).expect("lanes apply");
+            for got in [got, fused] {
+                assert!(same(want.0.as_slice(), got.0.as_slice()), "x {form:?}");
+                assert!(same(want.1.as_slice(), got.1.as_slice()), "P {form:?}");
+                assert!(same(&[want.2], &[got.2]), "NIS {form:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_are_bit_identical_to_the_scalar_kernels() {
+        let mut g = Lcg(7);
+        for _ in 0..200 {
+            case::<f64, 1, 1>(&mut g);
+            case::<f64, 2, 1>(&mut g);
+            case::<f64, 2, 2>(&mut g);
+            case::<f64, 3, 2>(&mut g);
+            case::<f64, 4, 2>(&mut g);
+            case::<f64, 4, 3>(&mut g);
+            case::<f32, 2, 2>(&mut g);
+            case::<f32, 3, 2>(&mut g);
+            case::<f32, 4, 2>(&mut g);
+            case::<f32, 4, 4>(&mut g);
+        }
+    }
+
+    #[test]
+    fn refusals_and_other_sizes_fall_back() {
+        let x = SVector::<f64, 2>::new(1.0, 2.0);
+        let p = SMatrix::<f64, 2, 2>::identity();
+        let c = SMatrix::<f64, 1, 2>::new(1.0, 0.0);
+        let r = SMatrix::<f64, 1, 1>::new(-1.0); // S = 0: refused
+        let y = SVector::<f64, 1>::new(0.5);
+        assert!(kalman_update(&x, &p, &c, &r, &y, CovarianceUpdate::Joseph).is_none());
+        let y = SVector::<f64, 1>::new(f64::NAN);
+        let r = SMatrix::<f64, 1, 1>::new(1.0);
+        assert!(kalman_update(&x, &p, &c, &r, &y, CovarianceUpdate::Joseph).is_none());
+        let p5 = SMatrix::<f64, 5, 5>::identity();
+        let x5 = SVector::<f64, 5>::zeros();
+        assert!(predict(&x5, &p5, &p5, &p5).is_none());
+    }
+}

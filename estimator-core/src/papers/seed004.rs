@@ -16,3 +16,26 @@ impl<T: Real> BoundScalars<T> {
         Self { eps }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kappas_of_the_paper_example() {
+        let k = BoundScalars::<f64>::paper_example().kappas().0;
+        let want = [
+            1.25,
+            1.0 + 20.0 + 4.0 / 0.7,
+            1.7,
+            1.0 + 2.1 + 20.0,
+            1.0 + 20.0 + 1.0 / 0.7 + 1.4,
+            1.0 + 20.0 + 0.7,
+            1.0 + 20.0 + 2.0 / 0.7 + 0.7,
+            1.0 + 1.0 / 0.7,
+        ];
+        for i in 0..8 {
+            assert!((k[i] - want[i]).abs() < 1e-12, "κ{}", i + 1);
+        }
+    }
+}

@@ -8,7 +8,7 @@
 //! η_{t+1} = λ η_t + σ − ‖ε_t‖,   η_0 given      (13)
 //! ```
 //!
-//! Decisions this implementation makes where the paper is loose (DESIGN.md, "Seed 004"):
+//! Decisions this implementation makes where the paper is loose (docs/design.md, "Seed 004"):
 //! * The reference `y_ref` changes only on an actual transmission (fired *and* granted a
 //!   token by the shared bucket); it starts at the censoring threshold τ (ȳ starts at τ).
 //! * The trigger condition uses `ε_t` against the reference *before* the decision; the

@@ -8,7 +8,7 @@
 //! ȳ_{m,t} = y_{m,t} if α_{m,t} β_{m,t} = 1, else ȳ_{m,t−1}    (19)-(20)
 //! ```
 //!
-//! Order within an instant (Algorithm 1, DESIGN.md "Seed 004"): every node's grant β uses the
+//! Order within an instant (Algorithm 1, docs/design.md "Seed 004"): every node's grant β uses the
 //! per-node allocation left by the *previous* instant's bucket update; the nodes decide;
 //! then the bucket is updated once with everything that was sent. Tokens, rate, capacity and
 //! costs are integers (the paper's `g`, `c_m`, `b` are), and `c_m ≤ ξ/L` is tested exactly as
