@@ -37,8 +37,8 @@
 //! The parts, one file each: `args` ([`RunArgs`]), `slot_loop` (the loop, [`run_loop`]),
 //! `instant` (one instant's work), `publish`, `truth` (the evaluation beside the loop),
 //! `wait`, `report` ([`RunReport`], the output files, the exit code), `trajectories`
-//! ([`Trajectories`]); and the public [`assemble`] (slots → instants), [`select`] (scenario
-//! and estimators by name) and [`system`] (CPU pinning, memory locking).
+//! ([`Trajectories`]); and the public [`assemble`] (slots → instants), [`select`] (estimators
+//! by name) and [`system`] (CPU pinning, memory locking).
 
 mod args;
 pub mod assemble;
