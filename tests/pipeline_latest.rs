@@ -6,8 +6,8 @@
 #[path = "pipeline_common.rs"]
 mod common;
 
-use channel_sim::wire::{self, Estimate, WIRE_VERSION};
 use common::{loop_setup, prefix, scratch, start_channel_sim};
+use estpipe_wire::{self as wire, Estimate, WIRE_VERSION};
 use iceoryx2::prelude::*;
 use ipc_runner::run::Hooks;
 use std::sync::atomic::{AtomicBool, Ordering};

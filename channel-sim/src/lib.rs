@@ -8,7 +8,7 @@
 //! | plant | [`plant`] | the true state x_k and every node's raw measurement z_{m,k} |
 //! | channel | [`channel`] | what happens to a packet between sensor and estimator: occlusion, token buckets, Tobit censoring, event triggers, random loss |
 //! | instant | [`sim`] | the contract: one [`Instant`] per k, one [`Observation`] per node |
-//! | shared memory | [`wire`], [`publisher`] | the `#[repr(C)]` payloads and the `channel-sim` process that publishes them on iceoryx2 |
+//! | shared memory | [`wire`], [`publisher`], [`backpressure`] | observations as the contract's slots (`estpipe_wire`), the `channel-sim` process that publishes them on iceoryx2, and what it does when a queue is full |
 //!
 //! [`scenario`] puts a plant, its channel stages and the initial distribution under a name
 //! (presets or TOML); [`scenario::resolve`] is what both processes call to get one. Beneath
@@ -16,6 +16,7 @@
 //! random streams) and [`validate`] (parameter checks naming the field). [`signal`] lets the
 //! publisher and `ipc-runner` ask for Ctrl-C without sleeping.
 
+pub mod backpressure;
 pub mod channel;
 pub mod error;
 pub mod plant;

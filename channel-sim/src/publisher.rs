@@ -6,16 +6,27 @@
 //! one slot per node, paced at `--rate` Hz, notifying the `slots-ready` event after each
 //! instant → publish an END marker → linger until the subscriber has detached (bounded).
 //!
+//! Every slot carries the scenario's [`StreamHeader`] (its shape and model fingerprint) as
+//! its user header, so a runner built for another scenario refuses the stream before it steps
+//! an estimator. A full subscriber queue blocks the send at `--rate 0` and drops the slot when
+//! paced ([`crate::backpressure`]).
+//!
 //! Faults: dead peers are invisible in iceoryx2 until someone cleans them up, so the publisher
 //! calls `try_cleanup_dead_nodes()` at startup (a SIGKILLed predecessor leaves its publisher
-//! port behind) and every 100 ms; if the subscriber is gone it pauses and waits for a new one.
-//! SIGINT/SIGTERM end the run cleanly with an ABORT marker.
+//! port behind), every 100 ms and whenever a blocked send gives up after
+//! [`BLOCK_SLICE`](crate::backpressure::BLOCK_SLICE); if the subscriber is gone it pauses and
+//! waits for a new one. SIGINT/SIGTERM end the run cleanly with an ABORT marker, also while a
+//! send is blocked.
 
+use crate::backpressure::{Backpressure, Gate, Mode};
 use crate::scenario;
 use crate::sim::MAX_NY;
-use crate::wire::{self, Slot, Truth, SLOT_ABORT, SLOT_END};
+use crate::wire::{slot_of, stream_header};
 use anyhow::{bail, Context, Result};
+use estpipe_wire::{self as wire, Slot, StreamHeader, Truth, SLOT_ABORT, SLOT_END};
 use iceoryx2::node::NodeWaitFailure;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::SendError;
 use iceoryx2::prelude::*;
 use std::time::Duration;
 
@@ -40,6 +51,10 @@ pub struct PublisherArgs {
     /// Sampling rate in Hz; 0 publishes as fast as possible.
     #[arg(long, default_value_t = 1000.0)]
     pub rate: f64,
+    /// What a full subscriber queue does: `block` waits (nothing is lost), `discard` drops the
+    /// slot (the runner counts the gap); `auto` blocks at `--rate 0` and discards when paced.
+    #[arg(long, value_enum, default_value_t = Backpressure::Auto)]
+    pub backpressure: Backpressure,
     /// Service-name prefix (use distinct prefixes for parallel runs).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
@@ -71,6 +86,10 @@ pub struct PublisherReport {
     pub interrupted: bool,
     /// Times the subscriber was lost and a new one awaited.
     pub subscriber_losses: u32,
+    /// Slots dropped for a subscriber whose queue was full (`--backpressure discard`).
+    pub discarded: u64,
+    /// Sends that blocked for a whole slice and were sent again (`--backpressure block`).
+    pub resent: u64,
 }
 
 fn stream_id() -> u64 {
@@ -81,16 +100,63 @@ enum Stop {
     Signal,
 }
 
-fn wait(node: &Node<ipc::Service>, d: Duration) -> Result<(), Stop> {
+fn wait(node: &Node<ipc::Service>, gate: &Gate, d: Duration) -> Result<(), Stop> {
     match node.wait(d) {
         Ok(()) => Ok(()),
-        Err(NodeWaitFailure::Interrupt | NodeWaitFailure::TerminationRequest) => Err(Stop::Signal),
+        Err(NodeWaitFailure::Interrupt | NodeWaitFailure::TerminationRequest) => {
+            gate.request_stop();
+            Err(Stop::Signal)
+        }
+    }
+}
+
+/// What became of a slot handed to [`send_slot`].
+enum Sent {
+    /// Delivered to every subscriber (or dropped for a full one in discard mode).
+    Done,
+    /// A termination request arrived while the send was blocked.
+    Stopped,
+    /// The blocked subscriber turned out to be dead and was cleaned up.
+    SubscriberGone,
+}
+
+/// Sends `slot` with `header` as its user header. A send that blocked for a whole slice
+/// gave up on the blocked subscriber; unless a signal or its death explains it, the same
+/// slot is sent again (a second subscriber then receives it twice: the runner ignores a
+/// `seq` it has seen).
+fn send_slot(
+    slot_pub: &Publisher<ipc::Service, Slot, StreamHeader>,
+    header: &StreamHeader,
+    slot: Slot,
+    gate: &Gate,
+    node: &Node<ipc::Service>,
+    n_subs: &dyn Fn() -> usize,
+    resent: &mut u64,
+) -> Result<Sent> {
+    loop {
+        let mut s = slot_pub.loan_uninit()?;
+        *s.user_header_mut() = *header;
+        match s.write_payload(slot).send() {
+            Ok(_) => return Ok(Sent::Done),
+            Err(SendError::UnableToDeliver) => {
+                if gate.stop_requested() {
+                    return Ok(Sent::Stopped);
+                }
+                let _ = node.try_cleanup_dead_nodes();
+                if n_subs() == 0 {
+                    return Ok(Sent::SubscriberGone);
+                }
+                *resent += 1;
+            }
+            Err(e) => return Err(e.into()),
+        }
     }
 }
 
 /// Waits until `count()` > 0, cleaning up dead nodes on the way. `Ok(false)` on timeout.
 fn wait_for_subscriber(
     node: &Node<ipc::Service>,
+    gate: &Gate,
     count: impl Fn() -> usize,
     timeout: f64,
 ) -> Result<bool, Stop> {
@@ -104,7 +170,7 @@ fn wait_for_subscriber(
             let _ = node.try_cleanup_dead_nodes();
             last_cleanup = std::time::Instant::now();
         }
-        wait(node, Duration::from_millis(2))?;
+        wait(node, gate, Duration::from_millis(2))?;
     }
     Ok(true)
 }
@@ -134,16 +200,29 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // A SIGKILLed predecessor leaves its ports registered; remove them before we claim ours.
     let _ = node.try_cleanup_dead_nodes();
 
+    let header = stream_header(&*scenario);
     let slots = wire::slot_service(&node, &args.prefix)?;
     let truth = wire::truth_service(&node, &args.prefix)?;
     let ready = wire::ready_event_service(&node, &args.prefix)?;
-    let slot_pub = slots.publisher_builder().create().map_err(|e| {
-        anyhow::anyhow!(
-            "cannot publish on {}/slots ({e:?}): is another channel-sim running with this \
+    let gate = Gate::new();
+    let data_mode = if args.backpressure.blocks(args.rate) {
+        Mode::Block
+    } else {
+        Mode::Discard
+    };
+    gate.set_mode(data_mode);
+    let slot_pub = slots
+        .publisher_builder()
+        .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+        .set_backpressure_handler(gate.handler())
+        .create()
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "cannot publish on {}/slots ({e:?}): is another channel-sim running with this \
              --prefix?",
-            args.prefix
-        )
-    })?;
+                args.prefix
+            )
+        })?;
     let truth_pub = truth
         .publisher_builder()
         .create()
@@ -177,7 +256,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         },
         args.prefix
     ));
-    match wait_for_subscriber(&node, n_subs, args.connect_timeout) {
+    match wait_for_subscriber(&node, &gate, n_subs, args.connect_timeout) {
         Ok(true) => {}
         Ok(false) => bail!(
             "no subscriber on {}/slots within {} s (start `ipc-runner run --prefix {}`)",
@@ -203,15 +282,17 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let mut last_check = t0;
     let mut delivered_count = 0u64;
     let mut k_done = 0u32;
+    let mut resent = 0u64;
     'instants: for i in 1..=steps {
         if period_ns > 0 {
             let due = t0 + u64::from(i - 1) * period_ns;
             let now = wire::monotonic_ns();
-            if due > now && wait(&node, Duration::from_nanos(due - now)).is_err() {
+            let stopped = due > now && wait(&node, &gate, Duration::from_nanos(due - now)).is_err();
+            if stopped || gate.stop_requested() {
                 report.interrupted = true;
                 break;
             }
-        } else if i.is_multiple_of(256) && crate::signal::termination_requested() {
+        } else if i.is_multiple_of(256) && gate.stop_requested() {
             report.interrupted = true;
             break;
         }
@@ -220,8 +301,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             .loan_uninit()?
             .write_payload(Truth::new(inst.k, sid, nx, &inst.truth))
             .send()?;
+        let mut subscriber_gone = false;
         for obs in &inst.obs {
-            let mut slot = Slot::data(
+            let mut slot = slot_of(
                 obs,
                 nodes,
                 sid,
@@ -238,8 +320,16 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
                     }
                 }
             }
-            slot_pub.loan_uninit()?.write_payload(slot).send()?;
+            let sent = send_slot(&slot_pub, &header, slot, &gate, &node, &n_subs, &mut resent)?;
             report.slots += 1;
+            match sent {
+                Sent::Done => {}
+                Sent::Stopped => {
+                    report.interrupted = true;
+                    break 'instants;
+                }
+                Sent::SubscriberGone => subscriber_gone = true,
+            }
         }
         notifier.notify()?;
         k_done = inst.k;
@@ -248,7 +338,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         // After the send: the scan of the node directory (sub-millisecond) runs in the slack
         // before the next instant is due rather than between its due time and its send.
         let now = wire::monotonic_ns();
-        if now - last_check > 100_000_000 {
+        if subscriber_gone || now - last_check > 100_000_000 {
             last_check = now;
             let _ = node.try_cleanup_dead_nodes();
             if n_subs() == 0 {
@@ -256,7 +346,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
                 say(&format!(
                     "subscriber lost after instant {i}; waiting for a new one"
                 ));
-                match wait_for_subscriber(&node, n_subs, args.connect_timeout) {
+                match wait_for_subscriber(&node, &gate, n_subs, args.connect_timeout) {
                     Ok(true) => say("subscriber back, continuing"),
                     Ok(false) => bail!("no subscriber came back within {} s", args.connect_timeout),
                     Err(Stop::Signal) => {
@@ -273,18 +363,40 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     } else {
         SLOT_END
     };
-    slot_pub
-        .loan_uninit()?
-        .write_payload(Slot::marker(
-            kind,
-            report.slots,
-            k_done,
-            nodes,
-            sid,
-            wire::monotonic_ns(),
-        ))
-        .send()?;
+    // The marker waits for room whatever the mode (bounded by --linger): a discarded END
+    // would leave the runner waiting for its deadline.
+    gate.set_mode(Mode::Final);
+    let marker = Slot::marker(kind, report.slots, k_done, nodes, sid, 0);
+    let start = std::time::Instant::now();
+    loop {
+        let mut s = slot_pub.loan_uninit()?;
+        *s.user_header_mut() = header;
+        match s
+            .write_payload(Slot {
+                send_ns: wire::monotonic_ns(),
+                ..marker
+            })
+            .send()
+        {
+            Ok(_) => break,
+            Err(SendError::UnableToDeliver) => {
+                let _ = node.try_cleanup_dead_nodes();
+                if n_subs() == 0 || start.elapsed().as_secs_f64() > args.linger {
+                    break;
+                }
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
     notifier.notify()?;
+    report.discarded = gate.discarded();
+    report.resent = resent;
+    if report.discarded > 0 {
+        say(&format!(
+            "{} slot(s) dropped for a subscriber whose queue was full (--backpressure discard)",
+            report.discarded
+        ));
+    }
     say(&format!(
         "{} after {} instants ({} slots)",
         if report.interrupted {
@@ -304,7 +416,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             let _ = node.try_cleanup_dead_nodes();
             last_cleanup = std::time::Instant::now();
         }
-        if wait(&node, Duration::from_millis(2)).is_err() {
+        if wait(&node, &gate, Duration::from_millis(2)).is_err() {
             break;
         }
     }

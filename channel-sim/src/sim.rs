@@ -8,12 +8,12 @@
 //! consumed in-process by `ipc-runner eval` or published by the `channel-sim` process, so the
 //! pipeline reproduces the Monte-Carlo numbers exactly.
 
-/// Largest state dimension a scenario may have (fixed so wire messages are fixed-size).
-pub const MAX_NX: usize = 8;
-/// Largest measurement dimension per node.
-pub const MAX_NY: usize = 4;
-/// Largest number of sensor nodes.
-pub const MAX_NODES: usize = 8;
+// The limits and the channel flags are part of the wire contract (fixed-size payloads, the
+// slot's `flags` field), so they are defined there, once.
+pub use estpipe_wire::{
+    FLAG_CENSORED, FLAG_OCCLUDED, FLAG_RANDOM_LOSS, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, MAX_NODES,
+    MAX_NX, MAX_NY,
+};
 
 /// What the channel delivers for one sampling instant and one sensor node.
 ///
@@ -35,17 +35,6 @@ pub struct Observation {
     /// Channel-side flags of this instant, see the `FLAG_*` constants.
     pub flags: u32,
 }
-
-/// The sensor's event trigger fired at this instant (seed 004 eq. 13).
-pub const FLAG_TRIGGERED: u32 = 1 << 0;
-/// A trigger (or scheduled send) was blocked because the token bucket was empty.
-pub const FLAG_TOKEN_BLOCKED: u32 = 1 << 1;
-/// At least one entry of `y` was censored (Tobit, seed 004 eq. 2).
-pub const FLAG_CENSORED: u32 = 1 << 2;
-/// The packet was lost by a random-loss stage (Bernoulli / Gilbert–Elliott).
-pub const FLAG_RANDOM_LOSS: u32 = 1 << 3;
-/// The packet was dropped because the state was inside an occlusion region (seed 001).
-pub const FLAG_OCCLUDED: u32 = 1 << 4;
 
 impl Observation {
     /// A dropped packet at instant `k` from `node` with measurement dimension `ny`.
@@ -101,6 +90,10 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     fn ny(&self) -> usize;
     /// Number of sensor nodes.
     fn nodes(&self) -> usize;
+    /// The model fingerprint a stream of this scenario announces in its
+    /// [`StreamHeader`](estpipe_wire::StreamHeader) (`docs/wire.md`, "Model fingerprint"):
+    /// equal for two scenarios whose estimators cannot tell them apart.
+    fn fingerprint(&self) -> u64;
     /// Starts run `run` of the experiment seeded by `seed`. Runs are independent streams:
     /// the same `(seed, run)` gives the same instants on every machine and thread count.
     fn start(&self, seed: u64, run: u64) -> Box<dyn Simulation>;

@@ -3,6 +3,28 @@
 
 use channel_sim::Observation;
 
+/// What [`Estimator::covariance`] wrote.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CovarianceKind {
+    /// Nothing (NaN): the estimator keeps no covariance.
+    None,
+    /// The estimator's error covariance P_k.
+    Estimate,
+    /// An upper bound on the error covariance (the NN estimator, the Tobit filters).
+    Bound,
+}
+
+impl CovarianceKind {
+    /// The wire encoding, [`Estimate::cov_kind`](estpipe_wire::Estimate::cov_kind).
+    pub fn wire(self) -> u32 {
+        match self {
+            Self::None => estpipe_wire::COV_NONE,
+            Self::Estimate => estpipe_wire::COV_ESTIMATE,
+            Self::Bound => estpipe_wire::COV_BOUND,
+        }
+    }
+}
+
 /// An estimator as the application drives it (f64, dynamic dimensions at this level; the
 /// const-generic core types live inside each implementation).
 pub trait Estimator: Send {
@@ -13,6 +35,13 @@ pub trait Estimator: Send {
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), estimator_core::Error>;
     /// Writes the current estimate x̂_k into `out[..nx]`.
     fn estimate(&self, out: &mut [f64]);
+    /// Writes the covariance of the current estimate, row-major, into `out[..nx·nx]` and
+    /// says what it is (the error covariance, or the bound the estimator's paper propagates).
+    /// Default: NaN and [`CovarianceKind::None`], for an estimator that has none.
+    fn covariance(&self, out: &mut [f64]) -> CovarianceKind {
+        out.fill(f64::NAN);
+        CovarianceKind::None
+    }
     /// Reports named per-step diagnostics of the current step (e.g. `"trace_p"`, the nn
     /// estimator's `"bound_trace"`) by calling `sink(name, value)`; called at k = 0 and after
     /// every successful step. `eval` averages each name over runs per k and writes it as an

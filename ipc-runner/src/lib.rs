@@ -3,7 +3,7 @@
 
 pub mod estimator;
 
-pub use estimator::Estimator;
+pub use estimator::{CovarianceKind, Estimator};
 pub mod demo;
 pub mod estimators;
 pub mod eval;

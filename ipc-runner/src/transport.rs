@@ -1,16 +1,16 @@
-//! The runner's side of the shared-memory services (see `channel_sim::wire`).
+//! The runner's side of the shared-memory services (see `estpipe_wire` and `docs/wire.md`).
 //!
 //! Ports are created in an order that makes the publisher's "wait for a subscriber" safe:
 //! truth subscriber and event listener first, the slot subscriber last — channel-sim starts
 //! publishing as soon as the slot subscriber exists, and by then everything else is connected.
 
 use anyhow::{anyhow, Result};
-use channel_sim::wire::{self, Estimate, Slot, Truth};
+use estpipe_wire::services::SlotService;
+use estpipe_wire::{self as wire, Estimate, Slot, StreamHeader, Truth};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use iceoryx2::service::port_factory::publish_subscribe;
 
 /// Estimate samples the loop loans ahead (one per estimator, up to this many); the publisher
 /// allows one more, for the estimators past it, which loan at send time.
@@ -22,9 +22,9 @@ pub struct Transport {
     /// The runner's iceoryx2 node (signal handling, dead-node cleanup).
     pub node: Node<ipc::Service>,
     /// Slot service (for publisher counts).
-    pub slots: publish_subscribe::PortFactory<ipc::Service, Slot, ()>,
-    /// Slot subscriber.
-    pub slot_sub: Subscriber<ipc::Service, Slot, ()>,
+    pub slots: SlotService,
+    /// Slot subscriber; every slot's user header is the stream's [`StreamHeader`].
+    pub slot_sub: Subscriber<ipc::Service, Slot, StreamHeader>,
     /// Truth subscriber (evaluation beside the loop).
     pub truth_sub: Subscriber<ipc::Service, Truth, ()>,
     /// Estimate publisher.

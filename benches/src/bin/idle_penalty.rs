@@ -10,7 +10,7 @@
 //! - `touch 16 KiB`: read-modify-write of one `u64` per cache line of a 16 KiB buffer (a
 //!   fixed reference working set, half an L1d);
 //! - `iceoryx2 loan+send`: `loan_uninit` + `write_payload` + `send` of one
-//!   `channel_sim::wire::Estimate` on a service of its own with no subscriber (the runner's
+//!   `estpipe_wire::Estimate` on a service of its own with no subscriber (the runner's
 //!   publish as it was before it loaned ahead);
 //! - `iceoryx2 send, loaned ahead`: `write_payload` + `send` of a sample loaned right after
 //!   the previous send, off the clock (the runner's publish now).
@@ -24,7 +24,7 @@
 //! crash).
 
 use anyhow::{anyhow, bail, Context, Result};
-use channel_sim::wire::{self, monotonic_ns, Estimate};
+use estpipe_wire::{self as wire, monotonic_ns, Estimate};
 use hdrhistogram::Histogram;
 use iceoryx2::prelude::*;
 use ipc_runner::latency::Percentiles;

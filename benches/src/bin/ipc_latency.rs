@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use channel_sim::wire::monotonic_ns;
+use estpipe_wire::monotonic_ns;
 use ipc_runner::latency::Percentiles;
 
 /// The message of every mode: 128 bytes, fixed layout.

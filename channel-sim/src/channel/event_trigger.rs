@@ -17,6 +17,7 @@ use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
 use estimator_core::protocol::shared_token_bucket::{
     NodeDecision, SharedTokenBucket, TriggeredBucketScheduler,
 };
+use estpipe_wire::Fnv1a64;
 use nalgebra::SVector;
 
 use super::{drop_packet, Stage, StageSpec};
@@ -267,6 +268,20 @@ impl StageSpec for TriggeredTokenBucket {
     }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
         Box::new(self.build_stage())
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        h.u64(self.triggers.len() as u64);
+        for (t, r) in self.triggers.iter().zip(&self.references) {
+            h.f64(t.sigma()).f64(t.chi()).f64(t.lambda()).f64(t.eta0());
+            h.u64(r.len() as u64).f64s(r);
+        }
+        h.u64(self.initial_tokens.into())
+            .u64(self.rate.into())
+            .u64(self.capacity.into());
+        for &c in &self.costs {
+            h.u64(c.into());
+        }
+        h.u64(self.allow_paper_violation.into());
     }
     fn as_any(&self) -> &dyn Any {
         self

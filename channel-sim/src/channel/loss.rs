@@ -3,6 +3,7 @@
 
 use std::any::Any;
 
+use estpipe_wire::Fnv1a64;
 use rand_distr::{Distribution, StandardUniform};
 use serde::Deserialize;
 
@@ -37,6 +38,9 @@ impl StageSpec for BernoulliLoss {
     }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
         Box::new(*self)
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        h.f64(self.p_loss);
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -117,6 +121,12 @@ impl StageSpec for GilbertElliottLoss {
             bad: None,
             nodes,
         })
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        h.f64(self.p_good_to_bad)
+            .f64(self.p_bad_to_good)
+            .f64(self.loss_good)
+            .f64(self.loss_bad);
     }
     fn as_any(&self) -> &dyn Any {
         self

@@ -10,6 +10,7 @@
 use std::any::Any;
 
 use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
+use estpipe_wire::Fnv1a64;
 use nalgebra::{SMatrix, SVector};
 use rand_distr::{Distribution, StandardNormal};
 
@@ -79,6 +80,13 @@ impl<const S: usize> StageSpec for OcclusionSpec<S> {
     }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
         Box::new(self.clone())
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        h.u64(self.e.len() as u64).f64s(&self.e).f64(self.psi);
+        h.u64(S as u64);
+        for i in 0..S {
+            h.f64(self.regions.centre(i)[0]).f64(self.regions.radius(i));
+        }
     }
     fn as_any(&self) -> &dyn Any {
         self

@@ -7,6 +7,7 @@
 use std::any::Any;
 
 use estimator_core::protocol::tobit::censor;
+use estpipe_wire::Fnv1a64;
 use nalgebra::SVector;
 
 use super::{Stage, StageSpec};
@@ -71,6 +72,12 @@ impl TobitCensoring {
 impl StageSpec for TobitCensoring {
     fn name(&self) -> &'static str {
         "tobit-censoring"
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        h.u64(self.thresholds.len() as u64);
+        for t in &self.thresholds {
+            h.u64(t.len() as u64).f64s(t);
+        }
     }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
         Box::new(self.clone())

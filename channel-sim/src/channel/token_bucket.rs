@@ -9,6 +9,7 @@
 use std::any::Any;
 
 use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
+use estpipe_wire::Fnv1a64;
 use serde::Deserialize;
 
 use super::{drop_packet, Stage, StageSpec};
@@ -46,6 +47,10 @@ impl TokenBucketStage {
 impl StageSpec for TokenBucketStage {
     fn name(&self) -> &'static str {
         "token-bucket"
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        let Self { a, b, s, z0 } = *self;
+        h.u64(a.into()).u64(b.into()).u64(s.into()).u64(z0.into());
     }
     fn build(&self, nodes: usize) -> Box<dyn Stage> {
         // Validated when the scenario was built; an invalid spec here is a programming error

@@ -4,10 +4,11 @@
 
 use std::any::Any;
 
+use estpipe_wire::Fnv1a64;
 use nalgebra::{DMatrix, DVector};
 
 use super::time_matrix::TimeMatrix;
-use super::{LinearDescription, Plant, PlantRun};
+use super::{fingerprint_matrix, LinearDescription, Plant, PlantRun};
 use crate::error::ScenarioError;
 use crate::rng::{standard_normal, SimRng};
 use crate::sim::{MAX_NODES, MAX_NX, MAX_NY};
@@ -124,6 +125,18 @@ impl Plant for LinearPlant {
             plant: self.clone(),
             x: DVector::from_column_slice(x0),
         })
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        h.str("linear");
+        self.a.fingerprint(h);
+        self.b.fingerprint(h);
+        fingerprint_matrix(h, &self.q);
+        h.u64(self.sensors.len() as u64);
+        for s in &self.sensors {
+            s.c.fingerprint(h);
+            s.d.fingerprint(h);
+            fingerprint_matrix(h, &s.r);
+        }
     }
     fn linear(&self) -> Option<&dyn LinearDescription> {
         Some(self)

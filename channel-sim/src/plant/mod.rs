@@ -17,6 +17,7 @@ pub mod time_matrix;
 use std::any::Any;
 use std::fmt::Debug;
 
+use estpipe_wire::Fnv1a64;
 use nalgebra::DMatrix;
 
 use crate::rng::SimRng;
@@ -32,6 +33,10 @@ pub trait Plant: Send + Sync + Debug {
     fn nodes(&self) -> usize;
     /// Starts one run from the true initial state `x0`.
     fn start(&self, x0: &[f64]) -> Box<dyn PlantRun>;
+    /// Feeds the plant's kind and parameters to the stream's model fingerprint
+    /// (`docs/wire.md`, "Model fingerprint"): two plants an estimator cannot tell apart must
+    /// feed the same values, any other difference must change them.
+    fn fingerprint(&self, h: &mut Fnv1a64);
     /// The linear-Gaussian description a Kalman-type filter may use, if the plant has one.
     fn linear(&self) -> Option<&dyn LinearDescription> {
         None
@@ -47,6 +52,11 @@ pub trait PlantRun: Send {
     /// Advances from x_{k−1} to x_k and writes node m's raw measurement z_{m,k} into
     /// `z[m][..ny]` for every node.
     fn advance(&mut self, k: u32, rng: &mut SimRng, z: &mut [[f64; MAX_NY]]);
+}
+
+/// Feeds `m` to a fingerprint: rows, cols, then the entries column by column.
+pub fn fingerprint_matrix(h: &mut Fnv1a64, m: &DMatrix<f64>) {
+    h.matrix(m.nrows(), m.ncols(), m.as_slice());
 }
 
 /// The linear-Gaussian part of a plant as a filter sees it:

@@ -17,6 +17,7 @@ use std::any::Any;
 
 use estimator_core::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use estimator_core::papers::Seed003Example;
+use estpipe_wire::Fnv1a64;
 use nalgebra::SVector;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -65,6 +66,10 @@ impl Plant for Seed003Plant {
             x: SVector::from_column_slice(&x0[..3]),
             pending_w: None,
         })
+    }
+    fn fingerprint(&self, h: &mut Fnv1a64) {
+        // The matrices and f are fixed code (Seed003Example); only the noise is a parameter.
+        h.str("seed003").f64(self.w_var);
     }
     fn as_any(&self) -> &dyn Any {
         self

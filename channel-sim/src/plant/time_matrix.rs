@@ -3,6 +3,7 @@
 
 use std::borrow::Cow;
 
+use estpipe_wire::Fnv1a64;
 use nalgebra::DMatrix;
 
 /// A matrix that is constant or a function of the time index k.
@@ -27,6 +28,27 @@ impl TimeMatrix {
         match self {
             TimeMatrix::Constant(m) => Cow::Borrowed(m),
             TimeMatrix::Varying { at, .. } => Cow::Owned(at(k)),
+        }
+    }
+
+    /// Instants a time-varying matrix is fingerprinted at (a function cannot be hashed;
+    /// its first values stand for it).
+    pub const FINGERPRINT_INSTANTS: usize = 4;
+
+    /// Feeds the matrix to a model fingerprint: `0` and the matrix when constant, `1` and
+    /// the matrices at k = 0..[`TimeMatrix::FINGERPRINT_INSTANTS`] when time-varying.
+    pub fn fingerprint(&self, h: &mut Fnv1a64) {
+        match self {
+            TimeMatrix::Constant(m) => {
+                h.u64(0);
+                super::fingerprint_matrix(h, m);
+            }
+            TimeMatrix::Varying { at, .. } => {
+                h.u64(1);
+                for k in 0..Self::FINGERPRINT_INSTANTS {
+                    super::fingerprint_matrix(h, &at(k));
+                }
+            }
         }
     }
 

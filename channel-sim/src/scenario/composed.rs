@@ -9,12 +9,18 @@ use std::any::Any;
 use std::fmt;
 use std::sync::Arc;
 
+use estpipe_wire::Fnv1a64;
+
 use super::initial::InitialDistribution;
 use crate::channel::{Stage, StageSpec};
 use crate::error::ScenarioError;
 use crate::plant::{Plant, PlantRun};
 use crate::rng::{run_rng, SimRng, Stream};
 use crate::sim::{Instant, Observation, Scenario, Simulation, MAX_NX, MAX_NY};
+
+/// The first thing a model fingerprint hashes: names the definition in `docs/wire.md`
+/// ("Model fingerprint"), changed with it.
+pub const FINGERPRINT_TAG: &str = "estpipe-model-1";
 
 /// A plant, its channel stages (applied in order) and the initial distribution, under a name.
 #[derive(Debug)]
@@ -138,6 +144,23 @@ impl Scenario for ComposedScenario {
     }
     fn nodes(&self) -> usize {
         self.plant.nodes()
+    }
+    fn fingerprint(&self) -> u64 {
+        let mut h = Fnv1a64::new();
+        h.str(FINGERPRINT_TAG)
+            .u64(self.nodes() as u64)
+            .u64(self.nx() as u64);
+        for _ in 0..self.nodes() {
+            h.u64(self.ny() as u64);
+        }
+        self.plant.fingerprint(&mut h);
+        self.initial.fingerprint(&mut h);
+        h.u64(self.stages.len() as u64);
+        for s in &self.stages {
+            h.str(s.name());
+            s.fingerprint(&mut h);
+        }
+        h.finish()
     }
     fn start(&self, seed: u64, run: u64) -> Box<dyn Simulation> {
         Box::new(self.simulate(seed, run))

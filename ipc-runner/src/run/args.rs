@@ -1,6 +1,6 @@
 //! The options of `ipc-runner run` (shared with `demo`).
 
-use channel_sim::wire;
+use estpipe_wire as wire;
 use serde::Serialize;
 use std::path::PathBuf;
 

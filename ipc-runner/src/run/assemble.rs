@@ -9,8 +9,8 @@
 //! steps through the instants it missed as dropped ones, counted as *missed before join*.
 
 use channel_sim::sim::MAX_NODES;
-use channel_sim::wire::{Slot, WireError, FLAG_IPC_LOST, SLOT_ABORT, SLOT_DATA, SLOT_END};
 use channel_sim::Observation;
+use estpipe_wire::{Slot, WireError, FLAG_IPC_LOST, SLOT_ABORT, SLOT_DATA, SLOT_END};
 use serde::Serialize;
 
 /// Slot accounting of one runner.
@@ -159,7 +159,7 @@ impl Assembler {
             return Ok(Pushed::Data);
         }
         self.fill_to(slot.seq, emit);
-        let obs = slot.observation()?;
+        let obs = channel_sim::wire::observation_of(slot)?;
         self.counts.received += 1;
         if obs.delivered {
             self.counts.delivered += 1;
@@ -180,7 +180,7 @@ impl Assembler {
 mod tests {
     use super::*;
     use channel_sim::sim::MAX_NY;
-    use channel_sim::wire::SLOT_END;
+    use estpipe_wire::SLOT_END;
 
     fn slot(k: u32, node: u8, nodes: u8, stream: u64) -> Slot {
         let mut y = [0.0; MAX_NY];
@@ -193,7 +193,7 @@ mod tests {
             y: if node != 1 { y } else { [0.0; MAX_NY] },
             flags: 0,
         };
-        Slot::data(&o, nodes, stream, 0, 0, 100)
+        channel_sim::wire::slot_of(&o, nodes, stream, 0, 0, 100)
     }
 
     fn collect(a: &mut Assembler, slots: &[Slot]) -> Vec<(u32, Vec<Observation>)> {

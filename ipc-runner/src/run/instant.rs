@@ -7,8 +7,8 @@ use crate::transport::Transport;
 use crate::Estimator;
 use anyhow::Result;
 use channel_sim::sim::MAX_NX;
-use channel_sim::wire::{self, Estimate, WIRE_VERSION};
 use channel_sim::Observation;
+use estpipe_wire::{self as wire, Estimate, COV_LEN, WIRE_VERSION};
 
 use super::args::RunArgs;
 use super::publish::Publisher;
@@ -34,6 +34,8 @@ pub(super) struct Runner {
     nx: usize,
     /// The latest estimate of every estimator.
     xhat: Vec<[f64; MAX_NX]>,
+    /// The covariance an estimator wrote (row-major), before it is packed on the wire.
+    p_full: [f64; MAX_NX * MAX_NX],
     rejected: Vec<u64>,
     names: Vec<[u8; 16]>,
     /// Per estimator, when its step of the current instant started and ended (recorded in the
@@ -85,6 +87,7 @@ impl Runner {
             estimators,
             nx,
             xhat: vec![[0.0; MAX_NX]; n_est],
+            p_full: [0.0; MAX_NX * MAX_NX],
             rejected: vec![0; n_est],
             names,
             step_ns: vec![(0, 0); n_est],
@@ -116,6 +119,7 @@ impl Runner {
             };
             let xhat = &mut self.xhat[e];
             est.estimate(&mut xhat[..nx]);
+            let cov_kind = est.covariance(&mut self.p_full[..nx * nx]);
             let t1 = wire::monotonic_ns();
             self.step_ns[e] = (t0, t1);
             let seq = self.est_seq;
@@ -123,7 +127,7 @@ impl Runner {
             if !self.out.is_on() {
                 continue;
             }
-            let msg = Estimate {
+            let mut msg = Estimate {
                 version: WIRE_VERSION,
                 k,
                 stream_id: self.slot.stream_id,
@@ -132,12 +136,14 @@ impl Runner {
                 nx: nx as u32,
                 name: self.names[e],
                 status,
-                reserved: 0,
+                cov_kind: cov_kind.wire(),
                 x: *xhat,
+                p: [0.0; COV_LEN],
                 slot_send_ns: self.slot.send_ns,
                 receive_ns: self.slot.recv_ns,
                 step_done_ns: t1,
             };
+            Estimate::pack_covariance(nx, &self.p_full[..nx * nx], &mut msg.p);
             self.out.send(t, e, msg);
         }
         let done_ns = wire::monotonic_ns();

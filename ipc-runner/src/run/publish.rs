@@ -9,7 +9,7 @@
 
 use crate::transport::{Transport, PRELOANED_ESTIMATES};
 use anyhow::{anyhow, Result};
-use channel_sim::wire::{self, Estimate};
+use estpipe_wire::{self as wire, Estimate};
 use iceoryx2::port::writer::{EntryHandleMut, Writer};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::blackboard;
@@ -23,7 +23,7 @@ type PreLoaned = iceoryx2::sample_mut_uninit::SampleMutUninit<
     (),
 >;
 
-/// The writer side of `channel_sim::wire::latest_estimates_board`, one entry handle per
+/// The writer side of `estpipe_wire::latest_estimates_board`, one entry handle per
 /// estimator (created once; updating an entry writes in place and allocates nothing).
 struct LatestBoard {
     entries: Vec<EntryHandleMut<ipc::Service, u32, Estimate>>,

@@ -7,8 +7,8 @@ use crate::latency::Latency;
 use crate::transport::Transport;
 use crate::Estimator;
 use anyhow::{bail, Context, Result};
-use channel_sim::wire::{self, WIRE_VERSION};
 use channel_sim::Observation;
+use estpipe_wire::{self as wire, WIRE_VERSION};
 use std::time::Duration;
 
 use super::args::{RunArgs, WaitMode};

@@ -3,7 +3,7 @@
 
 use crate::transport::Transport;
 use channel_sim::sim::MAX_NX;
-use channel_sim::wire::WIRE_VERSION;
+use estpipe_wire::WIRE_VERSION;
 
 /// Instants of truth kept: the truth of k must still be there when k's estimates are out.
 const TRUTH_RING: usize = 1024;

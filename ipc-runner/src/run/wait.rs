@@ -10,7 +10,7 @@
 
 use crate::transport::Transport;
 use anyhow::{anyhow, bail, Result};
-use channel_sim::wire;
+use estpipe_wire as wire;
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};

@@ -1,0 +1,118 @@
+//! What the publisher does when a subscriber's slot queue is full.
+//!
+//! The slot service does not overflow (`docs/wire.md`, QoS), so a full queue is the
+//! publisher's to handle, through iceoryx2's back-pressure handler:
+//!
+//! * **block** (the default at `--rate 0`): `send()` waits until the subscriber has made
+//!   room, so "as fast as possible" loses nothing. The wait is cut into slices of
+//!   [`BLOCK_SLICE`]: after each the send gives up on that subscriber (iceoryx2's
+//!   `DiscardDataAndFail`) and the publisher looks for dead nodes before it sends the same slot
+//!   again. A SIGKILLed runner keeps its full queue registered until someone cleans it up, and
+//!   SIGINT/SIGTERM must still end the run, so a send never waits for more than a slice
+//!   without the publisher noticing either.
+//! * **discard** (the default when paced): the slot is dropped for that subscriber at once;
+//!   the runner sees the gap in `seq` and counts it as lost in the IPC, and the publisher
+//!   counts it too ([`Gate::discarded`]).
+//!
+//! END and ABORT markers are always sent blocking ([`Mode::Final`]): a stream whose end
+//! marker was discarded would leave the runner waiting for its deadline.
+
+use iceoryx2::port::{BackpressureAction, BackpressureInfo};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Longest a blocked send waits before the publisher checks for a dead subscriber.
+pub const BLOCK_SLICE: Duration = Duration::from_millis(100);
+
+/// `--backpressure`: what a full subscriber queue does to the publisher.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backpressure {
+    /// Block at `--rate 0`, discard when paced.
+    Auto,
+    /// Wait for room: nothing is lost, a slow runner slows the publisher down.
+    Block,
+    /// Drop the slot for that subscriber: the publisher keeps its pace, the runner counts
+    /// the gap.
+    Discard,
+}
+
+impl Backpressure {
+    /// Whether data slots are sent blocking at `rate` Hz (0 = as fast as possible).
+    pub fn blocks(self, rate: f64) -> bool {
+        match self {
+            Self::Auto => rate == 0.0,
+            Self::Block => true,
+            Self::Discard => false,
+        }
+    }
+}
+
+/// How the next sends treat a full queue.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Mode {
+    /// Drop the sample for the full subscriber.
+    Discard = 0,
+    /// Wait up to [`BLOCK_SLICE`]; a termination request ends the wait.
+    Block = 1,
+    /// Wait up to [`BLOCK_SLICE`] even after a termination request (END/ABORT markers).
+    Final = 2,
+}
+
+/// The state the back-pressure handler shares with the publisher loop.
+#[derive(Debug, Default)]
+pub struct Gate {
+    mode: AtomicU8,
+    stop: AtomicBool,
+    discarded: AtomicU64,
+}
+
+impl Gate {
+    /// A gate in [`Mode::Discard`].
+    pub fn new() -> Arc<Self> {
+        Arc::new(Self::default())
+    }
+
+    /// Sets how the next sends treat a full queue.
+    pub fn set_mode(&self, m: Mode) {
+        self.mode.store(m as u8, Ordering::Relaxed);
+    }
+
+    /// Whether SIGINT/SIGTERM arrived, seen here or by the handler during a blocked send.
+    /// Asks iceoryx2's handler (which consumes the signal) and latches the answer.
+    pub fn stop_requested(&self) -> bool {
+        if !self.stop.load(Ordering::Relaxed) && crate::signal::termination_requested() {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// Records a termination request seen elsewhere (e.g. by `Node::wait`).
+    pub fn request_stop(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+
+    /// Slots dropped for a full subscriber in [`Mode::Discard`].
+    pub fn discarded(&self) -> u64 {
+        self.discarded.load(Ordering::Relaxed)
+    }
+
+    /// iceoryx2's back-pressure handler, called while a subscriber's queue is full.
+    pub fn handler(self: &Arc<Self>) -> impl Fn(&BackpressureInfo) -> BackpressureAction + Send {
+        let gate = Arc::clone(self);
+        move |info| {
+            let mode = gate.mode.load(Ordering::Relaxed);
+            if mode == Mode::Discard as u8 {
+                gate.discarded.fetch_add(1, Ordering::Relaxed);
+                return BackpressureAction::DiscardData;
+            }
+            let signalled = mode == Mode::Block as u8 && gate.stop_requested();
+            if signalled || info.elapsed_time >= BLOCK_SLICE {
+                BackpressureAction::DiscardDataAndFail
+            } else {
+                BackpressureAction::Retry
+            }
+        }
+    }
+}

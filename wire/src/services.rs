@@ -1,0 +1,207 @@
+//! The services under a prefix, the QoS every side opens them with, and the functions that
+//! open (or create) them so.
+//!
+//! | service | pattern | payload (user header) | written by |
+//! |---|---|---|---|
+//! | `<prefix>/slots` | publish-subscribe | [`Slot`] ([`StreamHeader`]) | the sensor side (channel-sim, a foreign publisher) |
+//! | `<prefix>/slots-ready` | event, id [`READY_EVENT`] | – | the sensor side, after each instant |
+//! | `<prefix>/truth` | publish-subscribe | [`Truth`] | channel-sim (evaluation only) |
+//! | `<prefix>/estimates` | publish-subscribe | [`Estimate`] | ipc-runner |
+//! | `<prefix>/estimates-latest` | blackboard, key `u32` | [`Estimate`] | ipc-runner (`--latest-estimates`) |
+//!
+//! Whoever comes first creates a service with the QoS below; whoever comes second opens it
+//! and requires at least that QoS, so a service created by a foreign process with iceoryx2's
+//! defaults is refused with one line that names what the contract requires
+//! ([`crate::explain`]).
+
+use crate::error::ContractError;
+use crate::explain;
+use crate::{Estimate, Slot, StreamHeader, Truth};
+use iceoryx2::port::event_id::EventId;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
+
+/// Default service-name prefix.
+pub const DEFAULT_PREFIX: &str = "estpipe";
+
+/// Service name (under the prefix) of the slots.
+pub const SLOTS: &str = "slots";
+/// Service name (under the prefix) of the "an instant was published" event.
+pub const SLOTS_READY: &str = "slots-ready";
+/// Service name (under the prefix) of the truth.
+pub const TRUTH: &str = "truth";
+/// Service name (under the prefix) of the estimate queue.
+pub const ESTIMATES: &str = "estimates";
+/// Service name (under the prefix) of the latest-estimate blackboard.
+pub const LATEST_ESTIMATES: &str = "estimates-latest";
+
+/// Subscriber queue capacity the services are created with (a subscriber may use less).
+pub const MAX_SUBSCRIBER_BUFFER: usize = 4096;
+
+/// Estimates a new subscriber of `<prefix>/estimates` receives on connecting: the newest of
+/// every estimator while the runner runs at most this many.
+pub const ESTIMATE_HISTORY: usize = 16;
+
+/// Event id notified on `<prefix>/slots-ready` after each instant's slots were sent.
+pub const READY_EVENT: EventId = EventId::new(1);
+
+/// The QoS of a publish-subscribe service of the contract.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PubSubQos {
+    /// Publishers the service admits.
+    pub max_publishers: usize,
+    /// Subscribers the service admits.
+    pub max_subscribers: usize,
+    /// Longest queue a subscriber may ask for.
+    pub subscriber_max_buffer_size: usize,
+    /// Samples a new subscriber receives on connecting.
+    pub history_size: usize,
+    /// `true`: a full queue overwrites its oldest sample; `false`: the publisher's
+    /// back-pressure strategy decides (block or discard the new sample).
+    pub safe_overflow: bool,
+}
+
+impl PubSubQos {
+    /// `max_publishers ≥ 1, max_subscribers ≥ 4, …` as the refusals print it.
+    pub fn describe(&self) -> String {
+        format!(
+            "max_publishers ≥ {}, max_subscribers ≥ {}, subscriber_max_buffer_size ≥ {}, \
+             history_size ≥ {}, safe overflow {}",
+            self.max_publishers,
+            self.max_subscribers,
+            self.subscriber_max_buffer_size,
+            self.history_size,
+            if self.safe_overflow { "on" } else { "off" }
+        )
+    }
+}
+
+/// `<prefix>/slots`: one publisher (one stream per prefix); no overflow, so a full queue is
+/// the publisher's to handle (it blocks at `--rate 0`, discards and the runner counts the
+/// gap when paced).
+pub const SLOTS_QOS: PubSubQos = PubSubQos {
+    max_publishers: 1,
+    max_subscribers: 4,
+    subscriber_max_buffer_size: MAX_SUBSCRIBER_BUFFER,
+    history_size: 0,
+    safe_overflow: false,
+};
+
+/// `<prefix>/truth`: never blocks the publisher.
+pub const TRUTH_QOS: PubSubQos = PubSubQos {
+    max_publishers: 1,
+    max_subscribers: 4,
+    subscriber_max_buffer_size: MAX_SUBSCRIBER_BUFFER,
+    history_size: 0,
+    safe_overflow: true,
+};
+
+/// `<prefix>/estimates`: a slow reader sees gaps in `seq` and never blocks the runner; a
+/// late one gets the newest [`ESTIMATE_HISTORY`] estimates.
+pub const ESTIMATES_QOS: PubSubQos = PubSubQos {
+    max_publishers: 1,
+    max_subscribers: 8,
+    subscriber_max_buffer_size: MAX_SUBSCRIBER_BUFFER,
+    history_size: ESTIMATE_HISTORY,
+    safe_overflow: true,
+};
+
+/// Notifiers and listeners `<prefix>/slots-ready` admits.
+pub const READY_MAX_NOTIFIERS: usize = 2;
+/// Listeners `<prefix>/slots-ready` admits.
+pub const READY_MAX_LISTENERS: usize = 4;
+/// Readers `<prefix>/estimates-latest` admits.
+pub const LATEST_MAX_READERS: usize = 8;
+
+/// The slot service's port factory.
+pub type SlotService = publish_subscribe::PortFactory<ipc::Service, Slot, StreamHeader>;
+
+/// Full service name `<prefix>/<what>`.
+pub fn service_name(prefix: &str, what: &str) -> Result<ServiceName, ContractError> {
+    let s = format!("{prefix}/{what}");
+    ServiceName::new(&s)
+        .map_err(|e| ContractError::Refused(format!("invalid service name {s:?}: {e:?}")))
+}
+
+/// Opens (or creates) `<prefix>/<what>` with payload `T`, user header `H` and `qos`.
+fn pubsub_service<T, H>(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+    what: &str,
+    qos: &PubSubQos,
+) -> Result<publish_subscribe::PortFactory<ipc::Service, T, H>, ContractError>
+where
+    T: ZeroCopySend + core::fmt::Debug + 'static,
+    H: ZeroCopySend + core::fmt::Debug + 'static,
+{
+    let name = service_name(prefix, what)?;
+    node.service_builder(&name)
+        .publish_subscribe::<T>()
+        .user_header::<H>()
+        .max_publishers(qos.max_publishers)
+        .max_subscribers(qos.max_subscribers)
+        .subscriber_max_buffer_size(qos.subscriber_max_buffer_size)
+        .history_size(qos.history_size)
+        .enable_safe_overflow(qos.safe_overflow)
+        .open_or_create()
+        .map_err(|e| explain::pubsub_open::<T, H>(node, &name, qos, &format!("{e:?}")))
+}
+
+/// Opens (or creates) the slot service.
+pub fn slot_service(node: &Node<ipc::Service>, prefix: &str) -> Result<SlotService, ContractError> {
+    pubsub_service(node, prefix, SLOTS, &SLOTS_QOS)
+}
+
+/// Opens (or creates) the truth service.
+pub fn truth_service(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+) -> Result<publish_subscribe::PortFactory<ipc::Service, Truth, ()>, ContractError> {
+    pubsub_service(node, prefix, TRUTH, &TRUTH_QOS)
+}
+
+/// Opens (or creates) the estimate service.
+pub fn estimate_service(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+) -> Result<publish_subscribe::PortFactory<ipc::Service, Estimate, ()>, ContractError> {
+    pubsub_service(node, prefix, ESTIMATES, &ESTIMATES_QOS)
+}
+
+/// Creates the latest-estimate blackboard `<prefix>/estimates-latest`: one entry per
+/// estimator, key = its index in the runner's list, value = its newest [`Estimate`]. Unlike
+/// the `estimates` queue it keeps no history (a reader gets the newest value and sees skipped
+/// ones as jumps in `seq`), and writing an entry allocates nothing — publish-subscribe in
+/// iceoryx2 0.10 allocates a reference count per loaned sample. Created by the runner (it
+/// knows the estimators); readers open it with `blackboard_opener::<u32>()`.
+pub fn latest_estimates_board(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+    names: &[[u8; 16]],
+) -> Result<blackboard::PortFactory<ipc::Service, u32>, ContractError> {
+    let name = service_name(prefix, LATEST_ESTIMATES)?;
+    let mut b = node
+        .service_builder(&name)
+        .blackboard_creator::<u32>()
+        .max_readers(LATEST_MAX_READERS);
+    for (i, n) in names.iter().enumerate() {
+        let i = i as u32;
+        b = b.add(i, Estimate::none_yet(i, *n));
+    }
+    b.create()
+        .map_err(|e| explain::other_open(&name, "blackboard", &format!("{e:?}")))
+}
+
+/// Opens (or creates) the event service notified with [`READY_EVENT`] after each instant.
+pub fn ready_event_service(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+) -> Result<event::PortFactory<ipc::Service>, ContractError> {
+    let name = service_name(prefix, SLOTS_READY)?;
+    node.service_builder(&name)
+        .event()
+        .max_notifiers(READY_MAX_NOTIFIERS)
+        .max_listeners(READY_MAX_LISTENERS)
+        .open_or_create()
+        .map_err(|e| explain::other_open(&name, "event", &format!("{e:?}")))
+}
