@@ -18,11 +18,14 @@ use std::sync::Arc;
 use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::sim::MAX_NODES;
-use channel_sim::{Observation, Scenario};
+use channel_sim::Scenario;
 use estimator_core::filter::KalmanFilter;
-use estimator_core::Error;
-use nalgebra::{DMatrix, SMatrix, SVector};
+use estimator_core::{Error, Estimate, Packet};
+use nalgebra::{DMatrix, SVector};
 
+use super::adapter::Adapted;
+use super::fed::Fed;
+use super::snapshot::{fixed, Snapshot};
 use super::EvalOptions;
 use crate::Estimator;
 
@@ -62,10 +65,10 @@ pub fn linear_kf(
     macro_rules! by_ny {
         ($nx:literal) => {
             match ny {
-                1 => LinearKf::<$nx, 1>::boxed(spec),
-                2 => LinearKf::<$nx, 2>::boxed(spec),
-                3 => LinearKf::<$nx, 3>::boxed(spec),
-                4 => LinearKf::<$nx, 4>::boxed(spec),
+                1 => boxed::<$nx, 1>(spec),
+                2 => boxed::<$nx, 2>(spec),
+                3 => boxed::<$nx, 3>(spec),
+                4 => boxed::<$nx, 4>(spec),
                 _ => anyhow::bail!("{name}: measurement dimension {ny} not supported"),
             }
         };
@@ -92,121 +95,67 @@ struct Spec<'a> {
     p0: &'a DMatrix<f64>,
 }
 
-/// Kalman filter over the plant's linear description; updates with every delivered
-/// observation of an instant, node by node.
-struct LinearKf<const NX: usize, const NY: usize> {
-    name: &'static str,
-    full_information: bool,
-    plant: Arc<dyn Plant>,
+/// The Kalman filter on every node's packet of an instant: one prediction, then an update
+/// with each delivered measurement, node by node. A core [`estimator_core::Estimator`] of its
+/// own because the core's Kalman filter takes one measurement per step.
+#[derive(Clone, Copy)]
+struct NodeByNode<const NX: usize, const NY: usize> {
+    /// The plant's model per node (entries from `nodes` on unused).
+    model: [Snapshot<NX, NY>; MAX_NODES],
+    nodes: usize,
     kf: KalmanFilter<f64, NX>,
-    /// Fixed-size copies of a time-invariant model, so that a step allocates nothing.
-    cache: Option<Box<Cached<NX, NY>>>,
 }
 
-/// A, B Q Bᵀ and, per node, C and D R Dᵀ converted once.
-struct Cached<const NX: usize, const NY: usize> {
-    a: SMatrix<f64, NX, NX>,
-    q: SMatrix<f64, NX, NX>,
-    c: [SMatrix<f64, NY, NX>; MAX_NODES],
-    r: [SMatrix<f64, NY, NY>; MAX_NODES],
-}
+impl<const NX: usize, const NY: usize> estimator_core::Estimator<f64, NX> for NodeByNode<NX, NY> {
+    type Measurement = [Packet<f64, NY>; MAX_NODES];
 
-impl<const NX: usize, const NY: usize> Cached<NX, NY> {
-    fn of(model: &dyn LinearDescription, nodes: usize) -> Box<Self> {
-        let mut c = [SMatrix::zeros(); MAX_NODES];
-        let mut r = [SMatrix::identity(); MAX_NODES];
-        for m in 0..nodes.min(MAX_NODES) {
-            c[m] = fixed(&model.c(m, 0));
-            r[m] = fixed(&model.measurement_cov(m, 0));
-        }
-        Box::new(Self {
-            a: fixed(&model.a(0)),
-            q: fixed(&model.process_cov(0)),
-            c,
-            r,
-        })
-    }
-}
-
-fn fixed<const R: usize, const C: usize>(m: &DMatrix<f64>) -> SMatrix<f64, R, C> {
-    SMatrix::from_fn(|i, j| m[(i, j)])
-}
-
-impl<const NX: usize, const NY: usize> LinearKf<NX, NY> {
-    fn boxed(spec: Spec<'_>) -> anyhow::Result<Box<dyn Estimator>> {
-        let kf = KalmanFilter::new(SVector::from_column_slice(spec.x0), fixed(spec.p0))
-            .map_err(|e| anyhow::anyhow!("{}: initial.estimator_cov: {e}", spec.name))?;
-        let cache = spec
-            .plant
-            .linear()
-            .filter(|m| m.time_invariant())
-            .map(|m| Cached::of(m, spec.plant.nodes()));
-        Ok(Box::new(Self {
-            name: spec.name,
-            full_information: spec.full_information,
-            plant: spec.plant,
-            kf,
-            cache,
-        }))
-    }
-
-    fn model(&self) -> Result<&dyn LinearDescription, Error> {
-        super::linear_of(&*self.plant)
-    }
-}
-
-impl<const NX: usize, const NY: usize> Estimator for LinearKf<NX, NY> {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-
-    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        if let Some(m) = &self.cache {
-            let mut kf = self.kf;
-            kf.predict_with(&m.a, &m.q)?;
-            for o in obs {
-                if let Some(y) = o.measurement() {
-                    let node = o.node as usize;
-                    if node >= self.plant.nodes() {
-                        return Err(Error::InvalidConfig {
-                            field: "node",
-                            reason: "observation from a node the model does not have",
-                        });
-                    }
-                    kf.update_with::<NY>(&m.c[node], &m.r[node], &SVector::from_column_slice(y))?;
-                }
-            }
-            self.kf = kf;
-            return Ok(());
-        }
-        let model = self.model()?;
-        let (k, prev) = (k as usize, k.saturating_sub(1) as usize);
+    fn step(&mut self, _k: usize, y: &Self::Measurement) -> Result<(), Error> {
         // Work on a copy and commit at the end: an error leaves the filter untouched.
         let mut kf = self.kf;
-        kf.predict_with(&fixed(&model.a(prev)), &fixed(&model.process_cov(prev)))?;
-        for o in obs {
-            if let Some(y) = o.measurement() {
-                let node = o.node as usize;
-                kf.update_with::<NY>(
-                    &fixed(&model.c(node, k)),
-                    &fixed(&model.measurement_cov(node, k)),
-                    &SVector::from_column_slice(y),
-                )?;
+        kf.predict_with(&self.model[0].a, &self.model[0].q)?;
+        for (node, y) in y.iter().enumerate() {
+            if let Some(y) = y.delivered() {
+                if node >= self.nodes {
+                    return Err(Error::InvalidConfig {
+                        field: "node",
+                        reason: "observation from a node the model does not have",
+                    });
+                }
+                let m = &self.model[node];
+                kf.update_with::<NY>(&m.c, &m.r, y)?;
             }
         }
         self.kf = kf;
         Ok(())
     }
 
-    fn estimate(&self, out: &mut [f64]) {
-        out[..NX].copy_from_slice(self.kf.estimate().state().as_slice());
+    fn estimate(&self) -> &Estimate<f64, NX> {
+        self.kf.estimate()
     }
+}
 
-    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        sink("trace_p", self.kf.estimate().covariance().trace());
-    }
+/// `NodeByNode`'s model at instant `k`.
+fn remodel<const NX: usize, const NY: usize>(
+    e: &mut NodeByNode<NX, NY>,
+    model: &dyn LinearDescription,
+    k: usize,
+) {
+    e.model = Snapshot::nodes(model, e.nodes, k);
+}
 
-    fn full_information(&self) -> bool {
-        self.full_information
-    }
+/// The filter of `spec` at `NX`, `NY`.
+fn boxed<const NX: usize, const NY: usize>(spec: Spec<'_>) -> anyhow::Result<Box<dyn Estimator>> {
+    let kf = KalmanFilter::new(SVector::from_column_slice(spec.x0), fixed(spec.p0))
+        .map_err(|e| anyhow::anyhow!("{}: initial.estimator_cov: {e}", spec.name))?;
+    let nodes = spec.plant.nodes();
+    let model = super::linear_of(&*spec.plant)?;
+    let est = NodeByNode::<NX, NY> {
+        model: Snapshot::nodes(model, nodes, 1),
+        nodes,
+        kf,
+    };
+    Ok(Box::new(
+        Adapted::<_, NX>::new(spec.name, Fed::on_plant(est, spec.plant, remodel))
+            .with_full_information(spec.full_information),
+    ))
 }

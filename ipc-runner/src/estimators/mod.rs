@@ -2,12 +2,23 @@
 //!
 //! Each estimator family is one file with a [`Factory`]; a family returns an empty list for
 //! scenarios it does not apply to. Adding a family is one file and one line in [`FACTORIES`].
+//!
+//! The families run estimator-core's estimators through the core's one interface
+//! ([`estimator_core::Estimator`], mostly a filter paired with its model in an
+//! [`estimator_core::OnModel`]); the application's [`Estimator`] over one is `adapter`'s, the
+//! stepping from slot observations `fed`'s, the conversion of the observations into the core's
+//! measurements `slots`', of the plant's model into fixed-size matrices `snapshot`'s. `pf` is
+//! the application's own particle filter and implements [`Estimator`] directly.
 
+mod adapter;
+mod fed;
 pub mod ikf;
 pub mod kf;
 pub mod nn;
 pub mod occlusion;
 pub mod pf;
+mod slots;
+mod snapshot;
 pub mod tobit;
 
 use std::borrow::Cow;

@@ -24,15 +24,17 @@
 use channel_sim::channel::token_bucket::TokenBucketStage;
 use channel_sim::plant::nn::Seed003Plant;
 use channel_sim::scenario::ComposedScenario;
-use channel_sim::{Observation, Scenario};
+use channel_sim::Scenario;
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
 use estimator_core::filter::nn::{
     check_before_run, BucketParams, NnBoundConfig, NnTbcpEstimator, PreRunVerdict, Tanh,
 };
 use estimator_core::papers::{Seed003Example, Seed003Nn};
-use estimator_core::Error;
+use estimator_core::OnModel;
 use nalgebra::{matrix, SMatrix, SVector};
 
+use super::adapter::Adapted;
+use super::fed::Fed;
 use super::EvalOptions;
 use crate::Estimator;
 
@@ -76,109 +78,50 @@ pub fn build(
         Seed003Example::p0(),
     )
     .map_err(|e| anyhow::anyhow!("nn: {e}"))?;
-    let base = |name: &'static str, mode| -> anyhow::Result<Box<dyn Estimator>> {
-        let kf = CoupledNoiseKf::new(x0, p0, matrix![w], mode)
-            .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-        Ok(Box::new(Baseline { name, kf }))
+    let base = |name: &'static str, mode| {
+        CoupledNoiseKf::new(x0, p0, matrix![w], mode).map_err(|e| anyhow::anyhow!("{name}: {e}"))
     };
+    let kf = base("kf", Linearisation::None)?;
     Ok(vec![
-        Box::new(Nn { nn }),
-        base("kf", Linearisation::None)?,
-        base("ekf", Linearisation::PaperJacobian)?,
-        base("ekf-std", Linearisation::Ekf)?,
+        Box::new(
+            Adapted::<_, 3>::new("nn", Fed::fixed(OnModel::new(Seed003Example, nn)))
+                .with_diagnostics(nn_diagnostics),
+        ),
+        Box::new(Adapted::<_, 3>::new(
+            "kf",
+            Fed::fixed(OnModel::new((Seed003Example, NoNonlinearity), kf)),
+        )),
+        Box::new(Adapted::<_, 3>::new(
+            "ekf",
+            Fed::fixed(OnModel::new(
+                (Seed003Example, Seed003Example),
+                base("ekf", Linearisation::PaperJacobian)?,
+            )),
+        )),
+        Box::new(Adapted::<_, 3>::new(
+            "ekf-std",
+            Fed::fixed(OnModel::new(
+                (Seed003Example, Seed003Example),
+                base("ekf-std", Linearisation::Ekf)?,
+            )),
+        )),
     ])
 }
 
-fn measurement(obs: &[Observation]) -> Option<SVector<f64, 2>> {
-    obs.first()
-        .and_then(|o| o.measurement())
-        .map(SVector::<f64, 2>::from_column_slice)
-}
-
-fn out_of_order() -> Error {
-    Error::InvalidConfig {
-        field: "k",
-        reason: "instants must be processed in increasing order",
-    }
-}
-
-struct Nn {
-    nn: Seed003Nn<f64>,
-}
-
-impl Estimator for Nn {
-    fn name(&self) -> &'static str {
-        "nn"
-    }
-
-    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let k = k as usize;
-        if k <= self.nn.instant() {
-            return Err(out_of_order());
-        }
-        let mut nn = self.nn;
-        // Instants missing from the stream (lost inside the IPC) count as withheld packets.
-        while nn.instant() + 1 < k {
-            nn.step(&Seed003Example, None)?;
-        }
-        nn.step(&Seed003Example, measurement(obs).as_ref())?;
-        self.nn = nn;
-        Ok(())
-    }
-
-    fn estimate(&self, out: &mut [f64]) {
-        out[..3].copy_from_slice(self.nn.estimate().state().as_slice());
-    }
-
-    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        sink("bound_trace", self.nn.estimate().covariance().trace());
-        sink("bound_q_trace", self.nn.bound_q().trace());
-        let phi = self.nn.phi_norm();
-        sink("phi_norm", phi);
-        sink(
-            "phi_exceeds",
-            f64::from(u8::from(phi > self.nn.config().phi_bar())),
-        );
-    }
-}
-
-struct Baseline {
-    name: &'static str,
-    kf: CoupledNoiseKf<f64, 3, 1, 2>,
-}
-
-impl Estimator for Baseline {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-
-    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let k = k as usize;
-        if k <= self.kf.instant() {
-            return Err(out_of_order());
-        }
-        let mut kf = self.kf;
-        let sys = Seed003Example;
-        while kf.instant() + 1 < k {
-            kf.step(&sys, &sys, None)?;
-        }
-        let y = measurement(obs);
-        if self.name == "kf" {
-            kf.step(&sys, &NoNonlinearity, y.as_ref())?;
-        } else {
-            kf.step(&sys, &sys, y.as_ref())?;
-        }
-        self.kf = kf;
-        Ok(())
-    }
-
-    fn estimate(&self, out: &mut [f64]) {
-        out[..3].copy_from_slice(self.kf.estimate().state().as_slice());
-    }
-
-    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        sink("trace_p", self.kf.estimate().covariance().trace());
-    }
+/// The NN estimator's diagnostics: its bounds' traces and `‖φ(x̂_k)‖` against `φ̄`.
+fn nn_diagnostics(
+    on: &OnModel<Seed003Example, Seed003Nn<f64>, 2>,
+    sink: &mut dyn FnMut(&'static str, f64),
+) {
+    let nn = &on.filter;
+    sink("bound_trace", nn.estimate().covariance().trace());
+    sink("bound_q_trace", nn.bound_q().trace());
+    let phi = nn.phi_norm();
+    sink("phi_norm", phi);
+    sink(
+        "phi_exceeds",
+        f64::from(u8::from(phi > nn.config().phi_bar())),
+    );
 }
 
 /// The assumption checker's pre-run verdict for a seed 003 scenario (`None` otherwise).

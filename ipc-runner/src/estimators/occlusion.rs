@@ -11,16 +11,18 @@
 use std::sync::Arc;
 
 use channel_sim::channel::occlusion::OcclusionSpec;
-use channel_sim::plant::{LinearDescription, Plant};
+use channel_sim::plant::Plant;
 use channel_sim::scenario::ComposedScenario;
-use channel_sim::{Observation, Scenario};
+use channel_sim::Scenario;
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
 use estimator_core::gsum::GaussSum;
-use estimator_core::model::LinearSystem;
 use estimator_core::protocol::occlusion::Occlusion;
-use estimator_core::Error;
-use nalgebra::{DMatrix, SMatrix, SVector};
+use estimator_core::{OnModel, Packet};
+use nalgebra::{SMatrix, SVector};
 
+use super::adapter::Adapted;
+use super::fed::Fed;
+use super::snapshot::{fixed, Snapshot};
 use super::EvalOptions;
 use crate::Estimator;
 
@@ -77,10 +79,6 @@ fn by_dims<const S: usize>(
     }
 }
 
-fn fixed<const R: usize, const C: usize>(m: &DMatrix<f64>) -> SMatrix<f64, R, C> {
-    SMatrix::from_fn(|i, j| m[(i, j)])
-}
-
 fn family<const NX: usize, const NY: usize, const S: usize>(
     composed: &ComposedScenario,
     spec: &OcclusionSpec<S>,
@@ -97,142 +95,26 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
         CrossCoupledEstimator::new(x0, p0, occ, &gsum).map_err(|e| anyhow::anyhow!("cce: {e}"))?;
     let kfio = KfIo::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("kf-io: {e}"))?;
     let adf = AssumedDensityFilter::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("adf: {e}"))?;
+    let model = Snapshot::<NX, NY>::at(super::linear_of(&*plant)?, 1);
     Ok(vec![
-        Box::new(Wrapped::<NX, NY, _>::new("cce", Arc::clone(&plant), cce)),
-        Box::new(Wrapped::<NX, NY, _>::new("kf-io", Arc::clone(&plant), kfio)),
-        Box::new(Wrapped::<NX, NY, _>::new("adf", plant, adf)),
+        adapted("cce", &plant, OnModel::new(model, cce)),
+        adapted("kf-io", &plant, OnModel::new(model, kfio)),
+        adapted("adf", &plant, OnModel::new(model, adf)),
     ])
 }
 
-/// The plant's matrices of one step as a core [`LinearSystem`] (`A`, `BQBᵀ` of `k − 1`;
-/// `C`, `DRDᵀ` of `k`).
-#[derive(Clone)]
-struct Snapshot<const NX: usize, const NY: usize> {
-    a: SMatrix<f64, NX, NX>,
-    q: SMatrix<f64, NX, NX>,
-    c: SMatrix<f64, NY, NX>,
-    r: SMatrix<f64, NY, NY>,
-}
-
-impl<const NX: usize, const NY: usize> LinearSystem<f64, NX, NY> for Snapshot<NX, NY> {
-    fn a(&self, _k: usize) -> SMatrix<f64, NX, NX> {
-        self.a
-    }
-    fn c(&self, _k: usize) -> SMatrix<f64, NY, NX> {
-        self.c
-    }
-    fn process_cov(&self, _k: usize) -> SMatrix<f64, NX, NX> {
-        self.q
-    }
-    fn measurement_cov(&self, _k: usize) -> SMatrix<f64, NY, NY> {
-        self.r
-    }
-}
-
-/// What the wrapper needs from a core occlusion filter.
-trait OcclusionFilter<const NX: usize, const NY: usize>: Send {
-    /// One step; returns the region label when the filter has one.
-    fn step_core(
-        &mut self,
-        m: &Snapshot<NX, NY>,
-        k: usize,
-        y: Option<&SVector<f64, NY>>,
-    ) -> Result<Option<usize>, Error>;
-    fn x(&self) -> &SVector<f64, NX>;
-    fn p(&self) -> &SMatrix<f64, NX, NX>;
-}
-
-/// The three core filters share the `estimate` accessor and a `step` of the same
-/// shape; only `cce` and `adf` return a region label.
-macro_rules! occlusion_filter {
-    ($ty:ty, [$($g:tt)*], $label:expr) => {
-        impl<const NX: usize, const NY: usize, $($g)*> OcclusionFilter<NX, NY> for $ty {
-            fn step_core(
-                &mut self,
-                m: &Snapshot<NX, NY>,
-                k: usize,
-                y: Option<&SVector<f64, NY>>,
-            ) -> Result<Option<usize>, Error> {
-                self.step(m, k, y).map($label)
-            }
-            fn x(&self) -> &SVector<f64, NX> {
-                self.estimate().state()
-            }
-            fn p(&self) -> &SMatrix<f64, NX, NX> {
-                self.estimate().covariance()
-            }
-        }
-    };
-}
-occlusion_filter!(CrossCoupledEstimator<f64, NX, 1, S, N>, [const S: usize, const N: usize], Some);
-occlusion_filter!(AssumedDensityFilter<f64, NX, S>, [const S: usize], Some);
-occlusion_filter!(KfIo<f64, NX, S>, [const S: usize], |()| None);
-
-struct Wrapped<const NX: usize, const NY: usize, F> {
+/// `on` (a filter on node 0's model) under `name`.
+fn adapted<const NX: usize, const NY: usize, F>(
     name: &'static str,
-    plant: Arc<dyn Plant>,
-    /// The model converted once when the plant is time invariant (no allocation per step).
-    cached: Option<Snapshot<NX, NY>>,
-    f: F,
-    label: usize,
-}
-
-impl<const NX: usize, const NY: usize, F> Wrapped<NX, NY, F> {
-    fn new(name: &'static str, plant: Arc<dyn Plant>, f: F) -> Self {
-        let cached = plant
-            .linear()
-            .filter(|m| m.time_invariant())
-            .map(|m| snapshot(m, 1));
-        Self {
-            name,
-            plant,
-            cached,
-            f,
-            label: 0,
-        }
-    }
-}
-
-/// The matrices of instant `k` (`A`, `BQBᵀ` of `k − 1`; `C`, `DRDᵀ` of `k`), converted to
-/// fixed size (allocates: nalgebra's dynamic matrices).
-fn snapshot<const NX: usize, const NY: usize>(
-    model: &dyn LinearDescription,
-    k: usize,
-) -> Snapshot<NX, NY> {
-    let prev = k.saturating_sub(1);
-    Snapshot {
-        a: fixed(&model.a(prev)),
-        q: fixed(&model.process_cov(prev)),
-        c: fixed(&model.c(0, k)),
-        r: fixed(&model.measurement_cov(0, k)),
-    }
-}
-
-impl<const NX: usize, const NY: usize, F: OcclusionFilter<NX, NY>> Estimator
-    for Wrapped<NX, NY, F>
+    plant: &Arc<dyn Plant>,
+    on: OnModel<Snapshot<NX, NY>, F, NY>,
+) -> Box<dyn Estimator>
+where
+    OnModel<Snapshot<NX, NY>, F, NY>:
+        estimator_core::Estimator<f64, NX, Measurement = Packet<f64, NY>> + Clone + Send + 'static,
 {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-
-    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let k = k as usize;
-        let snap = super::model_at(&self.cached, &*self.plant, k, |m, k| Ok(snapshot(m, k)))?;
-        let y = obs
-            .first()
-            .and_then(|o| o.measurement())
-            .map(SVector::<f64, NY>::from_column_slice);
-        // A missing slot (no observation at all) counts as a dropout, as DESIGN.md says.
-        let label = self.f.step_core(&snap, k, y.as_ref())?;
-        self.label = label.unwrap_or(0);
-        Ok(())
-    }
-
-    fn estimate(&self, out: &mut [f64]) {
-        out[..NX].copy_from_slice(self.f.x().as_slice());
-    }
-
-    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        sink("trace_p", self.f.p().trace());
-    }
+    let fed = Fed::on_plant(on, Arc::clone(plant), |on, model, k| {
+        on.model = Snapshot::at(model, k);
+    });
+    Box::new(Adapted::<_, NX>::new(name, fed))
 }

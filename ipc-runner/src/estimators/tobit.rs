@@ -23,15 +23,16 @@ use std::sync::{Arc, Mutex};
 
 use channel_sim::channel::event_trigger::TriggeredTokenBucket;
 use channel_sim::channel::tobit::TobitCensoring;
-use channel_sim::plant::{LinearDescription, Plant};
+use channel_sim::plant::Plant;
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::{Observation, Scenario};
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::TobitFusion;
-use estimator_core::linalg::check_finite;
-use estimator_core::Error;
-use nalgebra::{DMatrix, SMatrix, SVector};
+use estimator_core::{Error, Estimator as _, OnModel};
+use nalgebra::{DMatrix, SVector};
 
+use super::fed::Fed;
+use super::snapshot::{fixed, Snapshot};
 use super::EvalOptions;
 use crate::Estimator;
 
@@ -117,10 +118,6 @@ impl Parts {
     }
 }
 
-fn fixed<const R: usize, const C: usize>(m: &DMatrix<f64>) -> SMatrix<f64, R, C> {
-    SMatrix::from_fn(|i, j| m[(i, j)])
-}
-
 /// A fresh fusion filter for the scenario.
 pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
@@ -156,74 +153,39 @@ pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
     .map_err(|e| anyhow::anyhow!("tobit: initial prior: {e}"))
 }
 
-/// One instant of the fusion filter from the observations (all-or-nothing).
-fn step_fusion<const NX: usize, const NY: usize, const L: usize>(
-    fusion: &mut TobitFusion<f64, NX, NY, L>,
-    model: &dyn LinearDescription,
-    cached: Option<&TobitModel<NX, NY, L>>,
-    k: u32,
-    obs: &[Observation],
-) -> Result<(), Error> {
-    let k = k as usize;
-    let mut received = [None::<SVector<f64, NY>>; L];
-    for o in obs {
-        if let (Some(y), Some(slot)) = (o.measurement(), received.get_mut(o.node as usize)) {
-            let y = SVector::<f64, NY>::from_column_slice(y);
-            check_finite(&y, "measurement")?;
-            *slot = Some(y);
-        }
-    }
-    let m = match cached {
-        Some(m) => *m,
-        None => TobitModel::at(model, k)?,
-    };
-    let rec: [Option<&SVector<f64, NY>>; L] = core::array::from_fn(|m| received[m].as_ref());
-    fusion.step(&m.a, &m.q, &m.c, &m.r, rec)
+/// The fusion filter on every node's model.
+type OnNodes<const NX: usize, const NY: usize, const L: usize> =
+    OnModel<[Snapshot<NX, NY>; L], TobitFusion<f64, NX, NY, L>, NY>;
+
+/// A fresh fusion filter on the scenario's model, converted for instant 1 (and by [`Fed`] for
+/// every instant when the plant is time varying).
+fn fed_fusion<const NX: usize, const NY: usize, const L: usize>(
+    parts: &Parts,
+) -> anyhow::Result<Fed<OnNodes<NX, NY, L>>> {
+    let model = Snapshot::nodes(super::linear_of(&*parts.plant)?, L, 1);
+    let on = OnModel::new(model, fusion_for::<NX, NY, L>(parts)?);
+    Ok(Fed::on_plant(
+        on,
+        Arc::clone(&parts.plant),
+        |on, model, k| {
+            on.model = Snapshot::nodes(model, L, k);
+        },
+    ))
 }
 
-/// The plant's matrices for instant `k` (`A`, `BQBᵀ` of `k − 1`; every node's `C` and
-/// measurement variances of `k`) at fixed size. Converting allocates (nalgebra's dynamic
-/// matrices), so a time-invariant plant is converted once, at construction.
-#[derive(Clone, Copy)]
-struct TobitModel<const NX: usize, const NY: usize, const L: usize> {
-    a: SMatrix<f64, NX, NX>,
-    q: SMatrix<f64, NX, NX>,
-    c: [SMatrix<f64, NY, NX>; L],
-    r: [SVector<f64, NY>; L],
-}
-
-impl<const NX: usize, const NY: usize, const L: usize> TobitModel<NX, NY, L> {
-    fn at(model: &dyn LinearDescription, k: usize) -> Result<Self, Error> {
-        let prev = k.saturating_sub(1);
-        let mut r = [SVector::<f64, NY>::zeros(); L];
-        for (m, r) in r.iter_mut().enumerate() {
-            *r = estimator_core::filter::tobit::diagonal_variances(&fixed(
-                &model.measurement_cov(m, k),
-            ))?;
-        }
-        Ok(Self {
-            a: fixed(&model.a(prev)),
-            q: fixed(&model.process_cov(prev)),
-            c: core::array::from_fn(|m| fixed(&model.c(m, k))),
-            r,
-        })
-    }
-
-    /// The converted model when the plant is time invariant.
-    fn cached(model: &dyn LinearDescription) -> Option<Self> {
-        model
-            .time_invariant()
-            .then(|| Self::at(model, 1).ok())
-            .flatten()
-    }
-}
-
+/// The views' one filter: stepped by whichever view asks first at an instant, its result
+/// kept for the others.
 struct Shared<const NX: usize, const NY: usize, const L: usize> {
-    fusion: TobitFusion<f64, NX, NY, L>,
-    plant: Arc<dyn Plant>,
-    cached: Option<TobitModel<NX, NY, L>>,
+    fed: Fed<OnNodes<NX, NY, L>>,
     done_k: u32,
     last: Result<(), Error>,
+}
+
+impl<const NX: usize, const NY: usize, const L: usize> Shared<NX, NY, L> {
+    /// The fusion filter.
+    fn fusion(&self) -> &TobitFusion<f64, NX, NY, L> {
+        &self.fed.get().filter
+    }
 }
 
 struct View<const NX: usize, const NY: usize, const L: usize> {
@@ -236,9 +198,7 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let shared = Arc::new(Mutex::new(Shared {
-        fusion: fusion_for::<NX, NY, L>(parts)?,
-        plant: Arc::clone(&parts.plant),
-        cached: parts.plant.linear().and_then(TobitModel::cached),
+        fed: fed_fusion::<NX, NY, L>(parts)?,
         done_k: 0,
         last: Ok(()),
     }));
@@ -266,10 +226,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
         let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         if s.done_k != k {
-            let plant = Arc::clone(&s.plant);
-            let model = super::linear_of(&*plant)?;
-            let cached = s.cached;
-            s.last = step_fusion(&mut s.fusion, model, cached.as_ref(), k, obs);
+            s.last = s.fed.step::<NX>(k, obs);
             s.done_k = k;
         }
         s.last
@@ -278,8 +235,8 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn estimate(&self, out: &mut [f64]) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let x = match self.node {
-            Some(m) => s.fusion.local_estimate(m).map(|e| *e.state()),
-            None => Some(*s.fusion.estimate().state()),
+            Some(m) => s.fusion().local_estimate(m).map(|e| *e.state()),
+            None => Some(*s.fed.get().estimate().state()),
         };
         match x {
             Some(x) => out[..NX].copy_from_slice(x.as_slice()),
@@ -290,11 +247,11 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn diagnostics_vs_truth(&self, truth: &[f64], sink: &mut dyn FnMut(&'static str, f64)) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let (x, p) = match self.node {
-            Some(m) => match s.fusion.local_estimate(m) {
+            Some(m) => match s.fusion().local_estimate(m) {
                 Some(e) => e.into_parts(),
                 None => return,
             },
-            None => s.fusion.estimate().into_parts(),
+            None => s.fed.get().estimate().into_parts(),
         };
         let e = SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
         if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "bound") {
@@ -308,12 +265,12 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         match self.node {
             Some(m) => {
-                if let Some(p) = s.fusion.local_estimate(m).map(|e| e.covariance()) {
+                if let Some(p) = s.fusion().local_estimate(m).map(|e| e.covariance()) {
                     sink("trace_p", p.trace());
                 }
             }
             None => {
-                let p = s.fusion.estimate().covariance();
+                let p = s.fed.get().estimate().covariance();
                 sink("trace_p", p.trace());
                 if NX == 2 {
                     sink("p11", p[(0, 0)]);
@@ -353,14 +310,16 @@ mod tests {
             for e in v.iter_mut() {
                 e.step(k, &inst.obs).unwrap();
             }
-            step_fusion(
-                &mut alone,
-                parts.plant.linear().unwrap(),
-                None,
-                k,
-                &inst.obs,
-            )
-            .unwrap();
+            let models: [Snapshot<2, 2>; 3] =
+                Snapshot::nodes(parts.plant.linear().unwrap(), 3, k as usize);
+            let y: Vec<_> = inst
+                .obs
+                .iter()
+                .map(|o| o.measurement().map(SVector::<f64, 2>::from_column_slice))
+                .collect();
+            alone
+                .step_models(&models, k as usize, core::array::from_fn(|m| y[m].as_ref()))
+                .unwrap();
             let mut out = [0.0; 2];
             v[3].estimate(&mut out);
             assert_eq!(

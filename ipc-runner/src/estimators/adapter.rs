@@ -1,0 +1,77 @@
+//! The application's dynamic [`Estimator`] over a core one: a name, the estimate as `f64`s,
+//! diagnostics, and the stepping of [`Fed`].
+
+use estimator_core::Error;
+
+use super::fed::Fed;
+use super::slots::FromSlots;
+use crate::Estimator;
+
+/// Reports an estimator's per-step diagnostics (see [`Estimator::diagnostics`]).
+pub(crate) type Diagnostics<E> = fn(&E, &mut dyn FnMut(&'static str, f64));
+
+/// A core estimator `E` on `NX` states under a name.
+pub(crate) struct Adapted<E, const NX: usize> {
+    name: &'static str,
+    fed: Fed<E>,
+    diagnostics: Diagnostics<E>,
+    full_information: bool,
+}
+
+impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
+    /// `fed` named `name`, reporting `trace_p`, the trace of the estimate's covariance.
+    pub(crate) fn new(name: &'static str, fed: Fed<E>) -> Self {
+        Self {
+            name,
+            fed,
+            diagnostics: trace_p,
+            full_information: false,
+        }
+    }
+
+    /// Reports `diagnostics` instead of `trace_p`.
+    pub(crate) fn with_diagnostics(mut self, diagnostics: Diagnostics<E>) -> Self {
+        self.diagnostics = diagnostics;
+        self
+    }
+
+    /// An oracle fed the observations before the channel ([`Estimator::full_information`]).
+    pub(crate) fn with_full_information(mut self, full_information: bool) -> Self {
+        self.full_information = full_information;
+        self
+    }
+}
+
+/// `trace_p`: the trace of the estimate's covariance.
+fn trace_p<E: estimator_core::Estimator<f64, NX>, const NX: usize>(
+    e: &E,
+    sink: &mut dyn FnMut(&'static str, f64),
+) {
+    sink("trace_p", e.estimate().covariance().trace());
+}
+
+impl<E, const NX: usize> Estimator for Adapted<E, NX>
+where
+    E: estimator_core::Estimator<f64, NX> + Clone + Send,
+    E::Measurement: FromSlots,
+{
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn step(&mut self, k: u32, obs: &[channel_sim::Observation]) -> Result<(), Error> {
+        self.fed.step::<NX>(k, obs)
+    }
+
+    fn estimate(&self, out: &mut [f64]) {
+        out[..NX].copy_from_slice(self.fed.get().estimate().state().as_slice());
+    }
+
+    fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
+        (self.diagnostics)(self.fed.get(), sink);
+    }
+
+    fn full_information(&self) -> bool {
+        self.full_information
+    }
+}

@@ -1,0 +1,72 @@
+//! The plant's linear description at one instant, at the fixed sizes the core filters take.
+//!
+//! channel-sim describes a plant with nalgebra's dynamic matrices; the core runs on
+//! const-generic ones. Converting allocates (every dynamic matrix the description returns is a
+//! fresh one), so the adapters convert a time-invariant plant once, at construction, and only a
+//! time-varying one at every step ([`super::fed::Fed`]).
+
+use channel_sim::plant::LinearDescription;
+use estimator_core::model::LinearSystem;
+use nalgebra::{DMatrix, SMatrix};
+
+/// One node's view of the plant at instant `k` as a core [`LinearSystem`]: `A` and `B Q Bᵀ` of
+/// `k − 1`, the node's `C` and `D R Dᵀ` of `k`. The filters call it with the `k` it was taken
+/// at, so the instant arguments of the [`LinearSystem`] methods are not needed.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Snapshot<const NX: usize, const NY: usize> {
+    pub(crate) a: SMatrix<f64, NX, NX>,
+    pub(crate) q: SMatrix<f64, NX, NX>,
+    pub(crate) c: SMatrix<f64, NY, NX>,
+    pub(crate) r: SMatrix<f64, NY, NY>,
+}
+
+impl<const NX: usize, const NY: usize> Snapshot<NX, NY> {
+    /// Node 0 at instant `k`.
+    pub(crate) fn at(model: &dyn LinearDescription, k: usize) -> Self {
+        let [s] = Self::nodes(model, 1, k);
+        s
+    }
+
+    /// Nodes `0..nodes` at instant `k` (`A` and `B Q Bᵀ` converted once). The entries from
+    /// `nodes` on, which no node fills, have `C = 0` and `D R Dᵀ = I`.
+    pub(crate) fn nodes<const L: usize>(
+        model: &dyn LinearDescription,
+        nodes: usize,
+        k: usize,
+    ) -> [Self; L] {
+        let prev = k.saturating_sub(1);
+        let (a, q) = (fixed(&model.a(prev)), fixed(&model.process_cov(prev)));
+        core::array::from_fn(|m| {
+            let (c, r) = if m < nodes {
+                (fixed(&model.c(m, k)), fixed(&model.measurement_cov(m, k)))
+            } else {
+                (SMatrix::zeros(), SMatrix::identity())
+            };
+            Self { a, q, c, r }
+        })
+    }
+}
+
+impl<const NX: usize, const NY: usize> LinearSystem<f64, NX, NY> for Snapshot<NX, NY> {
+    #[inline]
+    fn a(&self, _k: usize) -> SMatrix<f64, NX, NX> {
+        self.a
+    }
+    #[inline]
+    fn c(&self, _k: usize) -> SMatrix<f64, NY, NX> {
+        self.c
+    }
+    #[inline]
+    fn process_cov(&self, _k: usize) -> SMatrix<f64, NX, NX> {
+        self.q
+    }
+    #[inline]
+    fn measurement_cov(&self, _k: usize) -> SMatrix<f64, NY, NY> {
+        self.r
+    }
+}
+
+/// A dynamic matrix at fixed size (the caller knows the dimensions match).
+pub(crate) fn fixed<const R: usize, const C: usize>(m: &DMatrix<f64>) -> SMatrix<f64, R, C> {
+    SMatrix::from_fn(|i, j| m[(i, j)])
+}
