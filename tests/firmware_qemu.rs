@@ -28,7 +28,8 @@ use nalgebra::{matrix, vector, Matrix3, SMatrix, Vector3};
 #[path = "../estimator-core/firmware/src/run/mod.rs"]
 mod run;
 
-use run::{Driven, Stream, Summary};
+use estimator_core::{Estimator, Packet};
+use run::{Stream, Summary};
 
 #[path = "firmware_qemu/elf.rs"]
 mod elf;
@@ -308,14 +309,11 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
         let p64 = nalgebra::Matrix2::new(p[0], p[1], p[1], p[2]);
         let x64 = nalgebra::Vector2::from(x64);
 
-        let y: [Option<nalgebra::Vector2<f32>>; 3] = r
+        let y: [Packet<f32, 2>; 3] = r
             .nodes
-            .map(|slot| slot.delivered.then(|| nalgebra::Vector2::from(slot.y)));
-        Driven::step(&mut f32_run, r.k as usize, y.each_ref().map(Option::as_ref)).unwrap();
-        let (x32, p32) = (
-            f32_run.fusion.estimate().state(),
-            f32_run.fusion.estimate().covariance(),
-        );
+            .map(|slot| Packet::from(slot.delivered.then(|| nalgebra::Vector2::from(slot.y))));
+        f32_run.step(r.k as usize, &y).unwrap();
+        let (x32, p32) = (f32_run.estimate().state(), f32_run.estimate().covariance());
         worst_x = worst_x.max((x32.map(f64::from) - x64).norm() / x64.norm().max(1.0));
         worst_p = worst_p.max((p32.map(f64::from) - p64).norm() / p64.norm());
 
@@ -343,7 +341,7 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
     // The whole-stream driver is this very computation.
     let full = run::run_tobit(&s, usize::MAX);
     assert_eq!((full.errors, full.steps), (0, 200));
-    assert_eq!(&full.x()[..2], f32_run.fusion.estimate().state().as_slice());
+    assert_eq!(&full.x()[..2], f32_run.estimate().state().as_slice());
     assert_eq!(full.arrivals + full.dropouts, 600);
     // P^g is an upper bound (Theorem 5), so the mean NEES of one run of 200 correlated
     // instants should not exceed n_x = 2 by much; 3 allows for the spread of one run and

@@ -1,13 +1,14 @@
-//! The estimator interface of the firmware ([`Driven`]), its input ([`Instant`]), and the one
-//! driver ([`drive`]) every firmware binary and the host check run.
+//! The one driver ([`drive`]) every firmware binary and the host check run: any core
+//! [`Estimator`] over a stream of [`Instant`]s, what the stream's node slots become for it
+//! ([`FromNodes`]), and what the digest records of it after each step ([`Digested`]).
 
-use estimator_core::Error;
+use estimator_core::{Error, Estimator, Packet};
 use nalgebra::Vector2;
 
 use super::digest::Fnv1a64;
 use super::summary::{Summary, MAX_NX};
 
-/// One sampling instant as an estimator sees it: k and what each of the `L` nodes delivered.
+/// One sampling instant of a stream: k and what each of the `L` nodes delivered.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Instant<const L: usize> {
     /// Sampling instant k ≥ 1.
@@ -16,18 +17,52 @@ pub struct Instant<const L: usize> {
     pub y: [Option<Vector2<f32>>; L],
 }
 
-/// An estimator as the driver sees it: one instant with what each of the `L` nodes delivered.
-/// On error the estimator must keep its state (the core's contract).
-pub trait Driven<const L: usize> {
-    /// Whether [`Driven::step`] returns a region label; if not, the digest records 0 for
-    /// every step, else the label (255 for a refused step).
-    const LABELS: bool;
-    /// One instant; returns the region-label estimate (ignored unless [`Driven::LABELS`]).
-    fn step(&mut self, k: usize, y: [Option<&Vector2<f32>>; L]) -> Result<usize, Error>;
-    /// Feeds the current estimate into the digest (x̂, then P's upper triangle, …).
-    fn digest(&self, h: &mut Fnv1a64);
-    /// The current x̂.
-    fn x(&self) -> &[f32];
+/// An estimator's [`Estimator::Measurement`] read from the `L` node slots of an instant.
+pub trait FromNodes<const L: usize>: Sized {
+    /// The measurement of an instant whose nodes delivered `y`; an error when the estimator
+    /// cannot take what arrived (the step is then counted as refused).
+    fn from_nodes(y: &[Option<Vector2<f32>>; L]) -> Result<Self, Error>;
+}
+
+/// An estimator that needs a measurement at every instant (the Kalman filter on the lossless
+/// link, where every instant has one).
+impl FromNodes<1> for Vector2<f32> {
+    fn from_nodes([y]: &[Option<Vector2<f32>>; 1]) -> Result<Self, Error> {
+        y.ok_or(Error::InvalidConfig {
+            field: "y",
+            reason: "no measurement for an estimator that needs one at every instant",
+        })
+    }
+}
+
+/// A single node's packet: a missing measurement is a dropout (the streams have no losses in
+/// transport).
+impl FromNodes<1> for Packet<f32, 2> {
+    fn from_nodes([y]: &[Option<Vector2<f32>>; 1]) -> Result<Self, Error> {
+        Ok(Packet::from(*y))
+    }
+}
+
+/// Every node's packet.
+impl<const L: usize> FromNodes<L> for [Packet<f32, 2>; L] {
+    fn from_nodes(y: &[Option<Vector2<f32>>; L]) -> Result<Self, Error> {
+        Ok(y.map(Packet::from))
+    }
+}
+
+/// What the digest records of an estimator after each step: a label byte, then the estimate.
+pub trait Digested<const NX: usize>: Estimator<f32, NX> {
+    /// The region-label estimate of the last step, for the estimators that have one (the
+    /// label byte is then the label, 255 after a refused step; 0 for the others).
+    fn label(&self) -> Option<usize> {
+        None
+    }
+
+    /// Feeds the estimate: x̂, then P's upper triangle (an estimator with more state worth
+    /// pinning feeds that too).
+    fn digest(&self, h: &mut Fnv1a64) {
+        h.estimate(self.estimate().state(), self.estimate().covariance());
+    }
 }
 
 /// Runs the estimator's constructor in a frame of its own, and [`step_all`] the steps in
@@ -42,12 +77,16 @@ fn construct<E>(build: impl FnOnce() -> Result<E, Error>) -> Result<E, Error> {
 /// The one driver: builds the estimator, steps it over the first `steps` instants (all of them
 /// if `steps` exceeds the stream), and digests after every instant the label byte and the
 /// estimate. Counts arrivals and dropouts per node slot, and the refused steps.
-pub fn drive<const L: usize, E: Driven<L>>(
+pub fn drive<const L: usize, const NX: usize, E>(
     name: &'static str,
     instants: impl Iterator<Item = Instant<L>>,
     steps: usize,
     build: impl FnOnce() -> Result<E, Error>,
-) -> Summary {
+) -> Summary
+where
+    E: Digested<NX>,
+    E::Measurement: FromNodes<L>,
+{
     let mut s = Summary::new(name);
     // Borrowed in place: moving the estimator out of the `Result` would be a second copy of
     // it on the stack.
@@ -57,7 +96,7 @@ pub fn drive<const L: usize, E: Driven<L>>(
         return s;
     };
     s.digest = step_all(&mut s, est, instants.take(steps));
-    let x = est.x();
+    let x = est.estimate().state().as_slice();
     s.nx = x.len().min(MAX_NX);
     for (b, v) in s.x_bits.iter_mut().zip(x) {
         *b = v.to_bits();
@@ -67,11 +106,15 @@ pub fn drive<const L: usize, E: Driven<L>>(
 
 /// The loop of [`drive`], in a frame of its own (see [`construct`]). Returns the digest.
 #[inline(never)]
-fn step_all<const L: usize, E: Driven<L>>(
+fn step_all<const L: usize, const NX: usize, E>(
     s: &mut Summary,
     est: &mut E,
     instants: impl Iterator<Item = Instant<L>>,
-) -> u64 {
+) -> u64
+where
+    E: Digested<NX>,
+    E::Measurement: FromNodes<L>,
+{
     let mut h = Fnv1a64::default();
     for inst in instants {
         s.steps += 1;
@@ -82,14 +125,17 @@ fn step_all<const L: usize, E: Driven<L>>(
                 s.dropouts += 1;
             }
         }
-        let label = match est.step(inst.k as usize, inst.y.each_ref().map(Option::as_ref)) {
-            Ok(label) => label,
-            Err(_) => {
-                s.error(inst.k);
-                usize::MAX
-            }
+        let stepped =
+            E::Measurement::from_nodes(&inst.y).and_then(|y| est.step(inst.k as usize, &y));
+        if stepped.is_err() {
+            s.error(inst.k);
+        }
+        let label = match (est.label(), stepped) {
+            (None, _) => 0,
+            (Some(label), Ok(())) => label.min(255) as u8,
+            (Some(_), Err(_)) => 255,
         };
-        h.bytes(&[if E::LABELS { label.min(255) as u8 } else { 0 }]);
+        h.bytes(&[label]);
         est.digest(&mut h);
     }
     h.0

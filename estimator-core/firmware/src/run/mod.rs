@@ -1,6 +1,6 @@
 //! The target-independent half of the firmware: the embedded measurement streams, the models
-//! they were simulated from, and one generic driver ([`drive`]) that runs any estimator
-//! ([`Driven`]) in `f32` over a stream and digests every estimate.
+//! they were simulated from, and one generic driver ([`drive`]) that runs any core estimator
+//! ([`estimator_core::Estimator`]) in `f32` over a stream and digests every estimate.
 //!
 //! The same source is compiled into the firmware (Cortex-M4F) and into the host check
 //! (`tests/firmware_qemu.rs`, through `#[path]` on this file), so the two sides run the same
@@ -15,11 +15,13 @@
 //! Modules, each importing only from those above it:
 //! - `digest`: FNV-1a 64 over bytes and estimates;
 //! - `summary`: what a run reports (the `RESULT` line);
-//! - `drive`: the estimator interface [`Driven`], its input [`Instant`] and the one driver
+//! - `drive`: the stream's [`Instant`], what its node slots become for an estimator
+//!   ([`FromNodes`]), what the digest records of one ([`Digested`]) and the one driver
 //!   [`drive`];
 //! - `vectors`: the embedded vector files, their format and parsers;
 //! - `models`: the `f32` models of seeds 001 and 004;
-//! - `drivers`: one [`Driven`] per estimator and its `run_<name>`.
+//! - `drivers`: every estimator (mostly a core filter paired with its model in an
+//!   [`estimator_core::OnModel`]) and its `run_<name>`.
 //!
 //! Everything public is re-exported here, so users name it `run::…`.
 #![forbid(unsafe_code)]
@@ -32,10 +34,10 @@ mod summary;
 mod vectors;
 
 pub use digest::{fnv1a64, Fnv1a64};
-pub use drive::{drive, Driven, Instant};
+pub use drive::{drive, Digested, FromNodes, Instant};
 pub use drivers::{
-    run_adf, run_cce, run_ikf, run_kf, run_kf_io, run_nn, run_tobit, Adf, Cce, Fusion, KfIoF32, Nn,
-    OcclusionEstimator, OnModel, Tobit,
+    run_adf, run_cce, run_ikf, run_kf, run_kf_io, run_nn, run_tobit, Adf, Cce, Fusion, Ikf, Kf,
+    KfIo, Nn, Tobit,
 };
 pub use models::{
     model, occlusion, prior, Model, TobitModel, TOBIT_CHI, TOBIT_ETA0, TOBIT_LAMBDA, TOBIT_SIGMA,

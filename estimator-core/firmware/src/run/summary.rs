@@ -23,7 +23,7 @@ pub struct Summary {
     pub errors: u32,
     /// Instant k of the first error (0 if none).
     pub first_error: u32,
-    /// FNV-1a 64 over every step's label byte and estimate (see [`Driven::digest`](super::Driven::digest)).
+    /// FNV-1a 64 over every step's label byte and estimate (see [`Digested`](super::Digested)).
     pub digest: u64,
     /// Entries of x̂ in `x_bits` (0 if the estimator could not be built).
     pub nx: usize,

@@ -1,13 +1,12 @@
-//! One [`Driven`](super::Driven) per estimator, with the `run_<name>` each firmware binary
-//! calls: the seed 001 estimators over the occlusion stream, the seed 003 NN estimator over the
-//! token-bucket stream, the seed 004 fusion filter over the Tobit stream.
+//! Every estimator the firmware runs, each a core [`Estimator`](estimator_core::Estimator)
+//! with what its digest records ([`Digested`](super::Digested)), and the `run_<name>` each
+//! firmware binary calls: the seed 001 estimators over the occlusion stream, the seed 003 NN
+//! estimator over the token-bucket stream, the seed 004 fusion filter over the Tobit stream.
 
 mod nn;
 mod occlusion;
 mod tobit;
 
 pub use nn::{run_nn, Nn};
-pub use occlusion::{
-    run_adf, run_cce, run_ikf, run_kf, run_kf_io, Adf, Cce, KfIoF32, OcclusionEstimator, OnModel,
-};
+pub use occlusion::{run_adf, run_cce, run_ikf, run_kf, run_kf_io, Adf, Cce, Ikf, Kf, KfIo};
 pub use tobit::{run_tobit, Fusion, Tobit};

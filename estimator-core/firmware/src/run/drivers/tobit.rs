@@ -3,11 +3,11 @@
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::TobitFusion;
 use estimator_core::protocol::event_trigger::EventTriggerConfig;
-use estimator_core::Error;
+use estimator_core::{Error, Estimate, Estimator, Packet};
 use nalgebra::{Matrix2, Vector2};
 
 use super::super::digest::Fnv1a64;
-use super::super::drive::{drive, Driven};
+use super::super::drive::{drive, Digested};
 use super::super::models::{TobitModel, TOBIT_CHI, TOBIT_ETA0, TOBIT_LAMBDA, TOBIT_SIGMA};
 use super::super::summary::Summary;
 use super::super::vectors::{NodeStream, NODES, NY, TOBIT_NX};
@@ -15,7 +15,11 @@ use super::super::vectors::{NodeStream, NODES, NY, TOBIT_NX};
 /// The federated Tobit fusion filter of the stream: 3 local Tobit filters on (n_x, n_y) = (2, 2).
 pub type Fusion = TobitFusion<f32, TOBIT_NX, NY, NODES>;
 
-/// Seed 004's estimator side as the firmware runs it: the fusion filter and its model.
+/// Seed 004's estimator side as the firmware runs it: the fusion filter and the example's
+/// matrices. A core estimator of its own rather than the fusion filter's
+/// [`OnModel`](estimator_core::OnModel) pairing: that pairing takes every node's model as a
+/// [`LinearSystem`](estimator_core::model::LinearSystem) and derives the variances R_m,j from
+/// R_m at every step, which the time-invariant example has stored once.
 #[derive(Clone, Debug)]
 pub struct Tobit {
     /// The example's matrices.
@@ -58,27 +62,30 @@ impl Tobit {
 }
 
 /// One instant of Algorithm 1 on the estimator side: every local filter on what its node
-/// delivered (θ = 1 holds the last received measurement), fusion (50), reset (51). The digest
-/// covers x̂^g and P^g, then every node's x̂_m and P̄_m before the reset.
-impl Driven<NODES> for Tobit {
-    const LABELS: bool = false;
-    fn step(&mut self, _k: usize, y: [Option<&Vector2<f32>>; NODES]) -> Result<usize, Error> {
+/// delivered (θ = 1 holds the last received measurement), fusion (50), reset (51).
+impl Estimator<f32, TOBIT_NX> for Tobit {
+    type Measurement = [Packet<f32, NY>; NODES];
+
+    fn step(&mut self, _k: usize, y: &[Packet<f32, NY>; NODES]) -> Result<(), Error> {
         let m = &self.model;
-        self.fusion.step(&m.a, &m.bqb, &m.c, &m.r, y).map(|()| 0)
+        let received = core::array::from_fn(|i| y[i].delivered());
+        self.fusion.step(&m.a, &m.bqb, &m.c, &m.r, received)
     }
+
+    fn estimate(&self) -> &Estimate<f32, TOBIT_NX> {
+        self.fusion.estimate()
+    }
+}
+
+/// The digest covers x̂^g and P^g, then every node's x̂_m and P̄_m before the reset.
+impl Digested<TOBIT_NX> for Tobit {
     fn digest(&self, h: &mut Fnv1a64) {
-        h.estimate(
-            self.fusion.estimate().state(),
-            self.fusion.estimate().covariance(),
-        );
+        h.estimate(self.estimate().state(), self.estimate().covariance());
         for m in 0..NODES {
             if let Some(e) = self.fusion.local_estimate(m) {
                 h.estimate(e.state(), e.covariance());
             }
         }
-    }
-    fn x(&self) -> &[f32] {
-        self.fusion.estimate().state().as_slice()
     }
 }
 
