@@ -6,7 +6,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 
 fn steps(c: &mut Criterion) {
-    for (name, f) in benches::estimators::all_kernels() {
+    for (name, mut f) in benches::estimators::all_kernels() {
         c.bench_function(&name, |b| b.iter(|| black_box(f()).expect("step")));
     }
 }

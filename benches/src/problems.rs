@@ -3,7 +3,7 @@
 use estimator_core::filter::{CovarianceUpdate, IntermittentKalmanFilter, KalmanFilter};
 use estimator_core::model::{LinearModel, LinearSystem};
 use estimator_core::papers::Seed001Example;
-use estimator_core::{Real, Result};
+use estimator_core::{Estimator, OnModel, Packet, Real, Result};
 use nalgebra::{matrix, vector, SMatrix, SVector};
 
 /// A linear-Gaussian problem with `B = I`, `D = I`, a converged prior and the measurement
@@ -60,9 +60,9 @@ impl<T: Real, const NX: usize, const NY: usize> KfProblem<T, NX, NY> {
     /// One KF step (predict + Joseph update) from the fixed prior.
     #[inline]
     pub fn kf_step(&self) -> Result<KalmanFilter<T, NX>> {
-        let mut f = self.prior;
-        f.step(&self.model, 1, &self.y)?;
-        Ok(f)
+        let mut f = OnModel::<_, _, NY>::new(&self.model, self.prior);
+        f.step(1, &self.y)?;
+        Ok(f.filter)
     }
 
     /// One KF step with the optimal-gain covariance form `P − K Gᵀ` ([`CovarianceUpdate::Standard`],
@@ -70,27 +70,28 @@ impl<T: Real, const NX: usize, const NY: usize> KfProblem<T, NX, NY> {
     /// `OptimalKalmanForcedSymmetric`.
     #[inline]
     pub fn kf_standard_step(&self) -> Result<KalmanFilter<T, NX>> {
-        let mut f = self
+        let standard = self
             .prior
             .with_covariance_update(CovarianceUpdate::Standard);
-        f.step(&self.model, 1, &self.y)?;
-        Ok(f)
+        let mut f = OnModel::<_, _, NY>::new(&self.model, standard);
+        f.step(1, &self.y)?;
+        Ok(f.filter)
     }
 
     /// One IKF step with the packet delivered (predict + update).
     #[inline]
     pub fn ikf_arrival_step(&self) -> Result<IntermittentKalmanFilter<T, NX>> {
-        let mut f = self.prior_ikf;
-        f.step(&self.model, 1, Some(&self.y))?;
-        Ok(f)
+        let mut f = OnModel::<_, _, NY>::new(&self.model, self.prior_ikf);
+        f.step(1, &Packet::Delivered(self.y))?;
+        Ok(f.filter)
     }
 
     /// One IKF step with the packet dropped (predict only).
     #[inline]
     pub fn ikf_dropout_step(&self) -> Result<IntermittentKalmanFilter<T, NX>> {
-        let mut f = self.prior_ikf;
-        f.step::<NY, _>(&self.model, 1, None)?;
-        Ok(f)
+        let mut f = OnModel::<_, _, NY>::new(&self.model, self.prior_ikf);
+        f.step(1, &Packet::Dropped)?;
+        Ok(f.filter)
     }
 }
 

@@ -11,10 +11,10 @@ use benches::problems::{occlusion_3x2_f32, occlusion_3x2_f64, tracking_4x2_f32, 
 use std::hint::black_box;
 use std::process::ExitCode;
 
-type Kernel = Box<dyn Fn(u64) -> u64>;
+type Kernel = Box<dyn FnMut(u64) -> u64>;
 
 /// Repeats `f` `n` times; counts the successful steps so nothing is optimised away.
-fn repeat<R, E>(f: impl Fn() -> Result<R, E> + 'static) -> Kernel {
+fn repeat<R, E>(mut f: impl FnMut() -> Result<R, E> + 'static) -> Kernel {
     Box::new(move |n| {
         let mut ok = 0;
         for _ in 0..n {
@@ -136,7 +136,7 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
-    let ks = kernels();
+    let mut ks = kernels();
     match args.get(1).map(String::as_str) {
         Some("list") => {
             for (name, _) in &ks {
@@ -145,7 +145,7 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Some(name) => {
-            let Some((_, k)) = ks.iter().find(|(n, _)| *n == name) else {
+            let Some((_, k)) = ks.iter_mut().find(|(n, _)| *n == name) else {
                 eprintln!("icount: unknown kernel {name:?}; `icount list` names them");
                 return ExitCode::from(2);
             };
