@@ -25,7 +25,7 @@
 //! (the paper's T): per instant and node what the channel delivered.
 //!
 //! After regenerating, update the hashes of `OCCLUSION` / `NN` / `TOBIT` in
-//! `estimator-core/firmware/src/run.rs` to the hashes this prints.
+//! `estimator-core/firmware/src/run/vectors.rs` to the hashes this prints.
 //!
 //! File format, version 1 (`occlusion.bin`, `nn.bin`; little-endian): magic `EFV1`, version
 //! u32 = 1, seed u64, steps u32, nx u32 = 3, ny u32 = 2, record size u32 = 32; then per
