@@ -6,6 +6,7 @@ use estimator_core::{Error, Estimator, Packet};
 use nalgebra::Vector2;
 
 use super::digest::Fnv1a64;
+use super::mark::{branch, step_mark, BEGIN};
 use super::summary::{Summary, MAX_NX};
 
 /// One sampling instant of a stream: k and what each of the `L` nodes delivered.
@@ -63,6 +64,12 @@ pub trait Digested<const NX: usize>: Estimator<f32, NX> {
     fn digest(&self, h: &mut Fnv1a64) {
         h.estimate(self.estimate().state(), self.estimate().covariance());
     }
+
+    /// Whether a delivered measurement arrived censored (for the branch code the driver passes
+    /// to the step marker; the estimators whose streams censor nothing keep `false`).
+    fn censored(_y: &Vector2<f32>) -> bool {
+        false
+    }
 }
 
 /// Runs the estimator's constructor in a frame of its own, and [`step_all`] the steps in
@@ -105,6 +112,7 @@ where
 }
 
 /// The loop of [`drive`], in a frame of its own (see [`construct`]). Returns the digest.
+/// Calls the step marker before the loop and around every step (see [`super::mark`]).
 #[inline(never)]
 fn step_all<const L: usize, const NX: usize, E>(
     s: &mut Summary,
@@ -116,6 +124,7 @@ where
     E::Measurement: FromNodes<L>,
 {
     let mut h = Fnv1a64::default();
+    step_mark(0, 0);
     for inst in instants {
         s.steps += 1;
         for y in &inst.y {
@@ -125,8 +134,17 @@ where
                 s.dropouts += 1;
             }
         }
+        step_mark(inst.k, BEGIN);
         let stepped =
             E::Measurement::from_nodes(&inst.y).and_then(|y| est.step(inst.k as usize, &y));
+        step_mark(
+            inst.k,
+            branch(
+                inst.y.each_ref().map(Option::is_some),
+                |m| inst.y[m].as_ref().is_some_and(E::censored),
+                stepped.is_err(),
+            ),
+        );
         if stepped.is_err() {
             s.error(inst.k);
         }

@@ -15,6 +15,7 @@
 //! Modules, each importing only from those above it:
 //! - `digest`: FNV-1a 64 over bytes and estimates;
 //! - `summary`: what a run reports (the `RESULT` line);
+//! - `mark`: the step marker, through which the instruction-count plugin counts single steps;
 //! - `drive`: the stream's [`Instant`], what its node slots become for an estimator
 //!   ([`FromNodes`]), what the digest records of one ([`Digested`]) and the one driver
 //!   [`drive`];
@@ -29,6 +30,7 @@
 mod digest;
 mod drive;
 mod drivers;
+pub mod mark;
 mod models;
 mod summary;
 mod vectors;

@@ -77,8 +77,14 @@ impl Estimator<f32, TOBIT_NX> for Tobit {
     }
 }
 
-/// The digest covers x̂^g and P^g, then every node's x̂_m and P̄_m before the reset.
+/// The digest covers x̂^g and P^g, then every node's x̂_m and P̄_m before the reset. A delivered
+/// measurement is censored where a component is at the threshold τ_m = 0 (eq. 2: the node sends
+/// τ for a value below it).
 impl Digested<TOBIT_NX> for Tobit {
+    fn censored(y: &Vector2<f32>) -> bool {
+        y.iter().any(|&v| v <= 0.0)
+    }
+
     fn digest(&self, h: &mut Fnv1a64) {
         h.estimate(self.estimate().state(), self.estimate().covariance());
         for m in 0..NODES {
