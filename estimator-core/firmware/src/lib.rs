@@ -5,6 +5,7 @@
 //! shared with the host check.
 #![no_std]
 
+pub mod peers;
 pub mod run;
 
 use core::fmt::{self, Write};
