@@ -143,7 +143,13 @@ fn slow_consumer_counts_gaps_instead_of_crashing() {
         &["--buffer", "4", "--debug-slow-us", "500"],
     );
     run.wait_for_stderr("waiting for channel-sim", 30);
-    let mut publ = publisher(&dir, "pub", &p, &["--rate", "0", "--steps", "300"]);
+    // Discarding, not the lossless default of --rate 0: the gaps are what is tested.
+    let mut publ = publisher(
+        &dir,
+        "pub",
+        &p,
+        &["--rate", "0", "--steps", "300", "--backpressure", "discard"],
+    );
     let st = run.wait(60);
     assert!(st.success(), "{st}\n{}", run.err());
     assert!(publ.wait(30).success());

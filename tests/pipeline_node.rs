@@ -1,5 +1,6 @@
 //! The product's pipeline subcommands as a binary of the test package: `run`, `demo`,
-//! `replay` and the publisher (`channel-sim`), dispatched exactly as `ipc-runner` does.
+//! `replay`, `stream-header` and the publisher (`channel-sim`), dispatched exactly as
+//! `ipc-runner` does.
 
 use clap::{Parser, Subcommand};
 
@@ -14,6 +15,7 @@ enum Cmd {
     Demo(ipc_runner::demo::DemoArgs),
     Run(ipc_runner::run::RunArgs),
     Replay(ipc_runner::replay::ReplayArgs),
+    StreamHeader(ipc_runner::stream_header::StreamHeaderArgs),
     ChannelSim(channel_sim::publisher::PublisherArgs),
 }
 
@@ -23,13 +25,14 @@ fn main() {
         Cmd::Demo(a) => ipc_runner::demo::main(&a),
         Cmd::Run(a) => ipc_runner::run::main(&a),
         Cmd::Replay(a) => ipc_runner::replay::main(&a),
+        Cmd::StreamHeader(a) => ipc_runner::stream_header::main(&a),
         Cmd::ChannelSim(a) => channel_sim::publisher::run(&a).map(|_| 0),
     };
     match result {
         Ok(code) => std::process::exit(code),
         Err(e) => {
             eprintln!("pipeline-node: error: {e:#}");
-            std::process::exit(1);
+            std::process::exit(ipc_runner::exit_code_of(&e));
         }
     }
 }

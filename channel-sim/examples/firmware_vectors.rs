@@ -16,7 +16,12 @@
 //! `nn.bin` is run 0 of channel-sim's `nn-token-bucket` preset (seed 003's Section IV example:
 //! x_{k+1} = A_k x_k + f(x_k) + B_k w_k, y_k = C_k x_k + D_k w_k with one scalar
 //! w_k ~ N(0, 0.1), x₀ = [3.1 −2.65 4]ᵀ, token bucket (a, b, S, z₀) = (2, 3, 10, 6)) with seed
-//! [`NN_SEED`], k = 1..=T, T = 100 (label 0 throughout).
+//! [`NN_SEED`], k = 1..=T, T = 100 (label 0 throughout). It is a fixed recorded stream with
+//! the timing the product had before issue 22: the bucket's first decision at k = 1 and no
+//! y₀. The preset now follows the paper (y₀ measured and sent at k = 0, so the bucket's
+//! pattern on k ≥ 1 is one instant earlier); the plant's x_k, y_k for k ≥ 1 are unchanged by
+//! that, so the generator replays the preset without its channel and runs the bucket from
+//! k = 1 itself, which reproduces the recorded file.
 //!
 //! `tobit.bin` is run 0 of channel-sim's `tobit-fusion` preset (seed 004's section 4 example:
 //! the oscillator x_{t+1} = [cos w  sin w; −sin w  cos w] x_t + [0.16; 0.18] ω_t, w = 0.052π,
@@ -145,15 +150,32 @@ fn record(
 }
 
 fn generate_nn() -> anyhow::Result<Vec<u8>> {
+    use channel_sim::channel::token_bucket::TokenBucketStage;
+    use channel_sim::sim::FLAG_TOKEN_BLOCKED;
+    use estimator_core::protocol::token_bucket::TokenBucket;
+
     let preset = channel_sim::scenario::preset("nn-token-bucket")?;
-    let mut sim = preset.start(NN_SEED, 0);
+    let composed = preset
+        .as_any()
+        .downcast_ref::<ComposedScenario>()
+        .ok_or_else(|| anyhow::anyhow!("the nn-token-bucket preset is not composed"))?;
+    let spec = composed
+        .stage::<TokenBucketStage>()
+        .ok_or_else(|| anyhow::anyhow!("the nn-token-bucket preset has no token bucket"))?;
+    // The recorded timing (see the module docs): the bucket decides from k = 1, y₀ unused.
+    let mut bucket = TokenBucket::new(spec.config("stages[0]")?);
+    let mut sim = composed.without_channel().simulate(NN_SEED, 0);
     let mut out = header(NN_SEED);
     for k in 1..=T {
         let inst = sim.next_instant();
         anyhow::ensure!(inst.k == k, "instants out of step at k = {k}");
         let o = &inst.obs[0];
         let x: [f64; 3] = std::array::from_fn(|i| inst.truth[i]);
-        record(&mut out, k, o.delivered, 0, o.flags, &[o.y[0], o.y[1]], &x);
+        if bucket.step().transmit {
+            record(&mut out, k, true, 0, 0, &[o.y[0], o.y[1]], &x);
+        } else {
+            record(&mut out, k, false, 0, FLAG_TOKEN_BLOCKED, &[0.0, 0.0], &x);
+        }
     }
     Ok(out)
 }

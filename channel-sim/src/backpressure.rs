@@ -12,13 +12,13 @@
 //!   without the publisher noticing either.
 //! * **discard** (the default when paced): the slot is dropped for that subscriber at once;
 //!   the runner sees the gap in `seq` and counts it as lost in the IPC, and the publisher
-//!   counts it too ([`Gate::discarded`]).
+//!   counts it too (a `send()` that reached fewer subscribers than there are).
 //!
 //! END and ABORT markers are always sent blocking ([`Mode::Final`]): a stream whose end
 //! marker was discarded would leave the runner waiting for its deadline.
 
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -65,7 +65,6 @@ pub enum Mode {
 pub struct Gate {
     mode: AtomicU8,
     stop: AtomicBool,
-    discarded: AtomicU64,
 }
 
 impl Gate {
@@ -77,6 +76,15 @@ impl Gate {
     /// Sets how the next sends treat a full queue.
     pub fn set_mode(&self, m: Mode) {
         self.mode.store(m as u8, Ordering::Relaxed);
+    }
+
+    /// How the next sends treat a full queue.
+    pub fn mode(&self) -> Mode {
+        match self.mode.load(Ordering::Relaxed) {
+            0 => Mode::Discard,
+            1 => Mode::Block,
+            _ => Mode::Final,
+        }
     }
 
     /// Whether SIGINT/SIGTERM arrived, seen here or by the handler during a blocked send.
@@ -93,18 +101,12 @@ impl Gate {
         self.stop.store(true, Ordering::Relaxed);
     }
 
-    /// Slots dropped for a full subscriber in [`Mode::Discard`].
-    pub fn discarded(&self) -> u64 {
-        self.discarded.load(Ordering::Relaxed)
-    }
-
     /// iceoryx2's back-pressure handler, called while a subscriber's queue is full.
     pub fn handler(self: &Arc<Self>) -> impl Fn(&BackpressureInfo) -> BackpressureAction + Send {
         let gate = Arc::clone(self);
         move |info| {
             let mode = gate.mode.load(Ordering::Relaxed);
             if mode == Mode::Discard as u8 {
-                gate.discarded.fetch_add(1, Ordering::Relaxed);
                 return BackpressureAction::DiscardData;
             }
             let signalled = mode == Mode::Block as u8 && gate.stop_requested();

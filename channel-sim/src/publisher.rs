@@ -18,12 +18,13 @@
 //! waits for a new one. SIGINT/SIGTERM end the run cleanly with an ABORT marker, also while a
 //! send is blocked.
 
-use crate::backpressure::{Backpressure, Gate, Mode};
+use crate::backpressure::{Backpressure, Gate, Mode, BLOCK_SLICE};
 use crate::scenario;
 use crate::sim::MAX_NY;
 use crate::wire::{slot_of, stream_header};
 use anyhow::{bail, Context, Result};
-use estpipe_wire::{self as wire, Slot, StreamHeader, Truth, SLOT_ABORT, SLOT_END};
+use estpipe_wire::services::SlotService;
+use estpipe_wire::{self as wire, Slot, StreamHeader, Truth, SLOT_ABORT, SLOT_DATA, SLOT_END};
 use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::SendError;
@@ -86,7 +87,8 @@ pub struct PublisherReport {
     pub interrupted: bool,
     /// Times the subscriber was lost and a new one awaited.
     pub subscriber_losses: u32,
-    /// Slots dropped for a subscriber whose queue was full (`--backpressure discard`).
+    /// Slots a subscriber did not receive because its queue was full (`--backpressure
+    /// discard`), one per slot and subscriber.
     pub discarded: u64,
     /// Sends that blocked for a whole slice and were sent again (`--backpressure block`).
     pub resent: u64,
@@ -110,48 +112,94 @@ fn wait(node: &Node<ipc::Service>, gate: &Gate, d: Duration) -> Result<(), Stop>
     }
 }
 
-/// What became of a slot handed to [`send_slot`].
+/// What became of a slot handed to [`SlotSender::send`].
 enum Sent {
-    /// Delivered to every subscriber (or dropped for a full one in discard mode).
+    /// Delivered to every subscriber (or, in discard mode, dropped for a full one).
     Done,
     /// A termination request arrived while the send was blocked.
     Stopped,
-    /// The blocked subscriber turned out to be dead and was cleaned up.
-    SubscriberGone,
+    /// The subscriber the send waited for turned out to be dead and was cleaned up, or the
+    /// marker's time ran out.
+    GaveUp,
 }
 
-/// Sends `slot` with `header` as its user header. A send that blocked for a whole slice
-/// gave up on the blocked subscriber; unless a signal or its death explains it, the same
-/// slot is sent again (a second subscriber then receives it twice: the runner ignores a
-/// `seq` it has seen).
-fn send_slot(
-    slot_pub: &Publisher<ipc::Service, Slot, StreamHeader>,
-    header: &StreamHeader,
-    slot: Slot,
-    gate: &Gate,
-    node: &Node<ipc::Service>,
-    n_subs: &dyn Fn() -> usize,
-    resent: &mut u64,
-) -> Result<Sent> {
-    loop {
-        let mut s = slot_pub.loan_uninit()?;
-        *s.user_header_mut() = *header;
-        match s.write_payload(slot).send() {
-            Ok(_) => return Ok(Sent::Done),
-            Err(SendError::UnableToDeliver) => {
-                if gate.stop_requested() {
-                    return Ok(Sent::Stopped);
-                }
-                let _ = node.try_cleanup_dead_nodes();
-                if n_subs() == 0 {
-                    return Ok(Sent::SubscriberGone);
-                }
-                *resent += 1;
+/// The slot publisher with what every send needs: the stream header, the back-pressure
+/// gate and the node (for dead-node cleanup).
+struct SlotSender<'a> {
+    publisher: Publisher<ipc::Service, Slot, StreamHeader>,
+    header: StreamHeader,
+    gate: &'a Gate,
+    node: &'a Node<ipc::Service>,
+    service: &'a SlotService,
+    /// Slots sent again after a blocked send gave up or a subscriber missed them.
+    resent: u64,
+    /// Slots a subscriber did not receive in discard mode (one per slot and subscriber).
+    discarded: u64,
+}
+
+impl SlotSender<'_> {
+    fn subscribers(&self) -> usize {
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Sends `slot` (a marker: until `give_up`, even after a termination request). Blocking,
+    /// a slot is sent again until every subscriber has it:
+    ///
+    /// * a send that blocked for a whole slice gave up on the blocked subscriber: unless a
+    ///   signal or its death explains it, the slot goes again;
+    /// * a subscriber that has not yet connected its end of the queue when the queue fills
+    ///   is skipped by iceoryx2 (it refuses to wait for a receiver that may never come):
+    ///   `send()` reports fewer receivers than there are subscribers, and the slot goes again
+    ///   after a short pause.
+    ///
+    /// A second subscriber that already had the slot then receives it twice; the runner
+    /// ignores a `seq` it has seen.
+    fn send(&mut self, slot: Slot, give_up: Option<std::time::Instant>) -> Result<Sent> {
+        let blocking = self.gate.mode() != Mode::Discard;
+        let mut last_check = std::time::Instant::now();
+        loop {
+            let mut s = self.publisher.loan_uninit()?;
+            *s.user_header_mut() = self.header;
+            let mut out = s.write_payload(slot);
+            if slot.kind != SLOT_DATA {
+                out.payload_mut().send_ns = wire::monotonic_ns();
             }
-            Err(e) => return Err(e.into()),
+            match out.send() {
+                Ok(n) if !blocking => {
+                    self.discarded += self.subscribers().saturating_sub(n) as u64;
+                    return Ok(Sent::Done);
+                }
+                Ok(n) if n >= self.subscribers() => return Ok(Sent::Done),
+                Ok(_) => std::thread::sleep(NOT_CONNECTED_PAUSE),
+                // A signal interrupts iceoryx2's wait inside a blocked send, which then
+                // reports an internal error rather than the signal.
+                Err(e @ (SendError::UnableToDeliver | SendError::InternalError)) => {
+                    if e == SendError::InternalError && !self.gate.stop_requested() {
+                        return Err(e.into());
+                    }
+                }
+                Err(e) => return Err(e.into()),
+            }
+            if give_up.is_none() && self.gate.stop_requested() {
+                return Ok(Sent::Stopped);
+            }
+            if give_up.is_some_and(|t| std::time::Instant::now() > t) {
+                return Ok(Sent::GaveUp);
+            }
+            if last_check.elapsed() >= BLOCK_SLICE {
+                last_check = std::time::Instant::now();
+                let _ = self.node.try_cleanup_dead_nodes();
+                if self.subscribers() == 0 {
+                    return Ok(Sent::GaveUp);
+                }
+            }
+            self.resent += 1;
         }
     }
 }
+
+/// Pause before sending a slot again that a not yet connected subscriber missed.
+const NOT_CONNECTED_PAUSE: Duration = Duration::from_micros(50);
 
 /// Waits until `count()` > 0, cleaning up dead nodes on the way. `Ok(false)` on timeout.
 fn wait_for_subscriber(
@@ -205,13 +253,16 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let truth = wire::truth_service(&node, &args.prefix)?;
     let ready = wire::ready_event_service(&node, &args.prefix)?;
     let gate = Gate::new();
+    // Installs iceoryx2's SIGINT/SIGTERM handler now: a run that never waits (a subscriber is
+    // already there, --rate 0) would otherwise die of the signal's default action.
+    let _ = gate.stop_requested();
     let data_mode = if args.backpressure.blocks(args.rate) {
         Mode::Block
     } else {
         Mode::Discard
     };
     gate.set_mode(data_mode);
-    let slot_pub = slots
+    let publisher = slots
         .publisher_builder()
         .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
         .set_backpressure_handler(gate.handler())
@@ -242,6 +293,15 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let wire_version = args.debug_wire_version.unwrap_or(wire::WIRE_VERSION);
     let mut report = PublisherReport::default();
     let n_subs = || slots.dynamic_config().number_of_subscribers();
+    let mut sender = SlotSender {
+        publisher,
+        header,
+        gate: &gate,
+        node: &node,
+        service: &slots,
+        resent: 0,
+        discarded: 0,
+    };
 
     say(&format!(
         "scenario {} (seed {}, run {}), {steps} instants × {nodes} nodes at {} on prefix {:?}; \
@@ -282,7 +342,6 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let mut last_check = t0;
     let mut delivered_count = 0u64;
     let mut k_done = 0u32;
-    let mut resent = 0u64;
     'instants: for i in 1..=steps {
         if period_ns > 0 {
             let due = t0 + u64::from(i - 1) * period_ns;
@@ -320,15 +379,18 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
                     }
                 }
             }
-            let sent = send_slot(&slot_pub, &header, slot, &gate, &node, &n_subs, &mut resent)?;
-            report.slots += 1;
-            match sent {
-                Sent::Done => {}
+            match sender.send(slot, None)? {
+                Sent::Done => report.slots += 1,
+                // The slot's seq is used: a later subscriber sees the gap.
+                Sent::GaveUp => {
+                    report.slots += 1;
+                    subscriber_gone = true;
+                }
+                // Not sent: the ABORT marker's count ends before it.
                 Sent::Stopped => {
                     report.interrupted = true;
                     break 'instants;
                 }
-                Sent::SubscriberGone => subscriber_gone = true,
             }
         }
         notifier.notify()?;
@@ -367,30 +429,11 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // would leave the runner waiting for its deadline.
     gate.set_mode(Mode::Final);
     let marker = Slot::marker(kind, report.slots, k_done, nodes, sid, 0);
-    let start = std::time::Instant::now();
-    loop {
-        let mut s = slot_pub.loan_uninit()?;
-        *s.user_header_mut() = header;
-        match s
-            .write_payload(Slot {
-                send_ns: wire::monotonic_ns(),
-                ..marker
-            })
-            .send()
-        {
-            Ok(_) => break,
-            Err(SendError::UnableToDeliver) => {
-                let _ = node.try_cleanup_dead_nodes();
-                if n_subs() == 0 || start.elapsed().as_secs_f64() > args.linger {
-                    break;
-                }
-            }
-            Err(e) => return Err(e.into()),
-        }
-    }
+    let give_up = std::time::Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));
+    sender.send(marker, Some(give_up))?;
     notifier.notify()?;
-    report.discarded = gate.discarded();
-    report.resent = resent;
+    report.discarded = sender.discarded;
+    report.resent = sender.resent;
     if report.discarded > 0 {
         say(&format!(
             "{} slot(s) dropped for a subscriber whose queue was full (--backpressure discard)",

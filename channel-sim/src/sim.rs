@@ -21,7 +21,9 @@ pub use estpipe_wire::{
 /// occlusion model the drop itself is information, so the estimator must see the instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Observation {
-    /// Sampling instant k (≥ 1; k = 0 is the prior and has no measurement).
+    /// Sampling instant k. The stream's slots are k ≥ 1; an observation of k = 0 exists only
+    /// for a scenario whose sensors measure at k = 0 (seed 003), and only through
+    /// [`Simulation::initial_observations`].
     pub k: u32,
     /// Sensor node index, 0-based.
     pub node: u8,
@@ -68,8 +70,17 @@ pub struct Instant {
 
 /// A running simulation: yields instants k = 1, 2, … without allocating per step.
 pub trait Simulation: Send {
-    /// The true initial state x_0 (k = 0 has no observation).
+    /// The true initial state x_0.
     fn initial_truth(&self) -> [f64; MAX_NX];
+    /// The observations of instant 0, after every channel stage, for a scenario whose
+    /// sensors measure at k = 0 (seed 003's timing: its token bucket takes its first decision
+    /// at k = 0 and its estimators use y₀); `None` for the others (k = 0 is the prior only,
+    /// seed 001's convention). They are not part of the stream, whose slots start at k = 1:
+    /// the estimators that use them receive them when they are built (docs/design.md,
+    /// "Seed 003").
+    fn initial_observations(&self) -> Option<&[Observation]> {
+        None
+    }
     /// Advances to the next instant.
     fn next_instant(&mut self) -> Instant;
     /// The observations of the last instant as the sensors produced them, before any channel

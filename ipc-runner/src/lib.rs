@@ -12,6 +12,7 @@ pub mod plot;
 pub mod replay;
 pub mod run;
 pub mod slot_log;
+pub mod stream_header;
 pub mod tail;
 pub mod transport;
 
@@ -19,3 +20,10 @@ pub mod transport;
 // ones.
 #[doc(hidden)]
 pub use plot::{latency as plot_latency, trace as plot_trace};
+
+/// The exit code of a failed pipeline command: [`estpipe_wire::ContractError::exit_code`]
+/// (2 for a peer outside the wire contract) when that is the cause, else 1.
+pub fn exit_code_of(e: &anyhow::Error) -> i32 {
+    e.downcast_ref::<estpipe_wire::ContractError>()
+        .map_or(1, estpipe_wire::ContractError::exit_code)
+}

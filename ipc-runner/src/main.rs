@@ -27,18 +27,22 @@ enum Command {
     Run(ipc_runner::run::RunArgs),
     /// Run the estimators over a recorded slot log (CSV, see docs/replay.md).
     Replay(ipc_runner::replay::ReplayArgs),
+    /// Print the stream header a publisher of this scenario must write into every slot
+    /// (JSON; see docs/wire.md).
+    StreamHeader(ipc_runner::stream_header::StreamHeaderArgs),
     /// The channel-sim publisher built into this executable (what `demo` starts).
     #[command(hide = true)]
     ChannelSim(channel_sim::publisher::PublisherArgs),
 }
 
-/// Runs a pipeline subcommand: its exit code, or code 1 with the error chain.
+/// Runs a pipeline subcommand: its exit code, or the error chain with code 2 when the peer
+/// does not follow the wire contract (`ipc_runner::exit_code_of`), else 1.
 fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
     match r {
         Ok(0) => Ok(()),
         Ok(code) => std::process::exit(code),
         Err(e) => Err(CommandError {
-            code: 1,
+            code: ipc_runner::exit_code_of(&e),
             message: format!("{e:#}"),
         }),
     }
@@ -77,6 +81,7 @@ fn main() {
         Command::Demo(a) => pipeline(ipc_runner::demo::main(&a)),
         Command::Run(a) => pipeline(ipc_runner::run::main(&a)),
         Command::Replay(a) => pipeline(ipc_runner::replay::main(&a)),
+        Command::StreamHeader(a) => pipeline(ipc_runner::stream_header::main(&a)),
         Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
     };
     if let Err(CommandError { code, message }) = result {

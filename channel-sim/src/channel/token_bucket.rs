@@ -2,9 +2,11 @@
 //! `estimator_core::protocol::token_bucket::TokenBucket` (the same state machine a real node
 //! would run) and a packet is withheld, flagged [`FLAG_TOKEN_BLOCKED`], when `μ_k < 0`.
 //!
-//! The framework's first instant is k = 1 (no measurement at k = 0), so the bucket takes its
-//! first decision at k = 1 from the level `z0`; the paper's example would take it at k = 0.
-//! The decision does not depend on the data or on randomness: no random numbers are drawn.
+//! The bucket takes its first decision, from the level `z0`, at the first instant it is
+//! applied to. Behind seed 003's plant, which measures at k = 0, that is k = 0, as in the
+//! paper (eq. (2) decides at k = 0: μ₀ = min{z₀ + a, S} − b); behind a plant without a
+//! measurement at k = 0 (a TOML scenario's linear plant) it is k = 1. The decision does not
+//! depend on the data or on randomness: no random numbers are drawn.
 
 use std::any::Any;
 
@@ -98,10 +100,11 @@ mod tests {
         };
         let mut stage = spec.build(1);
         let mut rng = run_rng(0, 0, Stream::Channel);
-        // From eq. (2) by hand (see estimator-core's token_bucket tests): six sends, then
-        // (withheld, sent, sent) repeating.
+        // From eq. (2) by hand (see estimator-core's token_bucket tests): the first six
+        // decisions send, then (withheld, sent, sent) repeats — whatever instant the first
+        // decision is applied to (here k = 0, as behind seed 003's plant).
         let mut pattern = Vec::new();
-        for k in 1..=12u32 {
+        for k in 0..12u32 {
             let mut obs = [Observation {
                 k,
                 node: 0,

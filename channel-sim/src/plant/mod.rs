@@ -52,6 +52,14 @@ pub trait PlantRun: Send {
     /// Advances from x_{k−1} to x_k and writes node m's raw measurement z_{m,k} into
     /// `z[m][..ny]` for every node.
     fn advance(&mut self, k: u32, rng: &mut SimRng, z: &mut [[f64; MAX_NY]]);
+    /// For a plant whose sensors measure at k = 0 (seed 003: eq. (2) takes its first
+    /// decision at k = 0 and eq. (5) uses y₀): writes every node's raw z_{m,0} into `z` and
+    /// returns `true`. Called once, right after the run starts and before the first
+    /// [`Self::advance`]. The default (every other plant: no measurement at k = 0, seed 001's
+    /// convention) writes nothing, draws nothing and returns `false`.
+    fn initial_measurement(&mut self, _rng: &mut SimRng, _z: &mut [[f64; MAX_NY]]) -> bool {
+        false
+    }
 }
 
 /// Feeds `m` to a fingerprint: rows, cols, then the entries column by column.

@@ -8,10 +8,14 @@
 //!
 //! The matrices and `f` come from `estimator_core::papers::Seed003Example`, the
 //! same code the estimators use. Because `w_k` enters `y_k` *and* `x_{k+1}`, one run keeps the
-//! `w_k` drawn for `y_k` and uses it in the next state transition. The framework has no
-//! measurement at k = 0, so `w_0` (which would also have produced `y_0`) is drawn at the first
-//! step. The plant offers no [`LinearDescription`](super::LinearDescription): it is neither
-//! linear nor has independent process and measurement noise.
+//! `w_k` drawn for `y_k` and uses it in the next state transition.
+//!
+//! The sensor measures from k = 0, as the paper's timing has it (eq. (2) decides at k = 0 and
+//! eq. (5) uses `y₀` for `x̂₁`; docs/design.md, "Seed 003"): [`PlantRun::initial_measurement`]
+//! draws `w₀`, writes `y₀ = C₀ x₀ + D₀ w₀` and keeps `w₀` for `x₁`. The draws come in the
+//! order `w₀, w₁, …` either way, so `x_k` and `y_k` for k ≥ 1 are the same numbers whether or
+//! not `y₀` is read. The plant offers no [`LinearDescription`](super::LinearDescription): it is
+//! neither linear nor has independent process and measurement noise.
 
 use std::any::Any;
 
@@ -84,28 +88,50 @@ struct Seed003Run {
     pending_w: Option<f64>,
 }
 
+impl Seed003Run {
+    /// `w ~ N(0, w̄²)` from the plant stream.
+    fn draw(&self, rng: &mut SimRng) -> f64 {
+        let n: f64 = StandardNormal.sample(rng);
+        self.sd * n
+    }
+
+    /// `y_k = C_k x_k + D_k w_k` of the current state with `w`.
+    fn measure(&self, k: u32, w: f64, z: &mut [[f64; MAX_NY]]) {
+        let sys = Seed003Example;
+        let c: nalgebra::SMatrix<f64, 2, 3> = sys.c(k as usize);
+        let d: nalgebra::SMatrix<f64, 2, 1> = sys.d(k as usize);
+        let y = c * self.x + d * w;
+        z[0][..2].copy_from_slice(y.as_slice());
+    }
+}
+
 impl PlantRun for Seed003Run {
     fn state(&self) -> &[f64] {
         self.x.as_slice()
     }
 
+    fn initial_measurement(&mut self, rng: &mut SimRng, z: &mut [[f64; MAX_NY]]) -> bool {
+        // w₀: the first draw of the run, the one `advance(1)` would otherwise make for x₁.
+        let w0 = self.draw(rng);
+        self.measure(0, w0, z);
+        self.pending_w = Some(w0);
+        true
+    }
+
     fn advance(&mut self, k: u32, rng: &mut SimRng, z: &mut [[f64; MAX_NY]]) {
         let sys = Seed003Example;
         let prev = k.saturating_sub(1) as usize;
-        let mut draw = || {
-            let n: f64 = StandardNormal.sample(rng);
-            self.sd * n
+        // w_{k−1}: kept from y_{k−1} (from y₀ when the run measured at k = 0).
+        let w_prev = match self.pending_w.take() {
+            Some(w) => w,
+            None => self.draw(rng),
         };
-        let w_prev = self.pending_w.take().unwrap_or_else(&mut draw);
         let a: nalgebra::SMatrix<f64, 3, 3> = sys.a(prev);
         let b: nalgebra::SMatrix<f64, 3, 1> = sys.b(prev);
         self.x = a * self.x + sys.eval(&self.x) + b * w_prev;
-        let w = draw();
-        let c: nalgebra::SMatrix<f64, 2, 3> = sys.c(k as usize);
-        let d: nalgebra::SMatrix<f64, 2, 1> = sys.d(k as usize);
-        let y = c * self.x + d * w;
+        let w = self.draw(rng);
+        self.measure(k, w, z);
         self.pending_w = Some(w);
-        z[0][..2].copy_from_slice(y.as_slice());
     }
 }
 
@@ -141,6 +167,42 @@ mod tests {
             );
         }
         assert!(Seed003Plant::new(-1.0).is_err());
+    }
+
+    #[test]
+    fn y0_shares_w0_with_x1_and_leaves_later_instants_unchanged() {
+        // y₀ = C₀ x₀ + D₀ w₀ with D₀ = [0.95, 0]ᵀ (sin 0 = 0): w₀ = (y₀ − C₀ x₀)₁ / 0.95, and
+        // the second row carries no noise at all. The same w₀ must drive x₁.
+        let p = Seed003Plant::new(0.1).unwrap();
+        let sys = Seed003Example;
+        let x0 = SVector::<f64, 3>::new(3.1, -2.65, 4.0);
+        let mut run = p.start(x0.as_slice());
+        let mut rng = run_rng(5, 0, Stream::Plant);
+        let mut z = [[0.0; MAX_NY]; 1];
+        assert!(run.initial_measurement(&mut rng, &mut z));
+        let c0: nalgebra::SMatrix<f64, 2, 3> = sys.c(0);
+        let r = SVector::<f64, 2>::new(z[0][0], z[0][1]) - c0 * x0;
+        assert_eq!(r[1], 0.0);
+        let w0 = r[0] / 0.95;
+        run.advance(1, &mut rng, &mut z);
+        let a0: nalgebra::SMatrix<f64, 3, 3> = sys.a(0);
+        let b0: nalgebra::SMatrix<f64, 3, 1> = sys.b(0);
+        let x1 = a0 * x0 + sys.eval(&x0) + b0 * w0;
+        let got = SVector::<f64, 3>::from_column_slice(run.state());
+        assert!((got - x1).amax() < 1e-12, "{got} vs {x1}");
+        // Reading y₀ or not: x_k and y_k for k ≥ 1 are the same bits (w₀ is the first draw
+        // either way).
+        let mut with = p.start(x0.as_slice());
+        let mut without = p.start(x0.as_slice());
+        let (mut r1, mut r2) = (run_rng(6, 3, Stream::Plant), run_rng(6, 3, Stream::Plant));
+        let (mut z1, mut z2) = ([[0.0; MAX_NY]; 1], [[0.0; MAX_NY]; 1]);
+        assert!(with.initial_measurement(&mut r1, &mut z1));
+        for k in 1..=50 {
+            with.advance(k, &mut r1, &mut z1);
+            without.advance(k, &mut r2, &mut z2);
+            assert_eq!(with.state(), without.state(), "k = {k}");
+            assert_eq!(z1, z2, "k = {k}");
+        }
     }
 
     #[test]

@@ -3,7 +3,8 @@
 //! parts they compose.
 //!
 //! The data path of one instant reads top to bottom in [`ComposedSimulation::next_instant`]:
-//! plant → raw observations → stages.
+//! plant → raw observations → stages. A plant that measures at k = 0 (seed 003) sends its
+//! y₀ down the same path when the run starts ([`Simulation::initial_observations`]).
 
 use std::any::Any;
 use std::fmt;
@@ -118,7 +119,7 @@ impl ComposedScenario {
         let mut truth0 = [0.0; MAX_NX];
         truth0[..x0.len()].copy_from_slice(x0.as_slice());
         let nodes = self.plant.nodes();
-        ComposedSimulation {
+        let mut sim = ComposedSimulation {
             plant: self.plant.start(x0.as_slice()),
             stages: self.stages.iter().map(|s| s.build(nodes)).collect(),
             plant_rng,
@@ -128,7 +129,17 @@ impl ComposedScenario {
             z: vec![[0.0; MAX_NY]; nodes],
             ny: self.plant.ny() as u8,
             k: 0,
+            obs0: None,
+        };
+        // Instant 0, for a plant that measures then (seed 003): the sensors' y₀ through every
+        // channel stage, as any other instant. Other plants draw nothing here.
+        if sim
+            .plant
+            .initial_measurement(&mut sim.plant_rng, &mut sim.z)
+        {
+            sim.obs0 = Some(sim.observe(0));
         }
+        sim
     }
 }
 
@@ -181,6 +192,37 @@ pub struct ComposedSimulation {
     z: Vec<[f64; MAX_NY]>,
     ny: u8,
     k: u32,
+    /// The observations of instant 0 (plants that measure at k = 0 only).
+    obs0: Option<heapless::Vec<Observation, { crate::sim::MAX_NODES }>>,
+}
+
+impl ComposedSimulation {
+    /// The sensors' raw observations of instant `k` from `z` (kept in `raw`), then the
+    /// channel, stage by stage.
+    fn observe(&mut self, k: u32) -> heapless::Vec<Observation, { crate::sim::MAX_NODES }> {
+        let x = self.plant.state();
+        // What the sensors hand to the channel: everything delivered, unflagged.
+        self.raw.clear();
+        for (m, z) in self.z.iter().enumerate() {
+            let mut y = [0.0; MAX_NY];
+            y[..self.ny as usize].copy_from_slice(&z[..self.ny as usize]);
+            self.raw.push(Observation {
+                k,
+                node: m as u8,
+                delivered: true,
+                ny: self.ny,
+                y,
+                flags: 0,
+            });
+        }
+        // The channel, stage by stage.
+        let mut obs: heapless::Vec<Observation, { crate::sim::MAX_NODES }> =
+            self.raw.iter().copied().collect();
+        for stage in &mut self.stages {
+            stage.apply(k, x, &mut obs, &mut self.channel_rng);
+        }
+        obs
+    }
 }
 
 impl fmt::Debug for ComposedSimulation {
@@ -205,30 +247,15 @@ impl Simulation for ComposedSimulation {
         let x = self.plant.state();
         let mut truth = [0.0; MAX_NX];
         truth[..x.len()].copy_from_slice(x);
-        // What the sensors hand to the channel: everything delivered, unflagged.
-        self.raw.clear();
-        for (m, z) in self.z.iter().enumerate() {
-            let mut y = [0.0; MAX_NY];
-            y[..self.ny as usize].copy_from_slice(&z[..self.ny as usize]);
-            self.raw.push(Observation {
-                k,
-                node: m as u8,
-                delivered: true,
-                ny: self.ny,
-                y,
-                flags: 0,
-            });
-        }
-        // The channel, stage by stage.
-        let mut obs: heapless::Vec<Observation, { crate::sim::MAX_NODES }> =
-            self.raw.iter().copied().collect();
-        for stage in &mut self.stages {
-            stage.apply(k, x, &mut obs, &mut self.channel_rng);
-        }
+        let obs = self.observe(k);
         Instant { k, truth, obs }
     }
 
     fn raw_observations(&self) -> Option<&[Observation]> {
         Some(&self.raw)
+    }
+
+    fn initial_observations(&self) -> Option<&[Observation]> {
+        self.obs0.as_deref()
     }
 }

@@ -154,12 +154,19 @@ impl Assembler {
                 "node count differs from the scenario the runner was started with",
             ));
         }
+        // Estimators read `ny` entries: a measurement of another size is refused, not read.
+        if slot.delivered == 1 && slot.ny != self.ny {
+            return Err(WireError::Invalid(
+                "ny differs from the scenario the runner was started with",
+            ));
+        }
         if slot.seq < self.next_seq {
             self.counts.out_of_order += 1;
             return Ok(Pushed::Data);
         }
         self.fill_to(slot.seq, emit);
-        let obs = channel_sim::wire::observation_of(slot)?;
+        let mut obs = channel_sim::wire::observation_of(slot)?;
+        obs.ny = self.ny;
         self.counts.received += 1;
         if obs.delivered {
             self.counts.delivered += 1;

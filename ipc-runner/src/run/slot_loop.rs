@@ -8,7 +8,8 @@ use crate::transport::Transport;
 use crate::Estimator;
 use anyhow::{bail, Context, Result};
 use channel_sim::Observation;
-use estpipe_wire::{self as wire, WIRE_VERSION};
+use estpipe_wire::{self as wire, ContractError, StreamHeader, WIRE_VERSION};
+use iceoryx2::port::update_connections::UpdateConnections;
 use std::time::Duration;
 
 use super::args::{RunArgs, WaitMode};
@@ -45,6 +46,9 @@ impl std::fmt::Debug for Hooks<'_> {
 /// Longest single wait: the deadline is checked at least this often.
 const MAX_WAIT_NS: u64 = 50_000_000;
 
+/// A new estimate subscriber gets its history within this many ns while the loop is idle.
+const UPDATE_CONNECTIONS_NS: u64 = 10_000_000;
+
 /// Progress is reported at most this often.
 const PROGRESS_EVERY_NS: u64 = 100_000_000;
 
@@ -59,6 +63,9 @@ pub fn run_loop(
     make: &dyn Fn() -> Result<Vec<Box<dyn Estimator>>>,
     mut hooks: Hooks<'_>,
 ) -> Result<(RunReport, Trajectories)> {
+    // The shape a stream must announce to feed these estimators (docs/wire.md, Stream header).
+    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
+    let expected = channel_sim::wire::stream_header(&*scenario);
     let machine = Machine::set_up(args);
     let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
     let runner = Runner::new(&t, args, make()?, nx, nodes)?;
@@ -74,6 +81,9 @@ pub fn run_loop(
         allocs: Allocs::new(&hooks),
         publisher_losses: 0,
         last_progress: 0,
+        expected,
+        checked_stream: None,
+        last_update_ns: 0,
     };
 
     // iceoryx2 installs its SIGINT/SIGTERM handler on the first `Node::wait`; do that before
@@ -98,6 +108,7 @@ pub fn run_loop(
         let Some(now) = waiter.now() else {
             break Ending::Interrupted;
         };
+        lp.update_connections(now);
         let due = lp.deadline.due();
         if now > due {
             match lp.missed(now) {
@@ -124,6 +135,12 @@ struct Loop<'a> {
     allocs: Allocs,
     publisher_losses: u32,
     last_progress: u64,
+    /// The header of the scenario the estimators were built for.
+    expected: StreamHeader,
+    /// The stream whose header was checked against `expected`.
+    checked_stream: Option<u64>,
+    /// When the estimate publisher last looked for new subscribers.
+    last_update_ns: u64,
 }
 
 impl Loop<'_> {
@@ -145,12 +162,16 @@ impl Loop<'_> {
             let recv_ns = wire::monotonic_ns();
             let slot = sample.payload();
             if slot.version != WIRE_VERSION {
-                bail!(
-                    "{}",
-                    wire::WireError::Version {
-                        found: slot.version
-                    }
-                );
+                let e = wire::WireError::Version {
+                    found: slot.version,
+                };
+                return Err(ContractError::Refused(e.to_string()).into());
+            }
+            // Once per stream, before any of its slots reaches an estimator: a stream of
+            // another shape or model is refused, never fed to estimators built for this one.
+            if self.checked_stream != Some(slot.stream_id) {
+                sample.user_header().check(&self.expected)?;
+                self.checked_stream = Some(slot.stream_id);
             }
             self.deadline.last_data_ns = Some(recv_ns);
             if slot.kind == wire::SLOT_DATA {
@@ -204,6 +225,17 @@ impl Loop<'_> {
                     p(self.runner.last_k, &self.asm.counts);
                 }
             }
+        }
+    }
+
+    /// While idle, at most every [`UPDATE_CONNECTIONS_NS`]: hands a subscriber that connected
+    /// since the last estimate the estimate history (`docs/wire.md`, QoS), which iceoryx2
+    /// otherwise delivers only with the next `send()`.
+    #[inline]
+    fn update_connections(&mut self, now: u64) {
+        if now.saturating_sub(self.last_update_ns) > UPDATE_CONNECTIONS_NS {
+            self.last_update_ns = now;
+            let _ = self.t.estimate_pub.update_connections();
         }
     }
 

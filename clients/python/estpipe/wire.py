@@ -1,0 +1,237 @@
+"""The pipeline's wire contract (docs/wire.md) as ctypes structures over the iceoryx2 PyPI package.
+
+The layouts are the Rust crate estpipe-wire's (`#[repr(C)]`); tests/pipeline_python.rs checks
+every offset and size against it. iceoryx2 compares the type name, size and alignment of
+payload and user header when a service is opened, so these must match exactly.
+"""
+
+import ctypes
+import time
+
+import iceoryx2 as iox2
+
+WIRE_VERSION = 2
+
+MAX_NX = 8
+MAX_NY = 4
+MAX_NODES = 8
+COV_LEN = MAX_NX * (MAX_NX + 1) // 2
+
+SLOT_DATA = 0
+SLOT_END = 1
+SLOT_ABORT = 2
+
+FLAG_TRIGGERED = 1 << 0
+FLAG_TOKEN_BLOCKED = 1 << 1
+FLAG_CENSORED = 1 << 2
+FLAG_RANDOM_LOSS = 1 << 3
+FLAG_OCCLUDED = 1 << 4
+FLAG_IPC_LOST = 1 << 31
+
+STATUS_OK = 0
+STATUS_REFUSED = 1
+STATUS_NONE_YET = 2
+
+COV_NONE = 0
+COV_ESTIMATE = 1
+COV_BOUND = 2
+
+DEFAULT_PREFIX = "estpipe"
+READY_EVENT = 1
+MAX_SUBSCRIBER_BUFFER = 4096
+ESTIMATE_HISTORY = 16
+
+
+class Slot(ctypes.Structure):
+    """One sensor node's observation of one sampling instant (payload of <prefix>/slots)."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint32),
+        ("kind", ctypes.c_uint32),
+        ("stream_id", ctypes.c_uint64),
+        ("seq", ctypes.c_uint64),
+        ("k", ctypes.c_uint32),
+        ("node", ctypes.c_uint8),
+        ("nodes", ctypes.c_uint8),
+        ("ny", ctypes.c_uint8),
+        ("delivered", ctypes.c_uint8),
+        ("flags", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+        ("send_ns", ctypes.c_uint64),
+        ("period_ns", ctypes.c_uint64),
+        ("stream_start_ns", ctypes.c_uint64),
+        ("y", ctypes.c_double * MAX_NY),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name both sides use."""
+        return "estpipe::wire::Slot"
+
+
+class StreamHeader(ctypes.Structure):
+    """The stream's shape: the iceoryx2 user header of every slot."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint32),
+        ("nodes", ctypes.c_uint8),
+        ("nx", ctypes.c_uint8),
+        ("reserved", ctypes.c_uint16),
+        ("ny", ctypes.c_uint8 * MAX_NODES),
+        ("model", ctypes.c_uint64),
+        ("scenario", ctypes.c_uint8 * 32),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name both sides use."""
+        return "estpipe::wire::StreamHeader"
+
+    @classmethod
+    def from_json(cls, h: dict) -> "StreamHeader":
+        """The header `ipc-runner stream-header` prints (a dict parsed from its JSON)."""
+        out = cls()
+        out.version = h["wire_version"]
+        out.nodes = h["nodes"]
+        out.nx = h["nx"]
+        for m, n in enumerate(h["ny"]):
+            out.ny[m] = n
+        out.model = int(h["model"], 16)
+        name = h["scenario"].encode()[:32]
+        ctypes.memmove(out.scenario, name, len(name))
+        return out
+
+
+class Estimate(ctypes.Structure):
+    """One estimator's estimate (payload of <prefix>/estimates)."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint32),
+        ("k", ctypes.c_uint32),
+        ("stream_id", ctypes.c_uint64),
+        ("seq", ctypes.c_uint64),
+        ("estimator", ctypes.c_uint32),
+        ("nx", ctypes.c_uint32),
+        ("name", ctypes.c_uint8 * 16),
+        ("status", ctypes.c_uint32),
+        ("cov_kind", ctypes.c_uint32),
+        ("x", ctypes.c_double * MAX_NX),
+        ("p", ctypes.c_double * COV_LEN),
+        ("slot_send_ns", ctypes.c_uint64),
+        ("receive_ns", ctypes.c_uint64),
+        ("step_done_ns", ctypes.c_uint64),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name both sides use."""
+        return "estpipe::wire::Estimate"
+
+    def estimator_name(self) -> str:
+        """The estimator's name."""
+        return bytes(self.name).split(b"\0", 1)[0].decode(errors="replace")
+
+    def xhat(self) -> list:
+        """x̂_k (nx entries)."""
+        return list(self.x[: self.nx])
+
+    def covariance(self) -> list:
+        """P_k as nx rows of nx (from the packed upper triangle)."""
+        n = self.nx
+        return [[self.p[packed_index(n, i, j)] for j in range(n)] for i in range(n)]
+
+
+class Truth(ctypes.Structure):
+    """The true state (payload of <prefix>/truth, evaluation only)."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint32),
+        ("k", ctypes.c_uint32),
+        ("stream_id", ctypes.c_uint64),
+        ("nx", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+        ("x", ctypes.c_double * MAX_NX),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name both sides use."""
+        return "estpipe::wire::Truth"
+
+
+def packed_index(nx: int, i: int, j: int) -> int:
+    """Index of P[i][j] in Estimate.p: the upper triangle row by row."""
+    i, j = min(i, j), max(i, j)
+    return i * nx - i * (i - 1) // 2 + (j - i)
+
+
+def seq_of(k: int, node: int, nodes: int) -> int:
+    """The dense sequence number of slot (k, node): (k - 1)·nodes + node."""
+    return (k - 1) * nodes + node
+
+
+def monotonic_ns() -> int:
+    """CLOCK_MONOTONIC in ns, the clock of every timestamp on the wire."""
+    return time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+
+
+def service_name(prefix: str, what: str):
+    """The iceoryx2 name of service <prefix>/<what>."""
+    return iox2.ServiceName.new(f"{prefix}/{what}")
+
+
+def slot_service(node, prefix: str):
+    """Opens (or creates) <prefix>/slots with the contract's QoS."""
+    return (
+        node.service_builder(service_name(prefix, "slots"))
+        .publish_subscribe(Slot)
+        .user_header(StreamHeader)
+        .max_publishers(1)
+        .max_subscribers(4)
+        .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
+        .history_size(0)
+        .enable_safe_overflow(False)
+        .open_or_create()
+    )
+
+
+def ready_event_service(node, prefix: str):
+    """Opens (or creates) <prefix>/slots-ready, notified with READY_EVENT per instant."""
+    return (
+        node.service_builder(service_name(prefix, "slots-ready"))
+        .event()
+        .max_notifiers(2)
+        .max_listeners(4)
+        .open_or_create()
+    )
+
+
+def estimate_service(node, prefix: str):
+    """Opens (or creates) <prefix>/estimates with the contract's QoS."""
+    return (
+        node.service_builder(service_name(prefix, "estimates"))
+        .publish_subscribe(Estimate)
+        .max_publishers(1)
+        .max_subscribers(8)
+        .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
+        .history_size(ESTIMATE_HISTORY)
+        .enable_safe_overflow(True)
+        .open_or_create()
+    )
+
+
+def layouts() -> dict:
+    """{type: {"size", "align", "fields": {name: [offset, size]}}} for the layout test."""
+    out = {}
+    for t in (Slot, StreamHeader, Estimate, Truth):
+        fields = {
+            name: [getattr(t, name).offset, getattr(t, name).size]
+            for name, _ in t._fields_
+        }
+        out[t.__name__] = {
+            "type_name": t.type_name(),
+            "size": ctypes.sizeof(t),
+            "align": ctypes.alignment(t),
+            "fields": fields,
+        }
+    return out

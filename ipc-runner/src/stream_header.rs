@@ -1,0 +1,38 @@
+//! `ipc-runner stream-header`: the [`StreamHeader`] every slot of a scenario's stream must
+//! carry, as one line of JSON. A foreign publisher (`clients/python`, `clients/c`) copies it
+//! instead of computing the model fingerprint itself (`docs/wire.md`, Stream header).
+
+use anyhow::Result;
+use estpipe_wire::StreamHeader;
+use std::path::PathBuf;
+
+/// Options of `ipc-runner stream-header`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct StreamHeaderArgs {
+    /// Scenario preset name.
+    #[arg(long, default_value = "occlusion")]
+    pub scenario: String,
+    /// Scenario TOML file (instead of a preset).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+/// `{"wire_version":2,"scenario":"linear","nodes":1,"nx":2,"ny":[1],"model":"0x…"}`: the
+/// model as a hex string, since a 64-bit integer does not survive every JSON parser.
+pub fn to_json(h: &StreamHeader) -> serde_json::Value {
+    serde_json::json!({
+        "wire_version": h.version,
+        "scenario": h.scenario_name(),
+        "nodes": h.nodes,
+        "nx": h.nx,
+        "ny": h.ny_per_node(),
+        "model": format!("{:#018x}", h.model),
+    })
+}
+
+/// Prints the header of `--scenario`/`--config`.
+pub fn main(args: &StreamHeaderArgs) -> Result<i32> {
+    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
+    println!("{}", to_json(&channel_sim::wire::stream_header(&*scenario)));
+    Ok(0)
+}
