@@ -30,7 +30,7 @@ use estimator_core::model::{LinearModel, LinearSystem};
 use estimator_core::Error;
 use nalgebra::{Matrix2x4, Matrix4, SMatrix, SVector, Vector2};
 
-use crate::run::mark::{branch, step_mark, BEGIN};
+use crate::run::mark::{branch, step_mark, BEGIN, REFUSED};
 use crate::run::{model, prior, Fnv1a64, Link, Stream, Summary, MAX_NX};
 
 /// Measurements per instant (both problems).
@@ -226,9 +226,10 @@ fn step_all<const NX: usize, E: KfStep<NX>>(
             continue;
         };
         s.arrivals += 1;
+        let code = branch([true], |_| false);
         step_mark(inst.k, BEGIN);
         let ok = est.step(inst.k as usize, &y);
-        step_mark(inst.k, branch([true], |_| false, !ok));
+        step_mark(inst.k, if ok { code } else { code | REFUSED });
         if !ok {
             refused(s, inst.k);
         }

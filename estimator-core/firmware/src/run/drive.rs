@@ -6,7 +6,7 @@ use estimator_core::{Error, Estimator, Packet};
 use nalgebra::Vector2;
 
 use super::digest::Fnv1a64;
-use super::mark::{branch, step_mark, BEGIN};
+use super::mark::{branch, step_mark, BEGIN, REFUSED};
 use super::summary::{Summary, MAX_NX};
 
 /// One sampling instant of a stream: k and what each of the `L` nodes delivered.
@@ -134,16 +134,20 @@ where
                 s.dropouts += 1;
             }
         }
+        // The branch code before the step, so that the step's count does not include it.
+        let code = branch(inst.y.each_ref().map(Option::is_some), |m| {
+            inst.y[m].as_ref().is_some_and(E::censored)
+        });
         step_mark(inst.k, BEGIN);
         let stepped =
             E::Measurement::from_nodes(&inst.y).and_then(|y| est.step(inst.k as usize, &y));
         step_mark(
             inst.k,
-            branch(
-                inst.y.each_ref().map(Option::is_some),
-                |m| inst.y[m].as_ref().is_some_and(E::censored),
-                stepped.is_err(),
-            ),
+            if stepped.is_err() {
+                code | REFUSED
+            } else {
+                code
+            },
         );
         if stepped.is_err() {
             s.error(inst.k);

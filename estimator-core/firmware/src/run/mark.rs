@@ -38,13 +38,10 @@ pub const REFUSED: u8 = 1 << 6;
 pub const BEGIN: u8 = 1 << 7;
 
 /// The branch code of one step with `L ≤ 3` nodes: bit m if node m's measurement arrived,
-/// bit 3 + m if it arrived censored (`censored(m)`), bit 6 if the step was refused.
-pub fn branch<const L: usize>(
-    arrived: [bool; L],
-    censored: impl Fn(usize) -> bool,
-    refused: bool,
-) -> u8 {
-    let mut code = if refused { REFUSED } else { 0 };
+/// bit 3 + m if it arrived censored (`censored(m)`). The driver computes it before the step
+/// (so that it is not counted in the step) and adds [`REFUSED`] after it if the step failed.
+pub fn branch<const L: usize>(arrived: [bool; L], censored: impl Fn(usize) -> bool) -> u8 {
+    let mut code = 0;
     for (m, &a) in arrived.iter().enumerate().take(3) {
         if a {
             code |= ARRIVED << m;
