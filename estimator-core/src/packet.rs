@@ -10,7 +10,7 @@
 
 use nalgebra::SVector;
 
-use crate::Real;
+use crate::{Error, Real, Result};
 
 /// The measurement of one instant as it reached the estimator.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,4 +51,17 @@ impl<T: Real, const NY: usize> From<Option<SVector<T, NY>>> for Packet<T, NY> {
             None => Packet::Dropped,
         }
     }
+}
+
+/// Validates the probability `p_loss` that a packet is lost in transport without the receiver
+/// knowing (the occlusion estimators' `with_loss_rate`): finite and `0 ≤ p_loss < 1` (at 1
+/// every packet is lost and no measurement ever arrives).
+pub(crate) fn check_loss_rate<T: Real>(p: T) -> Result<T> {
+    if !p.finite() || p < T::zero() || p >= T::one() {
+        return Err(Error::InvalidConfig {
+            field: "loss_rate",
+            reason: "must be finite and in [0, 1)",
+        });
+    }
+    Ok(p)
 }

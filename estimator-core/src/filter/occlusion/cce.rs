@@ -21,6 +21,28 @@
 //!   α-weighted mean and covariance of the component means `ũ^s`.
 //! * `Σ_i = V_i + Ψ` with `V_i = (r_i σ̂)² I` from the [`GaussSum`] table; with equal radii (as
 //!   in the paper) every region shares one `Σ_k`, as eq. (13) writes.
+//!
+//! # A known loss rate ([`CrossCoupledEstimator::with_loss_rate`])
+//!
+//! When the receiver cannot tell a packet lost in transport (probability `p_loss`, independent
+//! of the state) from an occlusion dropout, the likelihood of "no packet" is
+//!
+//! ```text
+//! P(y = φ | x) = p_occ(x) + (1 − p_occ(x)) p_loss = p_loss + (1 − p_loss) p_occ(x)
+//! ```
+//!
+//! so the hypotheses of a dropout are "lost" (probability `p_loss`, density: the prediction
+//! `N(x̂⁻, P⁻)` itself) and "not lost, in region `i`" (probability `(1 − p_loss) P(u ∈ R_i)`,
+//! with `P(u ∈ R_i) ≈ (1/N) Σ_s ω_{ik}^s` by the Gaussian sum). The label scoring (17) takes
+//! the argmax over both kinds, scaled by `N / (1 − p_loss)`:
+//!
+//! ```text
+//! score(lost) = ln N + ln p_loss − ln(1 − p_loss),   score(i) = ln Σ_s ω_{ik}^s
+//! ```
+//!
+//! If "lost" wins, `ĥ_k = 0` and the update is the prediction only (`x̂ = x̂⁻`, `P = P⁻`);
+//! otherwise Algorithm 2 as above. `p_loss = 0` (the default) gives `score(lost) = −∞`: every
+//! dropout is an occlusion, as in the paper.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -33,7 +55,7 @@ use crate::gsum::GaussSum;
 use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{check_finite, symmetrize};
 use crate::model::LinearSystem;
-use crate::packet::Packet;
+use crate::packet::{check_loss_rate, Packet};
 use crate::protocol::occlusion::Occlusion;
 use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
@@ -60,6 +82,11 @@ pub struct CrossCoupledEstimator<
     /// `ln Σ_s ω_{ik}^s` of the last dropout (eq. 16 up to the common `1/N`).
     region_log_weights: [T; S],
     form: CovarianceUpdate,
+    /// `p_loss` of [`Self::with_loss_rate`].
+    loss_rate: T,
+    /// `ln N + ln p_loss − ln(1 − p_loss)`: the "lost" hypothesis's label score (−∞ at
+    /// `p_loss = 0`).
+    lost_score: T,
 }
 
 impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
@@ -95,7 +122,31 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             ln_vol,
             region_log_weights: [T::zero(); S],
             form: CovarianceUpdate::Joseph,
+            loss_rate: T::zero(),
+            lost_score: -T::one() / T::zero(),
         })
+    }
+
+    /// A dropout may also be a packet lost in transport with the known probability `p_loss`
+    /// (independent of the state), which the receiver cannot tell from an occlusion dropout:
+    /// the label scoring gains the hypothesis "lost" beside the regions (module docs, "A known
+    /// loss rate"). `p_loss = 0` (the default) is the paper's estimator. Refuses a `p_loss`
+    /// that is not finite or not in `[0, 1)`.
+    pub fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
+        let p = check_loss_rate(p_loss)?;
+        self.loss_rate = p;
+        self.lost_score = if p > T::zero() {
+            T::lit(libm::log(N as f64)) + p.ln() - (-p).ln_1p()
+        } else {
+            -T::one() / T::zero()
+        };
+        Ok(self)
+    }
+
+    /// `p_loss` (0 unless set by [`Self::with_loss_rate`]).
+    #[inline]
+    pub fn loss_rate(&self) -> T {
+        self.loss_rate
     }
 
     /// Selects the covariance form of the arrival update (Joseph by default).
@@ -111,7 +162,8 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         &self.est
     }
 
-    /// Last region-label estimate `ĥ_k` (0 on arrival, `1..=S` on a dropout).
+    /// Last region-label estimate `ĥ_k` (0 on arrival, `1..=S` on a dropout; 0 on a dropout
+    /// read as a loss, see [`Self::with_loss_rate`]).
     #[inline]
     pub fn label(&self) -> usize {
         self.label
@@ -237,6 +289,11 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
                 best_sum = sum;
                 expw = e_i;
             }
+        }
+        // The "lost" hypothesis (with_loss_rate) against the best region: the prediction is
+        // the posterior of a loss.
+        if self.lost_score > lw[best] {
+            return Ok((*xp, *pp, 0, lw));
         }
         let i = best;
         // K_i = P⁻ Eᵀ S_i⁻¹, with the factor of the weights above.
@@ -397,6 +454,56 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// With a loss rate, the literal equations' region score `Σ_s ω^s` (eq. 15, 16 × N) meets
+    /// the "lost" hypothesis's `N p_loss / (1 − p_loss)`: just below the best region's score the
+    /// region's update is unchanged (bit for bit), just above it the dropout is read as a loss
+    /// (prediction only, label 0).
+    #[test]
+    fn loss_rate_adds_the_lost_hypothesis_to_the_label_scoring() {
+        let m = paper_model();
+        let occ = paper_occlusion();
+        let g = GaussSum::<f64, 1, 15>::uniform().unwrap();
+        let p0 = matrix![1.2, 0.3, -0.1; 0.3, 0.9, 0.2; -0.1, 0.2, 0.7];
+        for x0 in [vector![14.5, 2.0, 1.0], vector![38.0, 3.0, -2.0]] {
+            // The best region's Σ_s ω^s of the literal equations.
+            let xp = m.a * x0;
+            let pp = m.a * p0 * m.a.transpose() + m.b * m.q * m.b.transpose();
+            let (_, _, h) = literal(x0, p0, &m, &occ, &g);
+            let cov = pp[(0, 0)] + (5.0 * g.sigma()).powi(2) + 0.1;
+            let zeta = 20.0 * h as f64;
+            let best: f64 = (0..15)
+                .map(|s| {
+                    let d = zeta - 5.0 + 10.0 * s as f64 / 14.0 - xp[0];
+                    10.0 * (-0.5 * d * d / cov).exp() / (2.0 * core::f64::consts::PI * cov).sqrt()
+                })
+                .sum();
+            // N p / (1 − p) = best · t  ⇔  p = best · t / (N + best · t).
+            let rate = |t: f64| best * t / (15.0 + best * t);
+            let mut plain = cce(x0, p0);
+            assert_eq!(plain.step::<2, _>(&m, 1, None).unwrap(), h);
+            let mut below = cce(x0, p0).with_loss_rate(rate(0.99)).unwrap();
+            assert_eq!(below.step::<2, _>(&m, 1, None).unwrap(), h);
+            assert_eq!(below.estimate(), plain.estimate());
+            let mut above = cce(x0, p0).with_loss_rate(rate(1.01)).unwrap();
+            assert_eq!(above.step::<2, _>(&m, 1, None).unwrap(), 0);
+            assert!((above.estimate().state() - xp).amax() < 1e-12 * xp.amax());
+            assert!((above.estimate().covariance() - pp).amax() < 1e-12 * pp.amax());
+        }
+        // Validated; 0 is the default (the same estimator, the same steps).
+        let f = cce(vector![5.0, 5.0, 5.0], SMatrix::identity());
+        for bad in [-1e-9, 1.0, f64::NAN, f64::NEG_INFINITY] {
+            assert!(matches!(
+                f.with_loss_rate(bad),
+                Err(Error::InvalidConfig {
+                    field: "loss_rate",
+                    ..
+                })
+            ));
+        }
+        assert_eq!(f.with_loss_rate(0.0).unwrap(), f);
+        assert_eq!(f.with_loss_rate(0.2).unwrap().loss_rate(), 0.2);
     }
 
     #[test]

@@ -18,6 +18,18 @@
 //! and well defined as `p → 0`. `p_k` is the sum of the probabilities of the gaps between
 //! the (sorted, disjoint) intervals, each from `gauss::ln_interval_prob`, so it keeps its
 //! digits when it is tiny. `n_e = 1` (intervals).
+//!
+//! With a known loss rate ([`KfIo::with_loss_rate`]: a packet is also lost in transport with
+//! probability `p_loss`, independently of the state, and the receiver cannot tell a loss from
+//! a dropout) the packet arrives iff it is not occluded and not lost, so the arrival
+//! probability becomes
+//!
+//! ```text
+//! p_k = P(u_k in no region) · (1 − p_loss)
+//! ```
+//!
+//! and the equations above are unchanged otherwise (`p_loss = 0`, the default, is the filter
+//! above).
 
 use nalgebra::{SMatrix, SVector};
 
@@ -27,7 +39,7 @@ use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob, LogSumExp};
 use crate::linalg::{check_finite, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
-use crate::packet::Packet;
+use crate::packet::{check_loss_rate, Packet};
 use crate::protocol::occlusion::Occlusion;
 use crate::{Error, Real, Result};
 
@@ -38,6 +50,8 @@ pub struct KfIo<T: Real, const NX: usize, const S: usize> {
     occ: Occlusion<T, NX, 1, S>,
     sorted: [(T, T, usize); S],
     arrival_prob: T,
+    /// `p_loss` of [`Self::with_loss_rate`].
+    loss_rate: T,
 }
 
 impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
@@ -53,7 +67,23 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             sorted: occ.regions.sorted_intervals(),
             occ,
             arrival_prob: T::one(),
+            loss_rate: T::zero(),
         })
+    }
+
+    /// A packet may also be lost in transport with the known probability `p_loss`
+    /// (independent of the state), which the receiver cannot tell from a dropout: the arrival
+    /// probability becomes `p_k (1 − p_loss)` (module docs). `p_loss = 0` (the default) is the
+    /// filter of docs/design.md. Refuses a `p_loss` that is not finite or not in `[0, 1)`.
+    pub fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
+        self.loss_rate = check_loss_rate(p_loss)?;
+        Ok(self)
+    }
+
+    /// `p_loss` (0 unless set by [`Self::with_loss_rate`]).
+    #[inline]
+    pub fn loss_rate(&self) -> T {
+        self.loss_rate
     }
 
     /// Current estimate and covariance (the filter's own, unconditional-in-γ recursion).
@@ -62,7 +92,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         &self.est
     }
 
-    /// `p_k` used by the last step.
+    /// `p_k` used by the last step (with a loss rate: `P(u_k in no region) · (1 − p_loss)`).
     #[inline]
     pub fn arrival_prob(&self) -> T {
         self.arrival_prob
@@ -98,7 +128,8 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
         let e = &self.occ.e;
         let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
-        let p = self.prob_outside((e * xp)[0], s2.sqrt());
+        // × (1 − p_loss): the packet must also survive the transport (exactly × 1 by default).
+        let p = self.prob_outside((e * xp)[0], s2.sqrt()) * (T::one() - self.loss_rate);
         if !p.finite() {
             return Err(Error::Numerical {
                 what: "arrival probability",
@@ -169,14 +200,24 @@ mod tests {
         )
     }
 
-    /// docs/design.md's equations written literally (S_y, its inverse, K = p P Cᵀ S_y⁻¹).
+    /// docs/design.md's equations written literally (S_y, its inverse, K = p P Cᵀ S_y⁻¹), with
+    /// and without a loss rate (p = P(no region)·(1 − p_loss)).
     #[test]
     fn matches_the_design_equations_literally() {
         let (m, occ) = setup();
         let x0 = vector![22.0, 1.0, 2.0];
         let p0 = matrix![3.0, 0.2, 0.0; 0.2, 1.0, 0.1; 0.0, 0.1, 2.0];
-        for y in [Some(vector![70.0, 25.0]), None] {
-            let mut f = KfIo::new(x0, p0, occ).unwrap();
+        for (y, p_loss) in [
+            (Some(vector![70.0, 25.0]), 0.0),
+            (None, 0.0),
+            (Some(vector![70.0, 25.0]), 0.2),
+            (None, 0.35),
+        ] {
+            let mut f = KfIo::new(x0, p0, occ)
+                .unwrap()
+                .with_loss_rate(p_loss)
+                .unwrap();
+            assert_eq!(f.loss_rate(), p_loss);
             f.step(&m, 1, y.as_ref()).unwrap();
             let xp = m.a * x0;
             let pp = m.a * p0 * m.a.transpose() + m.b * m.q * m.b.transpose();
@@ -187,7 +228,7 @@ mod tests {
             for c in [20.0, 40.0, 60.0, 80.0] {
                 inside += phi((c + 5.0 - xp[0]) / s) - phi((c - 5.0 - xp[0]) / s);
             }
-            let p = 1.0 - inside;
+            let p = (1.0 - inside) * (1.0 - p_loss);
             assert!((f.arrival_prob() - p).abs() < 1e-12);
             let c = m.c;
             let x_big = pp + xp * xp.transpose();
@@ -201,6 +242,29 @@ mod tests {
             assert!((f.estimate().state() - want_x).amax() < 1e-10 * want_x.amax().max(1.0));
             assert!((f.estimate().covariance() - want_p).amax() < 1e-10 * want_p.amax().max(1.0));
         }
+    }
+
+    #[test]
+    fn loss_rate_is_validated_and_zero_is_the_default() {
+        let (m, occ) = setup();
+        let f = KfIo::new(vector![22.0, 1.0, 2.0], SMatrix::identity(), occ).unwrap();
+        for bad in [-0.1, 1.0, 1.5, f64::NAN, f64::INFINITY] {
+            assert_eq!(
+                f.with_loss_rate(bad),
+                Err(Error::InvalidConfig {
+                    field: "loss_rate",
+                    reason: "must be finite and in [0, 1)"
+                })
+            );
+        }
+        let (mut a, mut b) = (f, f.with_loss_rate(0.0).unwrap());
+        assert_eq!(a, b);
+        for k in 1..=5 {
+            let y = (k % 2 == 0).then_some(vector![30.0, 20.0]);
+            a.step(&m, k, y.as_ref()).unwrap();
+            b.step(&m, k, y.as_ref()).unwrap();
+        }
+        assert_eq!(a, b);
     }
 
     #[test]
