@@ -42,16 +42,21 @@ pub struct Proc {
 impl Proc {
     /// Starts `pipeline-node <args>` with output captured to files in `dir`.
     pub fn start(dir: &Path, name: &str, args: &[&str]) -> Self {
+        Self::start_program(dir, name, &node_exe(), args)
+    }
+
+    /// Starts `program <args>` (e.g. a Python client) with output captured to files in `dir`.
+    pub fn start_program(dir: &Path, name: &str, program: &Path, args: &[&str]) -> Self {
         let stdout = dir.join(format!("{name}.out"));
         let stderr = dir.join(format!("{name}.err"));
-        let child = Command::new(node_exe())
+        let child = Command::new(program)
             .args(args)
             .env("IOX2_LOG_LEVEL", "Error")
             .stdin(Stdio::null())
             .stdout(std::fs::File::create(&stdout).unwrap())
             .stderr(std::fs::File::create(&stderr).unwrap())
             .spawn()
-            .expect("start pipeline-node");
+            .unwrap_or_else(|e| panic!("start {program:?}: {e}"));
         Self {
             child: Some(child),
             stderr,

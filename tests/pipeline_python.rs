@@ -1,0 +1,219 @@
+//! The Python client (`clients/python`) against the real runner: the example publisher feeds
+//! `ipc-runner run` with the slots of a recorded log, the example subscriber prints the
+//! estimates, and both the runner's and the subscriber's estimates equal `ipc-runner replay`
+//! of the same slots bit for bit.
+//!
+//! Needs the `iceoryx2` PyPI package (`clients/python/requirements.txt`); the interpreter is
+//! `$ESTPIPE_PYTHON` (default `python3`). Without the package the test says so on one line and
+//! passes; `.ci/run` installs it in a venv so CI always runs it.
+
+#[path = "pipeline_common.rs"]
+mod common;
+
+use common::{prefix, scratch, Proc};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The interpreter, or `None` (and the one-line reason) when it cannot import iceoryx2.
+fn python() -> Option<PathBuf> {
+    let py = std::env::var("ESTPIPE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = std::process::Command::new(&py)
+        .args(["-c", "import iceoryx2"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        eprintln!(
+            "skipped: `{py} -c \"import iceoryx2\"` fails (pip install -r \
+             clients/python/requirements.txt, or point ESTPIPE_PYTHON at such an interpreter)"
+        );
+        return None;
+    }
+    Some(PathBuf::from(py))
+}
+
+/// `(k, estimator column) → value bits` of a CSV with a `k` column and `<est>_<j>` columns.
+fn estimate_bits(path: &Path, names: &[String]) -> BTreeMap<(u32, String), u64> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let kcol = head.iter().position(|h| *h == "k").unwrap();
+    let mut out = BTreeMap::new();
+    for l in lines {
+        let cells: Vec<&str> = l.split(',').collect();
+        let k: u32 = cells[kcol].parse().unwrap();
+        for (c, h) in head.iter().enumerate() {
+            if names.iter().any(|n| h.starts_with(&format!("{n}_"))) {
+                let v: f64 = cells[c].parse().unwrap();
+                out.insert((k, h.to_string()), v.to_bits());
+            }
+        }
+    }
+    out
+}
+
+/// Feeds `slots` (a slot log of `scenario`, `--config FILE` or `--scenario NAME`) through the
+/// Python publisher into the runner and checks the estimates against a replay.
+fn python_feeds_the_runner(py: &Path, name: &str, scenario: &[&str], slots: &Path) {
+    let dir = scratch(&format!("python-{name}"));
+    let p = prefix(&format!("python-{name}"));
+    let clients = repo().join("clients/python/examples");
+    let instants: u32 = {
+        let text = std::fs::read_to_string(slots).unwrap();
+        text.lines()
+            .skip(1)
+            .filter_map(|l| l.split(',').next()?.parse().ok())
+            .max()
+            .unwrap()
+    };
+    let steps = instants.to_string();
+
+    // The header the publisher must write, as a foreign publisher gets it.
+    let mut header = Proc::start(&dir, "header", &[&["stream-header"][..], scenario].concat());
+    assert!(header.wait(30).success(), "{}", header.err());
+    let header_json = dir.join("header.json");
+    std::fs::write(&header_json, header.out()).unwrap();
+
+    let est_csv = dir.join("run-estimates.csv");
+    let json = dir.join("run.json");
+    let mut run_args = vec!["run", "--prefix", &p, "--steps", &steps];
+    run_args.extend_from_slice(scenario);
+    run_args.extend_from_slice(&[
+        "--estimates-csv",
+        est_csv.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    let mut run = Proc::start(&dir, "runner", &run_args);
+    run.wait_for_stderr("waiting for channel-sim", 30);
+
+    let sub_py = clients.join("print_estimates.py");
+    let mut sub = Proc::start_program(
+        &dir,
+        "subscriber",
+        py,
+        &[
+            sub_py.to_str().unwrap(),
+            "--prefix",
+            &p,
+            "--csv",
+            "--idle-exit",
+            "3",
+        ],
+    );
+    sub.wait_for_stderr("ready", 30);
+    let pub_py = clients.join("publish_slots.py");
+    let mut publ = Proc::start_program(
+        &dir,
+        "publisher",
+        py,
+        &[
+            pub_py.to_str().unwrap(),
+            "--prefix",
+            &p,
+            "--header",
+            header_json.to_str().unwrap(),
+            "--slots",
+            slots.to_str().unwrap(),
+        ],
+    );
+    assert!(run.wait(120).success(), "runner: {}", run.err());
+    assert!(publ.wait(60).success(), "publisher: {}", publ.err());
+    assert!(sub.wait(60).success(), "subscriber: {}", sub.err());
+
+    let r = common::report(&json);
+    assert_eq!(r["ending"], "completed", "{r}");
+    assert_eq!(r["counts"]["lost_in_ipc"], 0, "{r}");
+    assert_eq!(r["counts"]["instants"], instants, "{r}");
+    let names: Vec<String> = r["estimators"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap().to_string())
+        .collect();
+
+    let replay_csv = dir.join("replay.csv");
+    let mut replay_args = vec![
+        "replay",
+        "--input",
+        slots.to_str().unwrap(),
+        "--output",
+        replay_csv.to_str().unwrap(),
+    ];
+    replay_args.extend_from_slice(scenario);
+    let mut replay = Proc::start(&dir, "replay", &replay_args);
+    assert!(replay.wait(60).success(), "{}", replay.err());
+
+    let want = estimate_bits(&replay_csv, &names);
+    assert!(!want.is_empty());
+    let live = estimate_bits(&est_csv, &names);
+    assert_eq!(
+        live, want,
+        "{name}: the runner's estimates differ from the replay's"
+    );
+
+    // The subscriber's rows: k,estimator,status,x_0..x_{nx-1},p_0.. (Python's repr is exact).
+    let mut seen = BTreeMap::new();
+    for l in sub.out().lines() {
+        let c: Vec<&str> = l.split(',').collect();
+        let k: u32 = c[0].parse().unwrap();
+        let nx = (0..)
+            .take_while(|j| want.contains_key(&(k, format!("{}_{j}", c[1]))))
+            .count();
+        for j in 0..nx {
+            let v: f64 = c[3 + j].parse().unwrap();
+            seen.insert((k, format!("{}_{j}", c[1])), v.to_bits());
+        }
+    }
+    assert_eq!(
+        seen, want,
+        "{name}: the Python subscriber's estimates differ from the replay's"
+    );
+    eprintln!(
+        "{name}: {instants} instants × {} estimator(s) from the Python publisher equal the replay bit for bit",
+        names.len()
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_python_publisher_feeds_the_runner_and_the_estimates_equal_the_replay() {
+    let Some(py) = python() else { return };
+    // A two-node TOML scenario with its recorded log (docs/replay.md).
+    let example = repo().join("channel-sim/scenarios/example.toml");
+    python_feeds_the_runner(
+        &py,
+        "example",
+        &["--config", example.to_str().unwrap()],
+        &repo().join("docs/examples/example-slots.csv"),
+    );
+
+    // A longer log of the linear preset, recorded by the runner from channel-sim.
+    let dir = scratch("python-record");
+    let p = prefix("python-record");
+    let log = dir.join("linear-slots.csv");
+    let mut run = Proc::start(
+        &dir,
+        "record",
+        &[
+            "run",
+            "--scenario",
+            "linear",
+            "--prefix",
+            &p,
+            "--steps",
+            "2000",
+            "--slots-csv",
+            log.to_str().unwrap(),
+        ],
+    );
+    run.wait_for_stderr("waiting for channel-sim", 30);
+    let mut publ = common::start_channel_sim(&dir, &p, "linear", 2000, 0);
+    assert!(publ.wait(60).success(), "{}", publ.err());
+    assert!(run.wait(60).success(), "{}", run.err());
+    python_feeds_the_runner(&py, "linear", &["--scenario", "linear"], &log);
+    let _ = std::fs::remove_dir_all(&dir);
+}
