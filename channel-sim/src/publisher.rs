@@ -14,7 +14,7 @@
 //! Faults: dead peers are invisible in iceoryx2 until someone cleans them up, so the publisher
 //! calls `try_cleanup_dead_nodes()` at startup (a SIGKILLed predecessor leaves its publisher
 //! port behind), every 100 ms and whenever a blocked send gives up after
-//! [`BLOCK_SLICE`](crate::backpressure::BLOCK_SLICE); if the subscriber is gone it pauses and
+//! [`BLOCK_SLICE`]; if the subscriber is gone it pauses and
 //! waits for a new one. SIGINT/SIGTERM end the run cleanly with an ABORT marker, also while a
 //! send is blocked.
 
