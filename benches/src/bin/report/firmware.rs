@@ -64,7 +64,18 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         steps: read("step_counts.csv")?,
         sizes: read("sizes.csv")?,
     };
-    render(md, &data)
+    render(md, &data)?;
+    // The part can be regenerated on its own (`--skip` the others): say of which commit.
+    let commit = Command::new("git")
+        .args(["rev-parse", "--short", "HEAD"])
+        .current_dir(&o.root)
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        .unwrap_or_else(|| "?".into());
+    let _ = writeln!(md, "(This part measured at commit {commit}.)\n");
+    Ok(())
 }
 
 /// The three files `.ci/firmware` writes.
