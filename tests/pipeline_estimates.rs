@@ -169,6 +169,19 @@ fn run_and_collect(
     (got, slots)
 }
 
+/// What an estimator's covariance is (docs/design.md, The estimator API): the bound its paper
+/// propagates for the NN estimator and the Tobit filters, none for the particle filter, else
+/// the error covariance.
+fn expected_kind(name: &str) -> ipc_runner::CovarianceKind {
+    use ipc_runner::CovarianceKind::*;
+    match name {
+        "nn" | "fused" => Bound,
+        n if n.starts_with("tobit-") => Bound,
+        "pf" => None,
+        _ => Estimate,
+    }
+}
+
 #[test]
 fn every_estimate_carries_the_estimators_covariance_bit_for_bit() {
     use ipc_runner::run::select;
@@ -177,6 +190,7 @@ fn every_estimate_carries_the_estimators_covariance_bit_for_bit() {
         ("linear", "ikf", 300u32),
         ("occlusion", "ikf,cce,kf-io,adf", 100),
         ("tobit-fusion", "", 100),
+        ("nn-token-bucket", "", 100),
     ] {
         let sc: std::sync::Arc<dyn channel_sim::Scenario> =
             channel_sim::scenario::preset(scenario).unwrap().into();
@@ -246,6 +260,7 @@ fn every_estimate_carries_the_estimators_covariance_bit_for_bit() {
                 assert_eq!(w.status, status, "{what}");
                 assert_eq!(w.nx as usize, nx, "{what}");
                 assert_eq!(w.cov_kind, kind.wire(), "{what}");
+                assert_eq!(kind, expected_kind(est.name()), "{what}");
                 let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&w.x[..nx]), bits(&x[..nx]), "{what}: x̂");
                 assert_eq!(bits(&w.p), bits(&p), "{what}: P");

@@ -1,11 +1,11 @@
-//! The application's dynamic [`Estimator`] over a core one: a name, the estimate as `f64`s,
-//! diagnostics, and the stepping of [`Fed`].
+//! The application's dynamic [`Estimator`] over a core one: a name, the estimate and its
+//! covariance as `f64`s, diagnostics, and the stepping of [`Fed`].
 
 use estimator_core::Error;
 
 use super::fed::Fed;
 use super::slots::FromSlots;
-use crate::Estimator;
+use crate::{CovarianceKind, Estimator};
 
 /// Reports an estimator's per-step diagnostics (see [`Estimator::diagnostics`]).
 pub(crate) type Diagnostics<E> = fn(&E, &mut dyn FnMut(&'static str, f64));
@@ -16,6 +16,7 @@ pub(crate) struct Adapted<E, const NX: usize> {
     fed: Fed<E>,
     diagnostics: Diagnostics<E>,
     full_information: bool,
+    cov_kind: CovarianceKind,
 }
 
 impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
@@ -26,7 +27,15 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
             fed,
             diagnostics: trace_p,
             full_information: false,
+            cov_kind: CovarianceKind::Estimate,
         }
+    }
+
+    /// The core estimate's covariance is a bound on the error covariance, the quantity the
+    /// estimator's paper propagates (docs/design.md, The estimator API), not the covariance.
+    pub(crate) fn with_covariance_bound(mut self) -> Self {
+        self.cov_kind = CovarianceKind::Bound;
+        self
     }
 
     /// Reports `diagnostics` instead of `trace_p`.
@@ -39,6 +48,18 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
     pub(crate) fn with_full_information(mut self, full_information: bool) -> Self {
         self.full_information = full_information;
         self
+    }
+}
+
+/// `p` row by row into `out[..NX·NX]`.
+pub(crate) fn write_row_major<const NX: usize>(
+    p: &nalgebra::SMatrix<f64, NX, NX>,
+    out: &mut [f64],
+) {
+    for i in 0..NX {
+        for j in 0..NX {
+            out[i * NX + j] = p[(i, j)];
+        }
     }
 }
 
@@ -65,6 +86,11 @@ where
 
     fn estimate(&self, out: &mut [f64]) {
         out[..NX].copy_from_slice(self.fed.get().estimate().state().as_slice());
+    }
+
+    fn covariance(&self, out: &mut [f64]) -> CovarianceKind {
+        write_row_major(self.fed.get().estimate().covariance(), out);
+        self.cov_kind
     }
 
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {

@@ -85,7 +85,8 @@ pub fn build(
     Ok(vec![
         Box::new(
             Adapted::<_, 3>::new("nn", Fed::fixed(OnModel::new(Seed003Example, nn)))
-                .with_diagnostics(nn_diagnostics),
+                .with_diagnostics(nn_diagnostics)
+                .with_covariance_bound(),
         ),
         Box::new(Adapted::<_, 3>::new(
             "kf",

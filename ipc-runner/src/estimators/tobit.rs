@@ -31,10 +31,11 @@ use estimator_core::filter::TobitFusion;
 use estimator_core::{Error, Estimator as _, OnModel};
 use nalgebra::{DMatrix, SVector};
 
+use super::adapter::write_row_major;
 use super::fed::Fed;
 use super::snapshot::{fixed, Snapshot};
 use super::EvalOptions;
-use crate::Estimator;
+use crate::{CovarianceKind, Estimator};
 
 /// The names of the local views, node 1 first.
 pub const LOCAL_NAMES: [&str; 8] = [
@@ -241,6 +242,25 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         match x {
             Some(x) => out[..NX].copy_from_slice(x.as_slice()),
             None => out[..NX].fill(f64::NAN),
+        }
+    }
+
+    /// The bound the Tobit filters propagate (seed 004), local or fused.
+    fn covariance(&self, out: &mut [f64]) -> CovarianceKind {
+        let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        let p = match self.node {
+            Some(m) => s.fusion().local_estimate(m).map(|e| *e.covariance()),
+            None => Some(*s.fed.get().estimate().covariance()),
+        };
+        match p {
+            Some(p) => {
+                write_row_major(&p, out);
+                CovarianceKind::Bound
+            }
+            None => {
+                out[..NX * NX].fill(f64::NAN);
+                CovarianceKind::None
+            }
         }
     }
 
