@@ -27,7 +27,7 @@
 //! `μ_j, v_j` the mean and variance of the `j`-th truncated standard normal,
 //!
 //! ```text
-//! w_j = Z_j / Σ Z_l                    (log domain, accumulated in one pass: `Mixture`)
+//! w_j = Z_j / Σ Z_l                    (log domain, accumulated in one pass)
 //! μ̄  = Σ w_j μ_j,   v̄ = Σ w_j (v_j + (μ_j − μ̄)²)
 //! x̂  = m_x + K s μ̄
 //! P̂  = (P − P Eᵀ E P / s²) + v̄ · P Eᵀ E P / s²
@@ -40,15 +40,21 @@
 //! `μ = (λ(α) − q λ(β))/(1 − q)`, and `v = 1 − λ(α)(λ(α) − α)` when `q` is negligible, so an
 //! interval thousands of standard deviations away still gives finite, accurate moments (the
 //! lower tail by symmetry).
+//!
+//! The sums over `j` are evaluated by `truncnorm.rs`: the interval nearest to the
+//! predicted `u` first and always, the others unless a bound proves that together they move
+//! `μ̄` by less than `EPS √v̄` and `v̄` by less than `EPS v̄` (one rounding of the result; see
+//! there), so a region ten or more standard deviations away costs a few comparisons instead of
+//! its `erfc`, `exp` and `ln` evaluations.
 
 use nalgebra::{SMatrix, SVector};
 
+use super::truncnorm::{truncated_std_normal, union_moments, Intervals};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::kalman::kalman_update;
 use crate::filter::time_update::predict;
-use crate::gauss::{cdf, inv_mills, inv_mills_delta, ln_sf, pdf, sf};
-use crate::linalg::{check_finite, symmetrize};
+use crate::linalg::check_finite;
 use crate::model::LinearSystem;
 use crate::packet::Packet;
 use crate::protocol::occlusion::Occlusion;
@@ -63,7 +69,9 @@ pub struct AssumedDensityFilter<T: Real, const NX: usize, const S: usize> {
     /// Regions as sorted intervals `(lower, upper, index)`.
     sorted: [(T, T, usize); S],
     label: usize,
-    region_log_probs: [T; S],
+    /// `(m, s)` of `u`'s predicted marginal at the last dropout (`s = 0` before any): the
+    /// region probabilities are computed from it when asked for.
+    dropout_marginal: (T, T),
     truncate_on_arrival: bool,
     form: CovarianceUpdate,
 }
@@ -81,7 +89,7 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
             sorted: occ.regions.sorted_intervals(),
             occ,
             label: 0,
-            region_log_probs: [T::zero(); S],
+            dropout_marginal: (T::zero(), T::zero()),
             truncate_on_arrival: true,
             form: CovarianceUpdate::Joseph,
         })
@@ -107,10 +115,26 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         self.label
     }
 
-    /// `ln P(u_k ∈ R_i | prediction)` per region at the last dropout.
+    /// `ln P(u_k ∈ R_i | prediction)` per region at the last dropout (0 before any). The step
+    /// evaluates only the regions that can change its result, so these are computed here,
+    /// from the dropout's predicted marginal of `u`.
+    pub fn region_log_probs(&self) -> [T; S] {
+        let (m, s) = self.dropout_marginal;
+        core::array::from_fn(|i| {
+            if s == T::zero() {
+                return T::zero();
+            }
+            let (lo, hi) = self.region(i);
+            truncated_std_normal((lo - m) / s, (hi - m) / s).0
+        })
+    }
+
+    /// Region `i` as the interval `(ζ_i − r_i, ζ_i + r_i)`.
     #[inline]
-    pub fn region_log_probs(&self) -> &[T; S] {
-        &self.region_log_probs
+    fn region(&self, i: usize) -> (T, T) {
+        let c = self.occ.regions.centre(i)[0];
+        let r = self.occ.regions.radius(i);
+        (c - r, c + r)
     }
 
     /// One instant `k ≥ 1`: predict, then the exact-likelihood moment-matching update for
@@ -126,7 +150,6 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
             check_finite(y, "measurement")?;
         }
         let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
-        let inf = T::one() / T::zero();
         match y {
             Some(y) => {
                 let (x1, p1, _) = kalman_update(
@@ -138,13 +161,7 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
                     self.form,
                 )?;
                 let (x, p) = if self.truncate_on_arrival {
-                    // The gaps between the sorted regions, half-lines included.
-                    let gap = |j: usize| {
-                        let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
-                        let hi = if j == S { inf } else { self.sorted[j].0 };
-                        (lo, hi)
-                    };
-                    let (x, p, _) = self.truncate(&x1, &p1, S + 1, gap, |_, _| {})?;
+                    let (x, p, _, _) = self.truncate(&x1, &p1, true)?;
                     (x, p)
                 } else {
                     (x1, p1)
@@ -153,23 +170,18 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
                 self.label = 0;
             }
             None => {
-                let region = |i: usize| {
-                    let c = self.occ.regions.centre(i)[0];
-                    let r = self.occ.regions.radius(i);
-                    (c - r, c + r)
-                };
-                let mut lp = [-inf; S];
-                let (x, p, best) = self.truncate(&xp, &pp, S, region, |i, l| lp[i] = l)?;
+                let (x, p, best, marginal) = self.truncate(&xp, &pp, false)?;
                 self.est = Estimate::trusted(x, p);
                 self.label = best + 1;
-                self.region_log_probs = lp;
+                self.dropout_marginal = marginal;
             }
         }
         Ok(self.label)
     }
 
     /// Instant `k ≥ 1` without information (a packet lost in transport,
-    /// [`Packet::Lost`]): the prediction (11) only; the label and the region probabilities keep the values of the last update. On error nothing changes.
+    /// [`Packet::Lost`]): the prediction (11) only; the label and the region probabilities keep
+    /// the values of the last update. On error nothing changes.
     pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
         &mut self,
         model: &M,
@@ -180,168 +192,88 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         Ok(())
     }
 
-    /// Moments of `N(mx, p)` conditioned on `u = E x + n` lying in one of the `n` disjoint
-    /// intervals `interval(0..n)`. Returns the moments and the index of the most probable
-    /// interval, and reports `ln Z_j` of every interval to `ln_z`. One pass, no per-interval
-    /// storage: the stack stays small whatever the number of regions.
+    /// Moments of `N(mx, p)` conditioned on `u = E x + n` lying in one of the disjoint
+    /// intervals of the event (`p` exactly symmetric): on an arrival the gaps between the
+    /// regions, half-lines included, on a dropout the regions. Returns the moments, the index
+    /// of the most probable region (dropout) and `(m, s)` of `u`'s marginal. `u` is
+    /// scalar, so the update is the rank-one correction `P − (1 − v̄) P Eᵀ E P / s²`, formed on
+    /// the upper triangle as `(P − P Eᵀ E P / s²) + v̄ · P Eᵀ E P / s²` and mirrored (exactly
+    /// symmetric). Out of line: one copy serves both events.
+    #[allow(clippy::type_complexity)]
+    #[inline(never)]
     fn truncate(
         &self,
         mx: &SVector<T, NX>,
         p: &SMatrix<T, NX, NX>,
-        n: usize,
-        interval: impl Fn(usize) -> (T, T),
-        mut ln_z: impl FnMut(usize, T),
-    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, usize)> {
+        arrival: bool,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, usize, (T, T))> {
         let e = &self.occ.e;
-        let pet = p * e.transpose();
-        let s2 = (e * pet)[(0, 0)] + self.occ.psi[(0, 0)];
+        // P Eᵀ, E P Eᵀ + Ψ and E m_x, summed in the order of the matrix products.
+        let mut pet = SVector::<T, NX>::zeros();
+        for i in 0..NX {
+            let mut acc = p[(i, 0)] * e[0];
+            for j in 1..NX {
+                acc += p[(i, j)] * e[j];
+            }
+            pet[i] = acc;
+        }
+        let (mut ep, mut m) = (e[0] * pet[0], e[0] * mx[0]);
+        for i in 1..NX {
+            ep += e[i] * pet[i];
+            m += e[i] * mx[i];
+        }
+        let s2 = ep + self.occ.psi[(0, 0)];
         if !s2.finite() || s2 <= T::zero() {
             return Err(Error::NotPositiveDefinite {
                 what: "E P Eᵀ + Ψ"
             });
         }
         let s = s2.sqrt();
-        let m = (e * mx)[0];
-        let mut mix = Mixture::new();
-        let (mut best, mut best_lz) = (0usize, -T::one() / T::zero());
-        for j in 0..n {
-            let (lo, hi) = interval(j);
-            let (l, mj, vj) = truncated_std_normal((lo - m) / s, (hi - m) / s);
-            ln_z(j, l);
-            mix.push(l, mj, vj);
-            if l > best_lz {
-                (best, best_lz) = (j, l);
-            }
+        // The sorted regions' ends in standard units, shared by the regions and the gaps.
+        let mut ends = self.sorted;
+        for e in ends.iter_mut() {
+            e.0 = (e.0 - m) / s;
+            e.1 = (e.1 - m) / s;
         }
-        if !mix.ln_total().finite() {
+        let events = Intervals {
+            sorted: &ends,
+            gaps: arrival,
+        };
+        let Some((mbar, vbar, best)) = union_moments(&events) else {
             return Err(Error::Numerical {
                 what: "occlusion event has zero probability under the prior",
             });
-        }
-        // In standard units u = m + s·z: E[z] = mbar, Var[z] = vbar.
-        let (mbar, vbar) = (mix.mean, mix.variance());
-        let x = mx + pet * (mbar / s);
-        let pe_ep = pet * pet.transpose() / s2;
-        let p_new = symmetrize(&((p - pe_ep) + pe_ep * vbar));
-        check_finite(&x, "updated state")?;
-        check_finite(&p_new, "updated covariance")?;
-        Ok((x, p_new, best))
-    }
-}
-
-/// Mean and variance of a mixture whose components arrive one at a time with log-domain
-/// weights: a weighted Welford update with the largest weight so far factored out, so no
-/// weight overflows and a mixture far in a tail does not underflow to 0/0.
-struct Mixture<T: Real> {
-    /// Largest log-weight so far.
-    top: T,
-    /// Σ exp(l_j − top).
-    w: T,
-    mean: T,
-    /// Σ w_j (var_j + (mu_j − mean)²), scaled like `w`.
-    m2: T,
-}
-
-impl<T: Real> Mixture<T> {
-    fn new() -> Self {
-        Self {
-            top: -T::one() / T::zero(),
-            w: T::zero(),
-            mean: T::zero(),
-            m2: T::zero(),
-        }
-    }
-
-    /// Adds a component with weight `exp(l)`, mean `mu` and variance `var`. Zero weights are
-    /// skipped; a NaN weight poisons the total (reported by the caller).
-    fn push(&mut self, l: T, mu: T, var: T) {
-        if l == -T::one() / T::zero() {
-            return;
-        }
-        if l > self.top {
-            let r = (self.top - l).exp();
-            self.w *= r;
-            self.m2 *= r;
-            self.top = l;
-        }
-        let wj = (l - self.top).exp();
-        if wj == T::zero() {
-            return;
-        }
-        let w_new = self.w + wj;
-        let d = mu - self.mean;
-        let mean_new = self.mean + d * (wj / w_new);
-        self.m2 += wj * var + wj * d * (mu - mean_new);
-        self.mean = mean_new;
-        self.w = w_new;
-    }
-
-    /// `ln Σ exp(l_j)`.
-    fn ln_total(&self) -> T {
-        self.top + self.w.ln()
-    }
-
-    fn variance(&self) -> T {
-        (self.m2 / self.w).max(T::zero())
-    }
-}
-
-/// `x φ(x)`, 0 at ±∞.
-#[inline]
-fn x_pdf<T: Real>(x: T) -> T {
-    if x.finite() {
-        x * pdf(x)
-    } else {
-        T::zero()
-    }
-}
-
-/// `(ln Z, mean, variance)` of a standard normal truncated to `(a, b)` (`a`, `b` may be
-/// infinite). An empty interval gives `ln Z = −∞`. The variance is clamped at 0 where rounding
-/// in the general formula would make it negative (narrow intervals far in a tail).
-pub(crate) fn truncated_std_normal<T: Real>(a: T, b: T) -> (T, T, T) {
-    let neg_inf = -T::one() / T::zero();
-    if a.partial_cmp(&b) != Some(core::cmp::Ordering::Less) {
-        return (neg_inf, T::zero(), T::zero());
-    }
-    if a + b < T::zero() {
-        let (l, m, v) = truncated_std_normal(-b, -a);
-        return (l, -m, v);
-    }
-    if a <= T::zero() {
-        // The interval contains the mode's side: Z ≥ Φ(b) − ½ is not small unless b − a is.
-        let z = if a.finite() {
-            cdf(b) - cdf(a)
-        } else {
-            T::one() - sf(b)
         };
-        let (pa, pb) = (
-            if a.finite() { pdf(a) } else { T::zero() },
-            if b.finite() { pdf(b) } else { T::zero() },
-        );
-        let mean = (pa - pb) / z;
-        let var = T::one() + (x_pdf(a) - x_pdf(b)) / z - mean * mean;
-        return (z.ln(), mean, var.max(T::zero()));
+        // In standard units u = m + s·z: E[z] = mbar, Var[z] = vbar.
+        // `nan` collects v − v of every entry: 0 if all are finite, NaN otherwise.
+        #[allow(clippy::eq_op)] // v − v is the test itself
+        let not_finite = |v: T| v - v;
+        let g = mbar / s;
+        let mut x = *mx;
+        let mut nan = T::zero();
+        for i in 0..NX {
+            x[i] += pet[i] * g;
+            nan += not_finite(x[i]);
+        }
+        let half = T::lit(0.5);
+        let mut p_new = *p;
+        for j in 0..NX {
+            for i in 0..=j {
+                let pe = pet[i] * pet[j] / s2;
+                let a = (p[(i, j)] - pe) + pe * vbar;
+                // (A + Aᵀ)/2 of an exactly symmetric A.
+                let v = (a + a) * half;
+                p_new[(i, j)] = v;
+                p_new[(j, i)] = v;
+                nan += not_finite(v);
+            }
+        }
+        if nan != T::zero() {
+            check_finite(&x, "updated state")?;
+            check_finite(&p_new, "updated covariance")?;
+        }
+        Ok((x, p_new, best, (m, s)))
     }
-    // Upper tail, 0 < a < b.
-    let la = inv_mills(a);
-    let ln_sa = ln_sf(a);
-    if !b.finite() {
-        return (ln_sa, la, (T::one() - inv_mills_delta(a)).max(T::zero()));
-    }
-    let q = (ln_sf(b) - ln_sa).exp();
-    let one_q = T::one() - q;
-    let lnz = ln_sa + (-q).ln_1p();
-    let lb = inv_mills(b);
-    let lam_a = la / one_q;
-    let lam_b = lb * q / one_q;
-    let mean = lam_a - lam_b;
-    let var = if q * b * b * (a * a + T::one()) < T::EPS {
-        T::one() - inv_mills_delta(a)
-    } else {
-        T::one() + a * lam_a - b * lam_b - mean * mean
-    };
-    (lnz, mean, var.max(T::zero()))
 }
 
 /// Delivered: the arrival update; dropped: the exact dropout update; lost: prediction only.
@@ -370,98 +302,6 @@ mod tests {
     use crate::model::LinearModel;
     use crate::papers::Seed001Example;
     use nalgebra::{matrix, vector};
-
-    /// Moments of a truncated standard normal by brute-force Simpson quadrature.
-    fn quad_moments(a: f64, b: f64) -> (f64, f64, f64) {
-        let n = 200_000;
-        let h = (b - a) / n as f64;
-        let (mut z, mut m1, mut m2) = (0.0, 0.0, 0.0);
-        for j in 0..=n {
-            let t = a + j as f64 * h;
-            let w = if j == 0 || j == n {
-                1.0
-            } else if j % 2 == 1 {
-                4.0
-            } else {
-                2.0
-            };
-            let f = w * (-0.5 * t * t).exp() / (2.0 * core::f64::consts::PI).sqrt();
-            z += f;
-            m1 += f * t;
-            m2 += f * t * t;
-        }
-        let mean = m1 / z;
-        ((z * h / 3.0).ln(), mean, m2 / z - mean * mean)
-    }
-
-    #[test]
-    fn streaming_mixture_matches_two_pass_moments() {
-        // Log-weights near −1000 (exp underflows to 0 without the shift), an empty interval
-        // and one negligible far component.
-        let comps = [
-            (-1000.0f64, 2.0, 0.5),
-            (-1001.5, -3.0, 0.1),
-            (-999.2, 0.7, 1.3),
-            (f64::NEG_INFINITY, 5.0, 9.0),
-            (-1040.0, 100.0, 0.0),
-        ];
-        let mut mix = Mixture::new();
-        for &(l, mu, v) in &comps {
-            mix.push(l, mu, v);
-        }
-        let top = -999.2f64;
-        let w = comps.map(|c| (c.0 - top).exp());
-        let wt: f64 = w.iter().sum();
-        let mean: f64 = comps.iter().zip(&w).map(|(c, w)| w * c.1).sum::<f64>() / wt;
-        let var: f64 = comps
-            .iter()
-            .zip(&w)
-            .map(|(c, w)| w * (c.2 + (c.1 - mean) * (c.1 - mean)))
-            .sum::<f64>()
-            / wt;
-        assert!((mix.ln_total() - (top + wt.ln())).abs() < 1e-12);
-        assert!((mix.mean - mean).abs() < 1e-12, "{} vs {mean}", mix.mean);
-        assert!(
-            (mix.variance() - var).abs() < 1e-12,
-            "{} vs {var}",
-            mix.variance()
-        );
-        let mut empty = Mixture::<f64>::new();
-        empty.push(f64::NEG_INFINITY, 1.0, 1.0);
-        assert!(!empty.ln_total().finite());
-    }
-
-    #[test]
-    fn truncated_moments_match_quadrature() {
-        for (a, b) in [
-            (-1.0, 2.0),
-            (-12.0, 12.0),
-            (0.5, 1.0),
-            (3.0, 9.0),
-            (-9.0, -3.0),
-            (-0.01, 0.02),
-            (6.0, 6.5),
-        ] {
-            let (l, m, v) = truncated_std_normal(a, b);
-            let (lq, mq, vq) = quad_moments(a, b);
-            assert!((l - lq).abs() < 1e-9, "lnZ ({a},{b}) {l} {lq}");
-            assert!((m - mq).abs() < 1e-8, "mean ({a},{b}) {m} {mq}");
-            assert!(
-                (v - vq).abs() < 1e-8 * vq.max(1e-3),
-                "var ({a},{b}) {v} {vq}"
-            );
-        }
-        // Far tail, where Φ(b) − Φ(a) is 0 − 0: moments tend to a + 1/a, 1/a².
-        let (l, m, v) = truncated_std_normal(1000.0f64, 1020.0);
-        assert!(l.is_finite() && (l - ln_sf(1000.0)).abs() < 1e-9);
-        assert!((m - 1000.0 - 1e-3).abs() < 1e-8);
-        assert!((v * 1e6 - 1.0).abs() < 1e-4);
-        let (_, m, _) = truncated_std_normal(-1020.0f64, -1000.0);
-        assert!((m + 1000.0 + 1e-3).abs() < 1e-8);
-        let (l, m, v) = truncated_std_normal(f64::NEG_INFINITY, f64::INFINITY);
-        assert_eq!((l, m, v), (0.0, 0.0, 1.0));
-        assert_eq!(truncated_std_normal(1.0f64, 1.0).0, f64::NEG_INFINITY);
-    }
 
     fn paper() -> (LinearModel<f64, 3, 3, 2, 2>, Occlusion<f64, 3, 1, 4>) {
         (

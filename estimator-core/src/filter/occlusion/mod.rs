@@ -11,6 +11,7 @@
 pub mod adf;
 pub mod cce;
 pub mod kf_io;
+mod truncnorm;
 
 pub use adf::AssumedDensityFilter;
 pub use cce::CrossCoupledEstimator;
