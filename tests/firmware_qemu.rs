@@ -39,10 +39,10 @@ use run::{Stream, Summary};
 
 #[path = "firmware_qemu/elf.rs"]
 mod elf;
-#[path = "firmware_qemu/qemu.rs"]
-mod qemu;
 #[path = "firmware_qemu/peers.rs"]
 mod peers_agree;
+#[path = "firmware_qemu/qemu.rs"]
+mod qemu;
 
 use elf::flash_sizes;
 use qemu::{build_firmware, missing_tools, require_qemu, run_qemu};
@@ -101,7 +101,8 @@ const BINS: &[(&str, HostRun, usize, usize)] = &[
         || run::run_tobit(&tobit_stream(), usize::MAX),
         48 * 1024,
         8 * 1024,
-    ),    (
+    ),
+    (
         "kf3x2",
         || peers::run_kf3x2(&stream(), usize::MAX),
         32 * 1024,
