@@ -44,8 +44,10 @@ fn doc_rows(md: &str) -> (Vec<Row>, Vec<(String, String)>) {
     let mut current: Option<String> = None;
     let num = |s: &str| s.trim().parse::<usize>().ok();
     for line in md.lines() {
-        if let Some(h) = line.strip_prefix("### ") {
+        if line.starts_with('#') {
             current = None;
+        }
+        if let Some(h) = line.strip_prefix("### ") {
             let Some((name, rest)) = h.split_once(':') else {
                 continue;
             };
