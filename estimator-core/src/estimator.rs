@@ -24,6 +24,7 @@
 //! | [`IntermittentKalmanFilter`](crate::filter::IntermittentKalmanFilter), [`CrossCoupledEstimator`](crate::filter::CrossCoupledEstimator), [`AssumedDensityFilter`](crate::filter::AssumedDensityFilter), [`KfIo`](crate::filter::KfIo), [`TobitFilter`](crate::filter::TobitFilter) | `LinearSystem` | [`Packet<T, NY>`](crate::Packet) |
 //! | [`NnTbcpEstimator`](crate::filter::NnTbcpEstimator) | `CoupledNoiseSystem` | [`Packet<T, NY>`](crate::Packet) |
 //! | [`CoupledNoiseKf`](crate::filter::CoupledNoiseKf) | `(CoupledNoiseSystem, DifferentiableMap)` | [`Packet<T, NY>`](crate::Packet) |
+//! | [`IndependentNoiseKf`](crate::filter::IndependentNoiseKf) | `(CoupledNoiseSystem, DifferentiableMap)` | [`Packet<T, NY>`](crate::Packet) |
 //! | [`TobitFusion`](crate::filter::TobitFusion) | `[LinearSystem; L]` | `[Packet<T, NY>; L]` |
 //!
 //! # What each estimator makes of a [`Packet`](crate::Packet)
@@ -34,9 +35,10 @@
 //!   region weights keep the values of the last update.
 //! * KF-IO: delivered or dropped → its linear MMSE update (`ỹ = z` or `0`); lost →
 //!   prediction only, the arrival probability keeps its last value.
-//! * NN estimator, coupled-noise KF/EKF: delivered → `γ = 1`; dropped (withheld by the
-//!   token bucket) or lost → `γ = 0`, as the papers treat a withheld packet. Both count their
-//!   own instant: a step for any `k` but the next one is refused ([`Error::OutOfOrder`]).
+//! * NN estimator, coupled-noise and independent-noise KF/EKF: delivered → `γ = 1`; dropped
+//!   (withheld by the token bucket) or lost → `γ = 0`, as the papers treat a withheld packet.
+//!   They count their own instant: a step for any `k` but the next one is refused
+//!   ([`Error::OutOfOrder`]).
 //! * Tobit filter and fusion: delivered → `θ = 0`; dropped → `θ = 1` (the trigger did not
 //!   fire or the bucket withheld: the held measurement ȳ and the trigger's bound enter (30)).
 //!   Lost is treated like dropped. This is provisional: the estimator cannot tell whether the

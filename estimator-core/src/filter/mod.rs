@@ -6,10 +6,13 @@
 //! * [`occlusion`] (seed 001): state-dependent dropouts — the cross-coupled estimator, an
 //!   assumed-density filter and the KF-IO baseline.
 //! * [`nn`] (seed 003): the NN estimator under the token bucket; [`coupled_kf`] holds its
-//!   KF/EKF baselines for the same noise-coupled system.
+//!   KF/EKF baselines for the same noise-coupled system (the paper's: the exact
+//!   correlated-noise predictor), [`independent_kf`] the textbook KF/EKF that treat its two
+//!   noise terms as independent.
 //! * [`tobit`] (seed 004): local Tobit filters of censored measurements and their fusion.
 
 pub mod coupled_kf;
+pub mod independent_kf;
 pub mod intermittent;
 pub mod kalman;
 pub mod nn;
@@ -19,6 +22,7 @@ pub mod tobit;
 
 pub use crate::CovarianceUpdate;
 pub use coupled_kf::CoupledNoiseKf;
+pub use independent_kf::IndependentNoiseKf;
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::KalmanFilter;
 pub use nn::NnTbcpEstimator;

@@ -13,19 +13,39 @@
 //! * **`ekf-std`** — a standard EKF (mean `A_k x̂ + f(x̂)`), the product's option beside the
 //!   paper's.
 //!
-//! The three baselines are estimator-core's `CoupledNoiseKf`: the exact one-step predictor for
-//! noise that drives state and measurement (cross-covariance `B_k w̄² D_kᵀ`), prediction only
-//! when the bucket withheld the packet, and a spectral pseudo-inverse of the innovation
-//! covariance, which becomes singular because `D w̄² Dᵀ` has rank 1 in two dimensions.
-//! All four produce `x̂_k` from `y_1 … y_{k−1}` (the paper's `x̂_k` is a one-step prediction).
+//! * **`kf-indep`**, **`ekf-indep`** — the textbook KF (`A_k`, `f` ignored) and EKF (`f`
+//!   known, linearised at the filtered estimate) a practitioner would try first: they take
+//!   `B_k w_k` and `D_k w_k` as independent noises (`Q = B w̄² Bᵀ`, `R = D w̄² Dᵀ`, no
+//!   cross-covariance), estimator-core's `IndependentNoiseKf`.
+//! * **`pf`** — a particle filter on the true nonlinear model, the reference of what is
+//!   achievable (`--particles`, 0 disables it; [`pf_coupled`]).
+//!
+//! The paper's three baselines are estimator-core's `CoupledNoiseKf`: the exact one-step
+//! predictor for noise that drives state and measurement (cross-covariance `B_k w̄² D_kᵀ`),
+//! prediction only when the bucket withheld the packet, and a spectral pseudo-inverse of the
+//! innovation covariance, which becomes singular because `D w̄² Dᵀ` has rank 1 in two
+//! dimensions. All of them produce `x̂_k` from `y_0 … y_{k−1}` (the paper's `x̂_k` is a one-step
+//! prediction).
+//!
+//! **`y₀`.** The paper's bucket takes its first decision at k = 0 and (5) uses `y₀` for `x̂₁`;
+//! the stream's slots start at k = 1. The scenario's run carries `y₀` and its delivery as
+//! its instant-0 observation (`channel_sim::Simulation::initial_observations`), and every
+//! estimator here is built with it ([`initial_measurement`]): re-simulating instant 0 of
+//! `(scenario, seed, run)` gives exactly what the publisher of that run drew, so `eval`,
+//! `run`, `demo` and `replay` initialise identically. A log recorded elsewhere carries no
+//! `y₀`; a replay of it gets the simulated one of `--seed`/`--run` (docs/design.md, "Seed 003").
+//!
 //! This scenario's plant has no linear description, so the framework's `kf`/`ikf` do not
 //! apply to it and the name `kf` means the paper's KF here.
+
+pub mod pf_coupled;
 
 use channel_sim::channel::token_bucket::TokenBucketStage;
 use channel_sim::plant::nn::Seed003Plant;
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::Scenario;
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
+use estimator_core::filter::independent_kf::{IndependentMode, IndependentNoiseKf};
 use estimator_core::filter::nn::{
     check_before_run, BucketParams, NnBoundConfig, NnTbcpEstimator, PreRunVerdict, Tanh,
 };
@@ -55,12 +75,26 @@ pub fn config(w_var: f64) -> anyhow::Result<NnBoundConfig<f64>> {
 /// `ε̄` of section IV.
 pub const EPS_BAR: f64 = 0.1;
 
-/// Builds the seed 003 estimators (none for other scenarios).
+/// `y₀` of run `run` when the bucket sent it (`None` when it was withheld or the scenario has
+/// no instant-0 observation): the run's instant 0 simulated again, which is what the run's
+/// publisher drew (same scenario, seed and run, same streams).
+pub fn initial_measurement(
+    scenario: &dyn Scenario,
+    seed: u64,
+    run: u64,
+) -> Option<SVector<f64, 2>> {
+    let sim = scenario.start(seed, run);
+    let o = sim.initial_observations()?.first()?;
+    o.measurement().map(SVector::from_column_slice)
+}
+
+/// Builds the seed 003 estimators (none for other scenarios), each initialised with `y₀`
+/// when it was sent.
 pub fn build(
     scenario: &dyn Scenario,
-    _options: &EvalOptions,
-    _seed: u64,
-    _run: u64,
+    options: &EvalOptions,
+    seed: u64,
+    run: u64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let Some((composed, plant)) = seed003(scenario) else {
         return Ok(Vec::new());
@@ -69,7 +103,9 @@ pub fn build(
     let x0 = SVector::<f64, 3>::from_column_slice(init.estimator_mean.as_slice());
     let p0 = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.estimator_cov[(i, j)]);
     let w = plant.w_var();
-    let nn = NnTbcpEstimator::new(
+    let y0 = initial_measurement(scenario, seed, run);
+    let named = |name: &'static str| move |e: estimator_core::Error| anyhow::anyhow!("{name}: {e}");
+    let mut nn = NnTbcpEstimator::new(
         config(w)?,
         Tanh,
         x0,
@@ -77,12 +113,26 @@ pub fn build(
         p0,
         Seed003Example::p0(),
     )
-    .map_err(|e| anyhow::anyhow!("nn: {e}"))?;
+    .map_err(named("nn"))?;
+    if let Some(y0) = y0 {
+        nn = nn.with_initial_measurement(y0).map_err(named("nn"))?;
+    }
     let base = |name: &'static str, mode| {
-        CoupledNoiseKf::new(x0, p0, matrix![w], mode).map_err(|e| anyhow::anyhow!("{name}: {e}"))
+        let kf = CoupledNoiseKf::new(x0, p0, matrix![w], mode).map_err(named(name))?;
+        match y0 {
+            Some(y0) => kf.with_initial_measurement(y0).map_err(named(name)),
+            None => Ok(kf),
+        }
+    };
+    let indep = |name: &'static str, mode| {
+        let kf = IndependentNoiseKf::new(x0, p0, matrix![w], mode).map_err(named(name))?;
+        match y0 {
+            Some(y0) => kf.with_initial_measurement(y0).map_err(named(name)),
+            None => Ok(kf),
+        }
     };
     let kf = base("kf", Linearisation::None)?;
-    Ok(vec![
+    let mut all: Vec<Box<dyn Estimator>> = vec![
         Box::new(
             Adapted::<_, 3>::new("nn", Fed::fixed(OnModel::new(Seed003Example, nn)))
                 .with_diagnostics(nn_diagnostics)
@@ -106,7 +156,33 @@ pub fn build(
                 base("ekf-std", Linearisation::Ekf)?,
             )),
         )),
-    ])
+        Box::new(Adapted::<_, 3>::new(
+            "kf-indep",
+            Fed::fixed(OnModel::new(
+                (Seed003Example, NoNonlinearity),
+                indep("kf-indep", IndependentMode::Kf)?,
+            )),
+        )),
+        Box::new(Adapted::<_, 3>::new(
+            "ekf-indep",
+            Fed::fixed(OnModel::new(
+                (Seed003Example, Seed003Example),
+                indep("ekf-indep", IndependentMode::Ekf)?,
+            )),
+        )),
+    ];
+    if options.particles > 0 {
+        all.push(Box::new(pf_coupled::CoupledPf::new(
+            x0,
+            p0,
+            w,
+            y0,
+            options.particles,
+            seed,
+            run,
+        )?));
+    }
+    Ok(all)
 }
 
 /// The NN estimator's diagnostics: its bounds' traces and `‖φ(x̂_k)‖` against `φ̄`.
