@@ -79,9 +79,11 @@ fn occlusion_section() {
 }
 
 /// Seed 003: the NN estimator (Kronecker and two-sided gain), the correlated-noise KF/EKF
-/// baselines, the token bucket and the run monitor, including an error path.
+/// baselines, the independent-noise KF/EKF, the token bucket and the run monitor, including
+/// an error path.
 fn nn_tbcp_section() {
     use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
+    use estimator_core::filter::independent_kf::{IndependentMode, IndependentNoiseKf};
     use estimator_core::filter::nn::{GainSolver, NnBoundConfig, RunMonitor};
     use estimator_core::papers::{Seed003Example, Seed003Nn};
     use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
@@ -103,6 +105,16 @@ fn nn_tbcp_section() {
         .unwrap()
     };
     let (mut kf, mut ekf) = (kf(Linearisation::None), kf(Linearisation::PaperJacobian));
+    let indep = |m| {
+        IndependentNoiseKf::<f64, 3, 1, 2>::new(
+            Seed003Example::xhat0(),
+            Seed003Example::p0(),
+            matrix![0.1],
+            m,
+        )
+        .unwrap()
+    };
+    let (mut kfi, mut ekfi) = (indep(IndependentMode::Kf), indep(IndependentMode::Ekf));
     let mut tb = TokenBucket::new(TokenBucketConfig::new(2, 3, 10, 6).unwrap());
     let sys = Seed003Example;
     let (n, ok) = ALLOC.count(|| {
@@ -120,6 +132,11 @@ fn nn_tbcp_section() {
             // The EKF on data that is not from the model may diverge to a (non-allocating)
             // error; only allocation is measured here.
             let _ = ekf.step(&sys, &sys, y_opt);
+            let _ = kfi.step(&sys, &NoNonlinearity, y_opt);
+            let _ = ekfi.step(&sys, &sys, y_opt);
+            ok &= kfi
+                .step(&sys, &NoNonlinearity, Some(&vector![f64::NAN, 0.0]))
+                .is_err();
             ok &= nn_k.step(&sys, Some(&vector![f64::NAN, 0.0])).is_err();
         }
         ok
