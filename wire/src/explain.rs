@@ -4,7 +4,7 @@
 //! existing service's static configuration says it, whatever its types.
 
 use crate::error::ContractError;
-use crate::services::PubSubQos;
+use crate::qos::PubSubQos;
 use crate::WIRE_VERSION;
 use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::message_type_details::TypeDetail;

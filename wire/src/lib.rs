@@ -14,6 +14,7 @@
 //! | [`estimate`] | [`Estimate`]: x̂, the packed covariance, status and timing |
 //! | [`truth`] | [`Truth`]: the true state, for evaluation only |
 //! | [`services`] | service names, QoS and opening the services with them |
+//! | [`qos`] | [`qos::PubSubQos`]: what a publish-subscribe service is created with |
 //! | [`explain`] | what a failed open means, in one line |
 //! | [`layout`] | every payload's field offsets, sizes and alignments (what the docs and the C header are checked against) |
 //! | [`error`] | [`WireError`] (a bad payload) and [`ContractError`] (a peer outside the contract) |
@@ -30,6 +31,7 @@ pub mod explain;
 pub mod fingerprint;
 pub mod header;
 pub mod layout;
+pub mod qos;
 pub mod services;
 pub mod slot;
 pub mod truth;
