@@ -222,3 +222,100 @@ fn estimators_start_with_y0() {
     assert_eq!(got.as_slice(), by_hand(true).as_slice());
     assert!((by_hand(false) - by_hand(true)).amax() > 1e-3);
 }
+
+/// The numbers of docs/nn-token-bucket.md, "How far `pf` is from the optimum" (not a check;
+/// run with `cargo test --release -p ipc-runner --test nn_token_bucket -- --ignored
+/// --nocapture pf_sensitivity`): the information bound, the MSE of x̂ = 0, and `pf`'s average
+/// MSE over k = 1..=300 (100 runs, seed 1) against its particle count and its floor ε, from the
+/// prior and started at the truth.
+#[test]
+#[ignore]
+fn pf_sensitivity() {
+    use ipc_runner::estimators::nn::initial_measurement;
+    use ipc_runner::estimators::nn::pf_coupled::{CoupledPf, EPS_REL};
+    use ipc_runner::Estimator as _;
+    use nalgebra::{SMatrix, SVector};
+    use rayon::prelude::*;
+
+    let s = scenario::preset("nn-token-bucket").unwrap();
+    let (runs, t, seed) = (100u64, 300u32, 1u64);
+    let w = 0.1;
+    // Mean and s.e. over runs of per-run averages over k = 1..=t.
+    let stats = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+        (m, sd / (v.len() as f64).sqrt())
+    };
+    // The information bound (an oracle knowing x_k: error B_{k−1} w_{k−1} after a withheld
+    // packet, 0 otherwise) and x̂ = 0.
+    let mut sim = s.start(seed, 0);
+    let mut prev_sent = sim.initial_observations().unwrap()[0].delivered;
+    let mut bound = 0.0;
+    for k in 1..=t {
+        let i = sim.next_instant();
+        if !prev_sent {
+            let b: SVector<f64, 3> =
+                estimator_core::filter::nn::CoupledNoiseSystem::b(&Seed003Example, k as usize - 1);
+            bound += w * b.norm_squared() / t as f64;
+        }
+        prev_sent = i.obs[0].delivered;
+    }
+    let zero: Vec<f64> = (0..runs)
+        .map(|run| {
+            let mut sim = s.start(seed, run);
+            (1..=t)
+                .map(|_| {
+                    let i = sim.next_instant();
+                    i.truth[..3].iter().map(|v| v * v).sum::<f64>() / t as f64
+                })
+                .sum()
+        })
+        .collect();
+    println!("information bound (k = 1..={t}): {bound:.4}");
+    let (m, se) = stats(&zero);
+    println!("x_hat = 0: {m:.1} ± {se:.1}");
+    let run_pf = |n: usize, eps: f64, at_truth: bool, horizon: u32| -> (f64, f64) {
+        let per_run: Vec<f64> = (0..runs)
+            .into_par_iter()
+            .map(|run| {
+                let mut sim = s.start(seed, run);
+                let (x0, p0) = if at_truth {
+                    let x0 = SVector::<f64, 3>::from_column_slice(&sim.initial_truth()[..3]);
+                    (x0, SMatrix::<f64, 3, 3>::identity() * 1e-6)
+                } else {
+                    (Seed003Example::xhat0(), Seed003Example::p0())
+                };
+                let y0 = initial_measurement(&*s, seed, run);
+                let mut pf = CoupledPf::with_eps(x0, p0, w, y0, n, eps, seed, run).unwrap();
+                let mut sum = 0.0;
+                let mut xhat = [0.0; 3];
+                for k in 1..=horizon {
+                    let i = sim.next_instant();
+                    if pf.step(k, &i.obs).is_err() {
+                        return f64::NAN;
+                    }
+                    pf.estimate(&mut xhat);
+                    sum += (0..3).map(|j| (i.truth[j] - xhat[j]).powi(2)).sum::<f64>();
+                }
+                sum / horizon as f64
+            })
+            .collect();
+        let ok: Vec<f64> = per_run.iter().copied().filter(|v| v.is_finite()).collect();
+        if ok.len() < per_run.len() {
+            println!("    ({} runs failed)", per_run.len() - ok.len());
+        }
+        stats(&ok)
+    };
+    for n in [500, 2000, 5000, 20000] {
+        let (m, se) = run_pf(n, EPS_REL * w, false, t);
+        println!("from the prior, N = {n}, eps = {EPS_REL:e} w^2: {m:.1} ± {se:.1}");
+    }
+    for rel in [0.0, 1e-6, 1e-3] {
+        let (m, se) = run_pf(2000, rel * w, false, t);
+        println!("from the prior, N = 2000, eps = {rel:e} w^2: {m:.1} ± {se:.1}");
+    }
+    for horizon in [12, 30, 100, 300] {
+        let (m, se) = run_pf(2000, EPS_REL * w, true, horizon);
+        println!("at the truth, N = 2000, k = 1..={horizon}: {m:.3} ± {se:.3}");
+    }
+}
