@@ -23,12 +23,17 @@ fn demo_matches_in_process_eval_exactly_and_replays() {
     check(&["--config", cfg.to_str().unwrap()], &scenario, 150);
 }
 
-/// The default scenario of the demo, with every real-time estimator that applies to it
-/// (including the seeded particle filter: estimators are built for the same seed and run).
+/// The default scenario of the demo, with every real-time estimator that applies to it and
+/// the particle filter, which is opt-in (`--particles`, given to the demo and the replay
+/// alike; seeded: estimators are built for the same seed and run).
 #[test]
 fn occlusion_demo_matches_in_process_eval_exactly() {
     let scenario = channel_sim::scenario::preset("occlusion").unwrap();
-    check(&["--scenario", "occlusion"], scenario.as_ref(), 60);
+    check(
+        &["--scenario", "occlusion", "--particles", "5000"],
+        scenario.as_ref(),
+        60,
+    );
 }
 
 fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u32) {
@@ -63,6 +68,8 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
     }
     let r = report(&out.join("report.json"));
     assert_eq!(r["ending"], "completed");
+    // The scenario's own name (a `--config` file's too).
+    assert_eq!(r["scenario"], scenario.name());
     assert_eq!(r["counts"]["instants"], u64::from(steps));
     assert_eq!(
         r["counts"]["lost_in_ipc"], 0,

@@ -35,6 +35,11 @@
 //!   region weights keep the values of the last update.
 //! * KF-IO: delivered or dropped → its linear MMSE update (`ỹ = z` or `0`); lost →
 //!   prediction only, the arrival probability keeps its last value.
+//! * CCE, ADF, KF-IO with a known loss rate (`with_loss_rate(p_loss)`, default 0): for a
+//!   receiver that cannot tell a loss from a dropout, "dropped" means "occluded, or lost with
+//!   probability `p_loss`": `P(no packet | x) = p_occ(x) + (1 − p_occ(x)) p_loss` (CCE: a
+//!   "lost" hypothesis in the label scoring; ADF: the exact moments of the two-component
+//!   posterior; KF-IO: arrival probability `p_k (1 − p_loss)`). Lost is still prediction only.
 //! * NN estimator, coupled-noise and independent-noise KF/EKF: delivered → `γ = 1`; dropped
 //!   (withheld by the token bucket) or lost → `γ = 0`, as the papers treat a withheld packet.
 //!   They count their own instant: a step for any `k` but the next one is refused

@@ -36,8 +36,9 @@ pub struct DemoArgs {
     #[arg(long)]
     pub steps: Option<u32>,
     /// Sampling rate in Hz (0 = as fast as possible). The default leaves room for the
-    /// occlusion scenario's particle filter (≈ 19 ms per step on the loaded 2-core build
-    /// machine); faster rates queue slots behind it, which the latency table then shows.
+    /// occlusion scenario's particle filter when it is asked for (`--particles`, ≈ 19 ms per
+    /// step on the loaded 2-core build machine); faster rates queue slots behind it, which
+    /// the latency table then shows.
     #[arg(long, default_value_t = 20.0)]
     pub rate: f64,
     /// Experiment seed (same meaning and default as `eval --seed`).
@@ -46,9 +47,19 @@ pub struct DemoArgs {
     /// Run index within the seed.
     #[arg(long, default_value_t = 0)]
     pub run: u64,
-    /// Estimators, comma-separated (default: all that apply).
+    /// Estimators, comma-separated (default: all real-time ones that apply; `pf` only with
+    /// `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
+    /// Particles of the `pf` reference filter (occlusion scenarios; far slower per step than
+    /// the other estimators). Default: not run, as in `eval`, unless `--estimators` names it
+    /// (then 5000).
+    #[arg(long)]
+    pub particles: Option<usize>,
+    /// Known loss rate P for the occlusion estimators' `-mix` variants (as `run --loss-rate`).
+    #[arg(long, default_value_t = 0.0, value_name = "P",
+          value_parser = crate::eval::cli::loss_probability)]
+    pub loss_rate: f64,
     /// How the loop waits for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
@@ -131,7 +142,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     // Without --steps, the default horizon of `channel-sim` and `eval`.
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
-    let make = select::estimators(
+    let make = select::estimators_with(
         scenario.clone(),
         &args.estimators,
         select::Experiment {
@@ -139,6 +150,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             run: args.run,
             horizon: steps,
         },
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
     )?;
     let prefix = args
         .prefix
@@ -168,6 +180,8 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     let mut rargs = RunArgs::new(&scenario_name, &prefix);
     rargs.config = args.config.clone();
     rargs.estimators = args.estimators.clone();
+    rargs.particles = args.particles;
+    rargs.loss_rate = args.loss_rate;
     rargs.wait = args.wait;
     rargs.cpu = args.cpu;
     rargs.latest_estimates = args.latest_estimates;

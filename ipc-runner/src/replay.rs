@@ -8,6 +8,7 @@ use crate::Estimator;
 use anyhow::{Context, Result};
 use channel_sim::sim::{MAX_NODES, MAX_NX};
 use channel_sim::Observation;
+use estpipe_wire::FLAG_IPC_LOST;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -23,9 +24,17 @@ pub struct ReplayArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Estimators to run, comma-separated (default: all that apply to the scenario).
+    /// Estimators to run, comma-separated (default: all real-time ones that apply to the
+    /// scenario; `pf` only with `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
+    /// Particles of the `pf` reference filter (as `run --particles`).
+    #[arg(long)]
+    pub particles: Option<usize>,
+    /// Known loss rate P for the occlusion estimators' `-mix` variants (as `run --loss-rate`).
+    #[arg(long, default_value_t = 0.0, value_name = "P",
+          value_parser = crate::eval::cli::loss_probability)]
+    pub loss_rate: f64,
     /// Experiment seed the estimators are built for (as `eval --seed`).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -64,7 +73,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
     let instants = read_slots(&args.input, nodes, ny)?;
-    let make = select::estimators(
+    let make = select::estimators_with(
         scenario.into(),
         &args.estimators,
         select::Experiment {
@@ -72,18 +81,24 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             run: args.run,
             horizon: u32::try_from(instants.len()).unwrap_or(u32::MAX),
         },
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
     )?;
     let mut estimators = make()?;
     let (est, rejected) = run_estimators(&mut estimators, &instants, nx);
-    let delivered: usize = instants
-        .iter()
-        .map(|(_, o)| o.iter().filter(|o| o.delivered).count())
-        .sum();
+    let count = |f: &dyn Fn(&Observation) -> bool| -> usize {
+        instants
+            .iter()
+            .map(|(_, o)| o.iter().filter(|o| f(o)).count())
+            .sum()
+    };
+    let delivered = count(&|o| o.delivered);
+    let lost = count(&|o| !o.delivered && o.flags & FLAG_IPC_LOST != 0);
     println!(
-        "replayed {} instants × {nodes} node(s) from {:?}: {delivered} measurements delivered, {} dropped",
+        "replayed {} instants × {nodes} node(s) from {:?}: {delivered} measurements delivered, \
+         {} dropped by the channel, {lost} lost (flagged or missing)",
         instants.len(),
         args.input,
-        instants.len() * nodes - delivered
+        instants.len() * nodes - delivered - lost
     );
     let ne = estimators.len();
     for (e, est_e) in estimators.iter().enumerate() {

@@ -10,16 +10,20 @@
 //! | `k`           | integer | sampling instant, ≥ 1 (k = 0 is the prior and has no slot) |
 //! | `node`        | integer | sensor node, 0-based, < the scenario's node count |
 //! | `delivered`   | 0 / 1   | 1 if a measurement reached the estimator, 0 if the packet was dropped |
-//! | `flags`       | integer | channel-side flags (`channel_sim::sim::FLAG_*`; 0 if unknown) |
+//! | `flags`       | integer | channel-side flags (`channel_sim::sim::FLAG_*`; 0 if unknown); bit 31 (`FLAG_IPC_LOST`, 2147483648) marks a slot that never reached the receiver |
 //! | `y_0` … `y_{ny−1}` | float | the measurement; ignored (may be empty) when `delivered = 0` |
 //!
-//! A node missing from an instant is treated as a dropped packet, and so is a missing
-//! instant: the estimators always see every k from 1 to the last one in the file. Values
-//! `nan`/`inf` are passed to the estimators, which reject them and keep their state (counted).
+//! A row with `delivered = 0` is a packet the channel dropped (a dropout, which may carry
+//! information: occlusion, event trigger), unless its flags have `FLAG_IPC_LOST`: then the
+//! packet was lost in transport and carries none (`Packet::Lost`, docs/design.md "A loss is not
+//! a dropout"). A node missing from an instant is lost, and so is a missing instant: the
+//! estimators always see every k from 1 to the last one in the file. Values `nan`/`inf` are
+//! passed to the estimators, which reject them and keep their state (counted).
 
 use anyhow::{bail, Context, Result};
 use channel_sim::sim::{MAX_NODES, MAX_NY};
 use channel_sim::Observation;
+use estpipe_wire::FLAG_IPC_LOST;
 use std::io::{BufRead, Write};
 use std::path::Path;
 
@@ -85,7 +89,7 @@ pub fn read_slots(
     let blank = |k: u32| {
         let mut v = heapless::Vec::new();
         for n in 0..nodes {
-            let _ = v.push(Observation::dropped(k, n as u8, ny as u8, 0));
+            let _ = v.push(Observation::dropped(k, n as u8, ny as u8, FLAG_IPC_LOST));
         }
         v
     };
@@ -179,7 +183,11 @@ mod tests {
         let r = read_slots(&p, 2, 2).unwrap();
         assert_eq!(r.len(), 3);
         assert_eq!(r[0].1[1], slots[0]);
-        assert!(!r[0].1[0].delivered && !r[1].1[0].delivered && !r[1].1[1].delivered);
+        // Missing rows are lost.
+        assert_eq!(r[0].1[0], Observation::dropped(1, 0, 2, FLAG_IPC_LOST));
+        assert_eq!(r[1].1[0], Observation::dropped(2, 0, 2, FLAG_IPC_LOST));
+        assert_eq!(r[1].1[1], Observation::dropped(2, 1, 2, FLAG_IPC_LOST));
+        assert_eq!(r[2].1[1], Observation::dropped(3, 1, 2, FLAG_IPC_LOST));
         assert_eq!(r[2].1[0], slots[1]);
         std::fs::write(&p, "k,node,delivered\n1,5,0\n").unwrap();
         let e = read_slots(&p, 2, 0).unwrap_err().to_string();

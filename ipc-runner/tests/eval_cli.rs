@@ -50,6 +50,61 @@ fn bad_flags_are_one_line_errors_with_code_2() {
         ".svg or .png",
     );
     assert_usage_error(&ipc_runner(&["frobnicate"]), "frobnicate");
+    assert_usage_error(
+        &ipc_runner(&[
+            "eval",
+            "--scenario",
+            "occlusion",
+            "--estimators",
+            "cce,nope",
+        ]),
+        "estimator \"nope\" does not apply to scenario \"occlusion\"",
+    );
+    assert_usage_error(
+        &ipc_runner(&["eval", "--scenario", "occlusion", "--estimators", "adf-mix"]),
+        "need --loss-rate P",
+    );
+    for bad in ["1", "-0.1", "nan", "x"] {
+        for flag in ["--loss-rate", "--transport-loss"] {
+            let arg = format!("{flag}={bad}");
+            assert_usage_error(
+                &ipc_runner(&["eval", "--scenario", "occlusion", &arg]),
+                flag,
+            );
+        }
+    }
+}
+
+#[test]
+fn estimators_flag_selects_in_registry_order_and_pf_by_name() {
+    let out = ipc_runner(&[
+        "eval",
+        "--scenario",
+        "occlusion",
+        "--runs",
+        "4",
+        "--horizon",
+        "5",
+        "--quiet",
+        "--estimators",
+        "adf,pf,ikf,cce-mix",
+        "--loss-rate",
+        "0.1",
+        "--particles",
+        "50",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<&str> = text
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|w| ["kf", "ikf", "cce", "adf", "cce-mix", "pf"].contains(w))
+        .collect();
+    assert_eq!(rows, ["ikf", "adf", "cce-mix", "pf"], "{text}");
 }
 
 #[test]

@@ -24,6 +24,7 @@ fn run_averages() -> Vec<(&'static str, Vec<f64>)> {
         horizon: HORIZON,
         seed: SEED,
         particles: 0,
+        ..EvalOptions::default()
     };
     let nx = scenario.nx();
     let mut out: Vec<(&'static str, Vec<f64>)> = Vec::new();

@@ -1,6 +1,6 @@
 //! A core estimator ([`estimator_core::Estimator`]) as the application feeds it: instant `k`
 //! with the slot observations of `k`, converted by [`FromSlots`], and the model of `k` when
-//! the plant is time varying.
+//! the plant is time varying. Instants that never reached the runner are stepped as lost.
 
 use std::sync::Arc;
 
@@ -42,9 +42,9 @@ impl<E> Fed<E> {
 
     /// Instant `k` with the observations `obs`. An estimator that counts its own instants
     /// refuses a `k` past its next one ([`Error::OutOfOrder`]): the instants between never
-    /// reached the runner (lost inside the IPC), and are stepped first as instants without
-    /// any observation. On error the estimator keeps its previous state, gap instants
-    /// included.
+    /// reached the runner, and are stepped first as instants without any observation (every
+    /// packet [`Packet::Lost`](estimator_core::Packet::Lost), see `slots`). On error the
+    /// estimator keeps its previous state, gap instants included.
     pub(crate) fn step<const NX: usize>(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error>
     where
         E: Estimator<f64, NX> + Clone,

@@ -64,6 +64,22 @@ pub struct EvalOptions {
     pub seed: u64,
     /// Particles of the `pf` reference filter (0 disables it).
     pub particles: usize,
+    /// The estimators to build, by name (empty: every one that applies). [`build_all`]
+    /// keeps only these; a name no family builds is not an error here (the commands check
+    /// their `--estimators` against what applies).
+    pub estimators: Vec<String>,
+    /// `p_loss` of the occlusion estimators' known-loss-rate option (`--loss-rate`): above 0,
+    /// `cce-mix`, `kf-io-mix`, `adf-mix` (and `pf-mix` when `pf` runs) read a dropout as
+    /// "occluded, or lost in transport with probability `p_loss`" beside the estimators that
+    /// read it as occluded (docs/occlusion.md, "Losses"). 0 builds none of them.
+    pub loss_rate: f64,
+    /// `eval` only: probability that a slot is lost in transport after the channel
+    /// (`--transport-loss`), independently of everything else (its own random stream, so the
+    /// channel's randomness is unchanged). 0: no transport stage.
+    pub transport_loss: f64,
+    /// `eval` only: the transport losses look like channel dropouts (`--transport-loss-unmarked`:
+    /// the receiver sees only "no packet") instead of being marked lost.
+    pub transport_loss_unmarked: bool,
 }
 
 impl Default for EvalOptions {
@@ -73,6 +89,10 @@ impl Default for EvalOptions {
             horizon: 100,
             seed: 0,
             particles: pf::DEFAULT_PARTICLES,
+            estimators: Vec::new(),
+            loss_rate: 0.0,
+            transport_loss: 0.0,
+            transport_loss_unmarked: false,
         }
     }
 }
@@ -96,7 +116,8 @@ pub const FACTORIES: &[Factory] = &[
     tobit::build,
 ];
 
-/// All estimators that apply to `scenario`, from `factories` in order.
+/// All estimators that apply to `scenario`, from `factories` in order; only those named in
+/// `options.estimators` when it is not empty.
 pub fn build_all(
     factories: &[Factory],
     scenario: &dyn Scenario,
@@ -107,6 +128,9 @@ pub fn build_all(
     let mut all = Vec::new();
     for f in factories {
         all.extend(f(scenario, options, seed, run)?);
+    }
+    if !options.estimators.is_empty() {
+        all.retain(|e| options.estimators.iter().any(|n| n == e.name()));
     }
     Ok(all)
 }

@@ -7,6 +7,14 @@
 //! Applies to composed scenarios with one sensor node, a linear plant and an occlusion stage
 //! ([`OcclusionSpec`] with 1 to 4 intervals), for `n_x ≤ 4` and `n_y ≤ 2`. `cce` uses the
 //! KL-optimal 15-component Gaussian sum (`gsum`, σ = 0.0617 r). Diagnostics: `trace_p`.
+//!
+//! A packet lost in transport ([`Packet::Lost`]: lost inside the IPC, missed before join,
+//! marked lost in a slot log or by `eval --transport-loss`) is a prediction-only step for all
+//! three: a loss says nothing about the state. With `--loss-rate P` (a positive
+//! `EvalOptions::loss_rate`) the family also builds `cce-mix`, `kf-io-mix` and `adf-mix`, the
+//! same filters with `with_loss_rate(P)`: for a receiver that cannot tell a loss from a
+//! dropout, every dropout is "occluded, or lost with probability P" (docs/occlusion.md,
+//! "Losses").
 
 use std::sync::Arc;
 
@@ -32,7 +40,7 @@ pub const CCE_COMPONENTS: usize = 15;
 /// Builds `cce`, `kf-io` and `adf` for an occlusion scenario (empty list otherwise).
 pub fn build(
     scenario: &dyn Scenario,
-    _options: &EvalOptions,
+    options: &EvalOptions,
     _seed: u64,
     _run: u64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
@@ -45,7 +53,7 @@ pub fn build(
     macro_rules! by_s {
         ($s:literal) => {
             if let Some(spec) = composed.stage::<OcclusionSpec<$s>>() {
-                return by_dims::<$s>(composed, spec);
+                return by_dims::<$s>(composed, spec, options.loss_rate);
             }
         };
     }
@@ -59,11 +67,12 @@ pub fn build(
 fn by_dims<const S: usize>(
     composed: &ComposedScenario,
     spec: &OcclusionSpec<S>,
+    loss_rate: f64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let (nx, ny) = (composed.plant().nx(), composed.plant().ny());
     macro_rules! go {
         ($nx:literal, $ny:literal) => {
-            family::<$nx, $ny, S>(composed, spec)
+            family::<$nx, $ny, S>(composed, spec, loss_rate)
         };
     }
     match (nx, ny) {
@@ -82,6 +91,7 @@ fn by_dims<const S: usize>(
 fn family<const NX: usize, const NY: usize, const S: usize>(
     composed: &ComposedScenario,
     spec: &OcclusionSpec<S>,
+    loss_rate: f64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let occ: Occlusion<f64, NX, 1, S> = spec
         .occlusion::<NX>()
@@ -96,11 +106,29 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
     let kfio = KfIo::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("kf-io: {e}"))?;
     let adf = AssumedDensityFilter::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("adf: {e}"))?;
     let model = Snapshot::<NX, NY>::at(super::linear_of(&*plant)?, 1);
-    Ok(vec![
+    let mut out = vec![
         adapted("cce", &plant, OnModel::new(model, cce)),
         adapted("kf-io", &plant, OnModel::new(model, kfio)),
         adapted("adf", &plant, OnModel::new(model, adf)),
-    ])
+    ];
+    if loss_rate > 0.0 {
+        let bad = |name: &str, e: estimator_core::Error| anyhow::anyhow!("{name}: {e}");
+        let cce = cce
+            .with_loss_rate(loss_rate)
+            .map_err(|e| bad("cce-mix", e))?;
+        let kfio = kfio
+            .with_loss_rate(loss_rate)
+            .map_err(|e| bad("kf-io-mix", e))?;
+        let adf = adf
+            .with_loss_rate(loss_rate)
+            .map_err(|e| bad("adf-mix", e))?;
+        out.extend([
+            adapted("cce-mix", &plant, OnModel::new(model, cce)),
+            adapted("kf-io-mix", &plant, OnModel::new(model, kfio)),
+            adapted("adf-mix", &plant, OnModel::new(model, adf)),
+        ]);
+    }
+    Ok(out)
 }
 
 /// `on` (a filter on node 0's model) under `name`.
@@ -117,4 +145,50 @@ where
         on.model = Snapshot::at(model, k);
     });
     Box::new(Adapted::<_, NX>::new(name, fed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimators::{build_all, FACTORIES};
+    use channel_sim::sim::FLAG_OCCLUDED;
+    use estpipe_wire::FLAG_IPC_LOST;
+
+    /// A slot lost in the IPC is a prediction for every occlusion estimator (the same as
+    /// `ikf`'s), a dropout is not: from the same prior, after one instant.
+    #[test]
+    fn a_lost_slot_is_a_prediction_and_a_dropout_is_not() {
+        let s = channel_sim::scenario::preset("occlusion").unwrap();
+        let options = EvalOptions {
+            particles: 0,
+            loss_rate: 0.2,
+            ..EvalOptions::default()
+        };
+        let after = |flags: u32| {
+            let mut ests = build_all(FACTORIES, &*s, &options, 0, 0).unwrap();
+            let obs = [channel_sim::Observation::dropped(1, 0, 2, flags)];
+            ests.iter_mut()
+                .filter(|e| !e.full_information())
+                .map(|e| {
+                    e.step(1, &obs).unwrap();
+                    let mut x = [0.0; 3];
+                    e.estimate(&mut x);
+                    (e.name(), x)
+                })
+                .collect::<Vec<_>>()
+        };
+        let (lost, dropped) = (after(FLAG_IPC_LOST), after(FLAG_OCCLUDED));
+        let ikf = lost.iter().find(|(n, _)| *n == "ikf").unwrap().1;
+        assert_eq!(lost.len(), 7, "{lost:?}");
+        for ((name, x), (_, y)) in lost.iter().zip(&dropped) {
+            assert_eq!(*x, ikf, "{name} on a loss");
+            match *name {
+                "ikf" => {}
+                // The prior (x₁ ≈ 5) is far below every region (15..85): for cce-mix the
+                // "lost" hypothesis wins the label scoring and the update is the prediction.
+                "cce-mix" => assert_eq!(*y, ikf),
+                _ => assert_ne!(x, y, "{name}: a dropout is not a loss"),
+            }
+        }
+    }
 }

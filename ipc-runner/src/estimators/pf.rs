@@ -11,6 +11,10 @@
 //! ```
 //!
 //! (probabilities from `gauss::ln_interval_prob`, so far tails neither underflow nor cancel).
+//! A packet lost in transport (`FLAG_IPC_LOST`, see `slots`) carries no information: the
+//! particles move and keep their weights. `pf-mix` (built beside `pf` with `--loss-rate P`)
+//! weights a dropout by `P + (1 − P) P(u ∈ ∪R_i | x)`, a loss the receiver cannot tell from an
+//! occlusion.
 //! Weights are kept as logarithms; the estimate is the weighted mean; systematic resampling
 //! when the effective sample size drops below half the particle count. The particle count is
 //! `--particles` (default 5000; 0 disables `pf`). Random numbers: xoshiro256++ seeded from
@@ -27,6 +31,7 @@ use channel_sim::sim::{MAX_NX, MAX_NY};
 use channel_sim::{Observation, Scenario};
 use estimator_core::gauss::{ln_interval_prob, log_sum_exp};
 use estimator_core::Error;
+use estpipe_wire::FLAG_IPC_LOST;
 use nalgebra::DMatrix;
 
 use super::EvalOptions;
@@ -35,7 +40,8 @@ use crate::Estimator;
 /// Default particle count.
 pub const DEFAULT_PARTICLES: usize = 5000;
 
-/// Builds `pf` for an occlusion scenario (empty list otherwise or with `--particles 0`).
+/// Builds `pf` for an occlusion scenario (empty list otherwise or with `--particles 0`), and
+/// `pf-mix` beside it when `options.loss_rate > 0`.
 pub fn build(
     scenario: &dyn Scenario,
     options: &EvalOptions,
@@ -54,22 +60,38 @@ pub fn build(
     macro_rules! by_s {
         ($s:literal) => {
             if let Some(spec) = composed.stage::<OcclusionSpec<$s>>() {
-                let intervals = (0..$s)
+                let intervals: Vec<(f64, f64)> = (0..$s)
                     .map(|i| {
                         let c = spec.regions.centre(i)[0];
                         let r = spec.regions.radius(i);
                         (c - r, c + r)
                     })
                     .collect();
-                return Ok(vec![Box::new(ParticleFilter::new(
-                    composed,
-                    spec.e.clone(),
-                    spec.psi,
-                    intervals,
-                    options.particles,
-                    seed,
-                    run,
-                )?)]);
+                let make = |intervals| {
+                    ParticleFilter::new(
+                        composed,
+                        spec.e.clone(),
+                        spec.psi,
+                        intervals,
+                        options.particles,
+                        seed,
+                        run,
+                    )
+                };
+                let mut out: Vec<Box<dyn Estimator>> = vec![Box::new(make(intervals.clone())?)];
+                let p = options.loss_rate;
+                if p > 0.0 {
+                    anyhow::ensure!(
+                        p.is_finite() && p < 1.0,
+                        "pf-mix: invalid loss_rate: must be finite and in [0, 1)"
+                    );
+                    // The same seed: pf-mix draws the same random numbers as pf.
+                    let mut mix = make(intervals)?;
+                    mix.name = "pf-mix";
+                    mix.ln_loss = Some((p.ln(), (-p).ln_1p()));
+                    out.push(Box::new(mix));
+                }
+                return Ok(out);
             }
         };
     }
@@ -126,6 +148,10 @@ impl Rng {
 }
 
 struct ParticleFilter {
+    /// `pf`, or `pf-mix` with a loss rate.
+    name: &'static str,
+    /// `(ln p_loss, ln(1 − p_loss))` of `pf-mix`.
+    ln_loss: Option<(f64, f64)>,
     plant: Arc<dyn Plant>,
     e: Vec<f64>,
     sd_n: f64,
@@ -213,6 +239,8 @@ impl ParticleFilter {
             }
         }
         Ok(Self {
+            name: "pf",
+            ln_loss: None,
             plant: composed.plant_arc(),
             e,
             sd_n: psi.sqrt(),
@@ -268,7 +296,7 @@ impl ParticleFilter {
 
 impl Estimator for ParticleFilter {
     fn name(&self) -> &'static str {
-        "pf"
+        self.name
     }
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
@@ -276,6 +304,10 @@ impl Estimator for ParticleFilter {
         let (a, lq, c, lr) = (&m.a, &m.lq, &m.c, &m.lr);
         let (nx, ny) = (self.nx, self.ny);
         let mut y_buf = [0.0; MAX_NY];
+        // Lost in transport: no likelihood, the particles only move.
+        let lost = obs
+            .first()
+            .is_none_or(|o| !o.delivered && o.flags & FLAG_IPC_LOST != 0);
         let y = obs.first().and_then(|o| o.measurement()).map(|y| {
             y_buf[..ny].copy_from_slice(&y[..ny]);
             &y_buf[..ny]
@@ -310,7 +342,15 @@ impl Estimator for ParticleFilter {
             }
             let ex: f64 = self.e.iter().zip(new.iter()).map(|(e, x)| e * x).sum();
             let ll = match y {
-                None => self.ln_prob(&self.regions, ex),
+                None if lost => 0.0,
+                None => {
+                    let occluded = self.ln_prob(&self.regions, ex);
+                    match self.ln_loss {
+                        // ln(p + (1 − p) P(occluded | x))
+                        Some((lp, l1p)) => log_sum_exp(&[lp, l1p + occluded]),
+                        None => occluded,
+                    }
+                }
                 Some(y) => {
                     // −½‖L⁻¹(y − Cx)‖² by forward substitution.
                     let mut q = 0.0;

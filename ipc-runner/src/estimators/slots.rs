@@ -2,19 +2,27 @@
 //! for a core estimator: its [`Estimator::Measurement`](estimator_core::Estimator::Measurement),
 //! a [`Packet`] or one per node.
 //!
-//! A packet the channel dropped is [`Packet::Dropped`]. So, for now, is a slot lost inside the
-//! IPC (`FLAG_IPC_LOST`): the estimators have always been fed it as a dropout, and a lost slot
-//! says less than a dropout does, which [`Packet::Lost`] will carry once the estimators'
-//! results may change with it.
+//! A packet is in one of three states (docs/design.md, "The estimator API": a loss is not a
+//! dropout):
+//!
+//! * delivered: [`Packet::Delivered`];
+//! * dropped by the channel (occlusion, event trigger, token bucket, a random-loss stage of the
+//!   channel): [`Packet::Dropped`], which may carry information;
+//! * never received — a slot lost inside the IPC, missed before the runner joined the stream,
+//!   a row flagged lost in a slot log, a slot lost by `eval --transport-loss`, all marked
+//!   [`FLAG_IPC_LOST`], and a node or instant the runner has no observation of at all:
+//!   [`Packet::Lost`], which carries none.
 
 use channel_sim::Observation;
 use estimator_core::Packet;
+use estpipe_wire::FLAG_IPC_LOST;
 use nalgebra::SVector;
 
 /// A core measurement read from the observations of one instant.
 pub(crate) trait FromSlots {
     /// The measurement of the instant whose observations are `obs` (in node order); with no
-    /// observation at all, every node's packet is a dropout.
+    /// observation at all (an instant that never reached the runner), every node's packet is
+    /// lost.
     fn from_slots(obs: &[Observation]) -> Self;
 }
 
@@ -22,27 +30,60 @@ pub(crate) trait FromSlots {
 pub(crate) fn packet<const NY: usize>(o: &Observation) -> Packet<f64, NY> {
     match o.measurement() {
         Some(y) => Packet::Delivered(SVector::from_column_slice(y)),
+        None if o.flags & FLAG_IPC_LOST != 0 => Packet::Lost,
         None => Packet::Dropped,
     }
 }
 
-/// A single-node estimator's packet: node 0's; an instant without any observation is a dropout.
+/// A single-node estimator's packet: node 0's; an instant without any observation is lost.
 impl<const NY: usize> FromSlots for Packet<f64, NY> {
     fn from_slots(obs: &[Observation]) -> Self {
-        obs.first().map_or(Packet::Dropped, packet)
+        obs.first().map_or(Packet::Lost, packet)
     }
 }
 
-/// Every node's packet at its node index; a node without an observation is a dropout, an
+/// Every node's packet at its node index; a node without an observation is lost, an
 /// observation from a node past `L` is not read.
 impl<const NY: usize, const L: usize> FromSlots for [Packet<f64, NY>; L] {
     fn from_slots(obs: &[Observation]) -> Self {
-        let mut y = [Packet::Dropped; L];
+        let mut y = [Packet::Lost; L];
         for o in obs {
             if let Some(slot) = y.get_mut(usize::from(o.node)) {
                 *slot = packet(o);
             }
         }
         y
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use channel_sim::sim::{FLAG_OCCLUDED, FLAG_RANDOM_LOSS};
+
+    #[test]
+    fn delivered_dropped_and_lost() {
+        let mut y = Observation::dropped(3, 0, 2, 0);
+        y.delivered = true;
+        y.y[..2].copy_from_slice(&[1.5, -2.0]);
+        assert_eq!(
+            packet::<2>(&y),
+            Packet::Delivered(SVector::from([1.5, -2.0]))
+        );
+        for flags in [0, FLAG_OCCLUDED, FLAG_RANDOM_LOSS] {
+            assert_eq!(
+                packet::<2>(&Observation::dropped(3, 0, 2, flags)),
+                Packet::Dropped
+            );
+        }
+        let lost = Observation::dropped(3, 1, 2, FLAG_IPC_LOST);
+        assert_eq!(packet::<2>(&lost), Packet::Lost);
+        assert_eq!(<Packet<f64, 2>>::from_slots(&[]), Packet::Lost);
+        assert_eq!(<Packet<f64, 2>>::from_slots(&[lost, y]), Packet::Lost);
+        // Node 2 sent nothing; node 1's slot was lost; node 0's arrived.
+        assert_eq!(
+            <[Packet<f64, 2>; 3]>::from_slots(&[y, lost]),
+            [packet(&y), Packet::Lost, Packet::Lost]
+        );
     }
 }

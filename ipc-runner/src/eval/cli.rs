@@ -41,11 +41,48 @@ pub struct EvalArgs {
     #[arg(long)]
     pub quiet: bool,
     /// Particles of the `pf` reference filter on occlusion scenarios. Off by default in
-    /// `eval`: at 5000 particles it costs ~3 CPU-ms per step, 100× the other estimators
-    /// together, so a 2000-run evaluation would take minutes instead of seconds.
-    /// Typical: `--particles 5000 --runs 200`.
-    #[arg(long, default_value_t = 0)]
-    pub particles: usize,
+    /// `eval` (unless `--estimators` names `pf` or `pf-mix`: then 5000): at 5000 particles it
+    /// costs ~3 CPU-ms per step, 100× the other estimators together, so a 2000-run
+    /// evaluation would take minutes instead of seconds. Typical: `--particles 5000 --runs 200`.
+    #[arg(long)]
+    pub particles: Option<usize>,
+    /// Estimators to evaluate, comma-separated (default: all that apply to the scenario).
+    #[arg(long, value_delimiter = ',')]
+    pub estimators: Vec<String>,
+    /// Known loss rate P of the occlusion estimators' mixture option: `cce-mix`,
+    /// `kf-io-mix`, `adf-mix` (and `pf-mix`) read a dropout as "occluded, or lost in
+    /// transport with probability P" (docs/occlusion.md, "Losses"). 0 (default): not built.
+    #[arg(long, default_value_t = 0.0, value_name = "P", value_parser = loss_probability)]
+    pub loss_rate: f64,
+    /// A transport stage after the channel that loses every slot with probability P (its own
+    /// random stream: the channel's randomness is unchanged); the lost slots reach the
+    /// estimators marked lost (no information).
+    #[arg(long, default_value_t = 0.0, value_name = "P", value_parser = loss_probability)]
+    pub transport_loss: f64,
+    /// The transport losses look like channel dropouts (the receiver sees only "no packet").
+    #[arg(long, requires = "transport_loss")]
+    pub transport_loss_unmarked: bool,
+}
+
+/// A probability in `[0, 1)` (a loss rate).
+pub fn loss_probability(s: &str) -> Result<f64, String> {
+    let p: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if p.is_finite() && (0.0..1.0).contains(&p) {
+        Ok(p)
+    } else {
+        Err(format!("{p} is not in [0, 1)"))
+    }
+}
+
+/// The particle count of `pf`: `--particles` when given, else 0 unless `names` asks for `pf`
+/// or `pf-mix` by name (then the default count). The particle filter is opt-in for every
+/// command: it is the one estimator too slow for the others' time budget.
+pub fn particles(explicit: Option<usize>, names: &[String]) -> usize {
+    explicit.unwrap_or(if names.iter().any(|n| n == "pf" || n == "pf-mix") {
+        crate::estimators::pf::DEFAULT_PARTICLES
+    } else {
+        0
+    })
 }
 
 /// A failed command: exit code 2 for bad input (flags, scenario, configuration), 1 otherwise.
@@ -95,9 +132,38 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         runs: args.runs,
         horizon: args.horizon,
         seed: args.seed,
-        particles: args.particles,
-        ..EvalOptions::default()
+        particles: particles(args.particles, &args.estimators),
+        estimators: args.estimators.clone(),
+        loss_rate: args.loss_rate,
+        transport_loss: args.transport_loss,
+        transport_loss_unmarked: args.transport_loss_unmarked,
     };
+    if !options.estimators.is_empty() {
+        let all = EvalOptions {
+            estimators: Vec::new(),
+            ..options.clone()
+        };
+        let available: Vec<&str> =
+            crate::estimators::build_all(FACTORIES, &*scenario, &all, options.seed, 0)
+                .map_err(|e| CommandError::failure(format!("{e:#}")))?
+                .iter()
+                .map(|e| e.name())
+                .collect();
+        for n in &options.estimators {
+            if !available.contains(&n.as_str()) {
+                let hint = if n.ends_with("-mix") && options.loss_rate == 0.0 {
+                    " (the -mix estimators need --loss-rate P)"
+                } else {
+                    ""
+                };
+                return Err(CommandError::usage(format!(
+                    "estimator {n:?} does not apply to scenario {:?}{hint}; available: {}",
+                    scenario.name(),
+                    available.join(", ")
+                )));
+            }
+        }
+    }
     let run_config = RunConfig {
         threads: args.threads.map(|t| t as usize),
         progress: !args.quiet,

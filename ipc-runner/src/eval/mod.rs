@@ -13,6 +13,18 @@
 //! What a scenario adds to its evaluation lives here too, not in its estimators:
 //! [`nn_bound`] (seed 003's assumption check, bound check and bound plot).
 //!
+//! **Transport losses** (`--transport-loss P`, [`EvalOptions::transport_loss`]): a stage after
+//! the channel, outside the scenario, that loses every slot independently with probability
+//! `P` before the estimators see it — what a lossy network between sensor and estimator
+//! does. Slot `(k, node)` is lost iff `U < P`, `U` uniform from its own SplitMix64 stream of
+//! `(seed, run)` indexed by the slot's sequence number ([`transport_lost`]), so the plant's
+//! and the channel's random numbers, and the slots lost, are the same whatever the
+//! estimators or `P`'s other uses. A lost slot reaches the estimators marked
+//! `FLAG_IPC_LOST` (a [`Packet::Lost`](estimator_core::Packet::Lost): no information), or with
+//! `--transport-loss-unmarked` as an unflagged dropout (the receiver sees only "no packet").
+//! The channel counts are the channel's (before the transport); `transport_lost` counts the
+//! slots the transport lost.
+//!
 //! ```
 //! use ipc_runner::estimators::{EvalOptions, FACTORIES};
 //! use ipc_runner::eval::{evaluate, RunConfig};
@@ -32,8 +44,9 @@ pub mod report;
 
 use anyhow::Context as _;
 use channel_sim::sim::{FLAG_CENSORED, FLAG_OCCLUDED, FLAG_RANDOM_LOSS, FLAG_TOKEN_BLOCKED};
-use channel_sim::sim::{FLAG_TRIGGERED, MAX_NX};
+use channel_sim::sim::{FLAG_TRIGGERED, MAX_NODES, MAX_NX};
 use channel_sim::{Observation, Scenario};
+use estpipe_wire::FLAG_IPC_LOST;
 use rayon::prelude::*;
 
 use crate::estimators::{build_all, EvalOptions, Factory};
@@ -196,12 +209,36 @@ pub fn run_one(
         t.truth[..nx].copy_from_slice(&truth0[..nx]);
     }
 
+    let transport = options.transport_loss > 0.0;
+    let mut after_transport: heapless::Vec<Observation, MAX_NODES> = heapless::Vec::new();
     for k in 1..=options.horizon {
         let instant = sim.next_instant();
         let truth = &instant.truth[..nx];
         for (o, counts) in instant.obs.iter().zip(&mut channel) {
             counts.count(o);
         }
+        // The transport after the channel (module docs): what the estimators receive.
+        let received: &[Observation] = if !transport {
+            &instant.obs
+        } else {
+            after_transport.clear();
+            let nodes = instant.obs.len() as u64;
+            for (o, counts) in instant.obs.iter().zip(&mut channel) {
+                let seq = u64::from(o.k - 1) * nodes + u64::from(o.node);
+                let mut o = *o;
+                if transport_lost(options.seed, run, seq, options.transport_loss) {
+                    counts.transport_lost += 1;
+                    let flags = if options.transport_loss_unmarked {
+                        0
+                    } else {
+                        FLAG_IPC_LOST
+                    };
+                    o = Observation::dropped(o.k, o.node, o.ny, flags);
+                }
+                let _ = after_transport.push(o);
+            }
+            &after_transport
+        };
         if let Some(t) = &mut trajectory {
             t.truth[k as usize * nx..][..nx].copy_from_slice(truth);
         }
@@ -219,7 +256,7 @@ pub fn run_one(
                     }
                 }
             } else {
-                &instant.obs
+                received
             };
             match e.step(k, obs) {
                 Ok(()) => {
@@ -238,6 +275,18 @@ pub fn run_one(
         channel,
         trajectory,
     })
+}
+
+/// Whether `eval`'s transport stage loses slot `seq` (`(k − 1)·nodes + node`) of run `run`:
+/// `U < p`, with `U` uniform in `[0, 1)` from the slot's own SplitMix64 output in a stream of
+/// `(seed, run)` with a tag of its own, apart from the simulation's plant and channel streams
+/// (`channel_sim::rng`).
+pub fn transport_lost(seed: u64, run: u64, seq: u64, p: f64) -> bool {
+    use channel_sim::rng::splitmix64;
+    // "transpor": the stream's tag.
+    let stream = splitmix64(splitmix64(splitmix64(seed ^ 0x7472_616e_7370_6f72) ^ run));
+    let bits = splitmix64(stream.wrapping_add(seq.wrapping_mul(0x9E37_79B9_7F4A_7C15)));
+    ((bits >> 11) as f64) * (1.0 / (1u64 << 53) as f64) < p
 }
 
 /// Reads the estimate at `k`, records its squared error (or marks the run diverged when it is

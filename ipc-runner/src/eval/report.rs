@@ -4,13 +4,14 @@
 //! JSON shape (fields beyond the issue's are additions):
 //! ```text
 //! { "scenario", "runs", "horizon", "seed",
+//!   ["transport_loss", "transport_loss_unmarked", "loss_rate",]   (only when set)
 //!   "estimators": { NAME: { "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
 //!                           "median_run_avg", "diverged_runs", "valid_runs",
 //!                           "first_error", "mse_per_state": [[MSE_i(k)]…],
 //!                           <diagnostic name>: [mean over runs per k]… } },
 //!   "channel": { "delivery_rate", "nodes": [ { "node", "instants", "delivered", "dropped",
 //!                "sent", "triggered", "blocked", "censored", "random_loss", "occluded",
-//!                "delivery_rate" }… ] } }
+//!                ["transport_lost",] "delivery_rate" }… ] } }
 //! ```
 //! MSE(k) is the mean over valid runs of ‖x_k − x̂_k‖²; `avg_mse` the mean of MSE(k) over
 //! k = 1..=T (equivalently the mean of the valid runs' averages), `avg_mse_se` its Monte-Carlo
@@ -37,6 +38,15 @@ pub struct EvalResult {
     pub horizon: u32,
     /// Experiment seed.
     pub seed: u64,
+    /// `--transport-loss` (not written when 0).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub transport_loss: f64,
+    /// `--transport-loss-unmarked` (not written when false).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub transport_loss_unmarked: bool,
+    /// `--loss-rate` of the `-mix` estimators (not written when 0).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub loss_rate: f64,
     /// Per estimator, in registry order.
     #[serde(serialize_with = "ordered_map")]
     pub estimators: Vec<(String, EstimatorResult)>,
@@ -106,6 +116,10 @@ pub struct NodeCounts {
     pub random_loss: u64,
     /// `FLAG_OCCLUDED` set.
     pub occluded: u64,
+    /// Slots lost by `eval`'s transport stage after the channel (`--transport-loss`; not
+    /// written when 0). The counts above are the channel's, before that stage.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub transport_lost: u64,
     /// delivered / instants.
     pub delivery_rate: f64,
 }
@@ -133,6 +147,14 @@ impl Trajectory {
             estimates: vec![vec![f64::NAN; len]; names.len()],
         }
     }
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
+}
+
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn ordered_map<S: Serializer, V: Serialize>(
@@ -245,6 +267,7 @@ impl Accumulator {
             total.censored += c.censored;
             total.random_loss += c.random_loss;
             total.occluded += c.occluded;
+            total.transport_lost += c.transport_lost;
         }
         if out.trajectory.is_some() {
             self.trajectory = out.trajectory;
@@ -311,6 +334,9 @@ impl Accumulator {
             runs: self.options.runs,
             horizon: self.options.horizon,
             seed: self.options.seed,
+            transport_loss: self.options.transport_loss,
+            transport_loss_unmarked: self.options.transport_loss_unmarked,
+            loss_rate: self.options.loss_rate,
             estimators,
             channel: ChannelSummary {
                 delivery_rate: delivered as f64 / instants.max(1) as f64,
@@ -402,6 +428,27 @@ impl EvalResult {
         }
         for w in &self.warnings {
             let _ = writeln!(s, "WARNING: {w}");
+        }
+        if self.transport_loss > 0.0 {
+            let lost: u64 = self.channel.nodes.iter().map(|c| c.transport_lost).sum();
+            let slots: u64 = self.channel.nodes.iter().map(|c| c.instants).sum();
+            let _ = writeln!(
+                s,
+                "transport after the channel: {lost} of {slots} slots lost (p = {}), {}",
+                self.transport_loss,
+                if self.transport_loss_unmarked {
+                    "unmarked (the estimators see a dropout)"
+                } else {
+                    "marked lost (the estimators see a loss)"
+                }
+            );
+        }
+        if self.loss_rate > 0.0 {
+            let _ = writeln!(
+                s,
+                "the -mix estimators read a dropout as occluded or lost with p_loss = {}",
+                self.loss_rate
+            );
         }
         for c in &self.channel.nodes {
             let _ = writeln!(

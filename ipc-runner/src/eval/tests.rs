@@ -243,3 +243,65 @@ fn diverged_runs_are_counted_and_excluded_never_a_crash() {
     let v: serde_json::Value = serde_json::from_str(&r.to_json()).unwrap();
     assert_eq!(v["estimators"]["faulty"]["diverged_runs"], 20);
 }
+
+/// The transport stage after the channel: it loses about `p` of the slots (binomial, within
+/// 5 standard deviations), leaves the channel's counts and `ikf` (a dropout and a loss are the
+/// same to it) as they were, and the occlusion estimators see a marked loss differently from an
+/// unmarked one. Without it (`p = 0`) the JSON is that of an eval without the stage.
+#[test]
+fn transport_losses_come_after_the_channel() {
+    let s = preset("occlusion").unwrap();
+    let base = options(40, 50, 5);
+    let with = |p: f64, unmarked: bool| {
+        let o = EvalOptions {
+            particles: 0,
+            transport_loss: p,
+            transport_loss_unmarked: unmarked,
+            ..base.clone()
+        };
+        eval_with(&*s, &o, FACTORIES, 2)
+    };
+    let none = with(0.0, false);
+    assert_eq!(
+        none.to_json(),
+        eval_with(
+            &*s,
+            &EvalOptions {
+                particles: 0,
+                ..base.clone()
+            },
+            FACTORIES,
+            2
+        )
+        .to_json()
+    );
+    let (marked, unmarked) = (with(0.2, false), with(0.2, true));
+    let (c0, c1) = (&none.channel.nodes[0], &marked.channel.nodes[0]);
+    assert_eq!((c0.delivered, c0.occluded), (c1.delivered, c1.occluded));
+    let n = c1.instants as f64;
+    let lost = c1.transport_lost as f64;
+    assert!(
+        (lost - 0.2 * n).abs() < 5.0 * (n * 0.2 * 0.8).sqrt(),
+        "{lost} of {n}"
+    );
+    assert_eq!(c1.transport_lost, unmarked.channel.nodes[0].transport_lost);
+    assert!(marked.to_json().contains("\"transport_lost\""));
+    assert!(!none.to_json().contains("transport"));
+    let ikf = |r: &EvalResult| estimator(r, "ikf").mse.clone();
+    assert_eq!(ikf(&marked), ikf(&unmarked));
+    assert_ne!(ikf(&marked), ikf(&none));
+    for e in ["cce", "adf"] {
+        assert_ne!(
+            estimator(&marked, e).mse,
+            estimator(&unmarked, e).mse,
+            "{e}"
+        );
+    }
+    // The same slots are lost whatever the loss rate's other uses: a slot lost at p is lost at
+    // every larger p.
+    for seq in 0..1000 {
+        if transport_lost(5, 3, seq, 0.1) {
+            assert!(transport_lost(5, 3, seq, 0.2));
+        }
+    }
+}

@@ -39,9 +39,21 @@ pub struct RunArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Estimators to run, comma-separated (default: all that apply to the scenario).
+    /// Estimators to run, comma-separated (default: all real-time ones that apply to the
+    /// scenario; `pf` only with `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
+    /// Particles of the `pf` reference filter (occlusion scenarios; far slower per step than
+    /// the other estimators). Default: `pf` is not run unless `--estimators` names it (then
+    /// 5000).
+    #[arg(long)]
+    pub particles: Option<usize>,
+    /// Known loss rate P for the occlusion estimators' mixture option: adds `cce-mix`,
+    /// `kf-io-mix`, `adf-mix` (and `pf-mix`), which read a dropout as "occluded, or lost in
+    /// transport with probability P" (docs/occlusion.md, "Losses").
+    #[arg(long, default_value_t = 0.0, value_name = "P",
+          value_parser = crate::eval::cli::loss_probability)]
+    pub loss_rate: f64,
     /// Service-name prefix (must match channel-sim's).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
@@ -115,6 +127,8 @@ impl RunArgs {
             scenario: scenario.to_string(),
             config: None,
             estimators: Vec::new(),
+            particles: None,
+            loss_rate: 0.0,
             prefix: prefix.to_string(),
             wait: WaitMode::Spin,
             deadline_ms: 100.0,

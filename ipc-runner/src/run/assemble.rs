@@ -2,11 +2,12 @@
 //!
 //! Sequence numbers are dense (`seq = (k − 1)·nodes + node`, see [`Slot::seq_of`]), so every
 //! missing slot is known exactly: a gap is a slot lost inside the IPC (the subscriber queue
-//! overflowed and the oldest sample was overwritten). It becomes a dropped observation with
-//! [`FLAG_IPC_LOST`] — the estimator sees the instant, as for a packet the channel dropped —
-//! and is counted separately. An instant is handed on when its last node's slot (received or
+//! overflowed and the oldest sample was overwritten). It becomes an observation without a
+//! measurement marked [`FLAG_IPC_LOST`] — the estimator sees the instant, as a loss (no
+//! information, `Packet::Lost`), not as a packet the channel dropped — and is counted
+//! separately. An instant is handed on when its last node's slot (received or
 //! lost) has been seen. A runner that joins a stream in the middle (restarted after a crash)
-//! steps through the instants it missed as dropped ones, counted as *missed before join*.
+//! steps through the instants it missed as lost ones, counted as *missed before join*.
 
 use channel_sim::sim::MAX_NODES;
 use channel_sim::Observation;
@@ -22,7 +23,7 @@ pub struct Counts {
     pub delivered: u64,
     /// Received slots whose packet the channel dropped (occlusion, token bucket, loss, …).
     pub dropped_by_channel: u64,
-    /// Slots lost inside the IPC (sequence gaps), treated as dropped.
+    /// Slots lost inside the IPC (sequence gaps), handed on as lost.
     pub lost_in_ipc: u64,
     /// Slots before the first one this runner saw of a stream (joined mid-stream).
     pub missed_before_join: u64,

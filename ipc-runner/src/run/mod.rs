@@ -65,7 +65,7 @@ use std::sync::Arc;
 pub fn main(args: &RunArgs) -> Result<i32> {
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let scenario: Arc<dyn channel_sim::Scenario> = scenario.into();
-    let make = select::estimators(
+    let make = select::estimators_with(
         scenario.clone(),
         &args.estimators,
         select::Experiment {
@@ -73,6 +73,7 @@ pub fn main(args: &RunArgs) -> Result<i32> {
             run: args.run,
             horizon: args.steps,
         },
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
     )?;
     let (report, traj) = run_loop(
         args,

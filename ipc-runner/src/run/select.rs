@@ -23,13 +23,52 @@ pub struct Experiment {
     pub horizon: u32,
 }
 
-/// The estimators that can run on live data for `scenario`: `names` (all when empty). The
-/// full-information oracles of `eval` (`Estimator::full_information`) read observations from
-/// before the channel, which a real-time loop does not have; they are left out.
+/// What the commands choose beside the names: `--particles` and `--loss-rate`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Choice {
+    /// Particles of `pf` (0: not built).
+    pub particles: usize,
+    /// `p_loss` of the occlusion estimators' `-mix` variants (0: not built).
+    pub loss_rate: f64,
+}
+
+impl Choice {
+    /// What [`estimators`] builds: `pf` at its default particle count, no `-mix` variants.
+    pub const EVERY: Self = Self {
+        particles: crate::estimators::pf::DEFAULT_PARTICLES,
+        loss_rate: 0.0,
+    };
+
+    /// The choice of `run`, `replay` and `demo`: `pf` only when asked for (`--particles N`,
+    /// or named in `--estimators`), as in `eval`, and the `-mix` estimators with
+    /// `--loss-rate P`.
+    pub fn of(particles: Option<usize>, names: &[String], loss_rate: f64) -> Self {
+        Self {
+            particles: crate::eval::cli::particles(particles, names),
+            loss_rate,
+        }
+    }
+}
+
+/// The estimators that can run on live data for `scenario`: `names` (all when empty), with
+/// `pf` and without the `-mix` variants ([`Choice::EVERY`]; the commands use
+/// [`estimators_with`]). The full-information oracles of `eval`
+/// (`Estimator::full_information`) read observations from before the channel, which a
+/// real-time loop does not have; they are left out.
 pub fn estimators(
     scenario: Arc<dyn Scenario>,
     names: &[String],
     exp: Experiment,
+) -> Result<EstimatorFactory> {
+    estimators_with(scenario, names, exp, Choice::EVERY)
+}
+
+/// [`estimators`] with the particle count and loss rate of `choice`.
+pub fn estimators_with(
+    scenario: Arc<dyn Scenario>,
+    names: &[String],
+    exp: Experiment,
+    choice: Choice,
 ) -> Result<EstimatorFactory> {
     // Estimator families add fields to EvalOptions; the rest default, as in `eval`.
     #[allow(clippy::needless_update)]
@@ -37,6 +76,8 @@ pub fn estimators(
         runs: 1,
         horizon: exp.horizon,
         seed: exp.seed,
+        particles: choice.particles,
+        loss_rate: choice.loss_rate,
         ..EvalOptions::default()
     };
     let all = build_all(FACTORIES, scenario.as_ref(), &options, exp.seed, exp.run)?;
@@ -52,6 +93,8 @@ pub fn estimators(
                 "estimator {n:?} {} for scenario {:?}; available: {}",
                 if oracle {
                     "is a full-information oracle (offline `eval` only)"
+                } else if n.ends_with("-mix") && choice.loss_rate == 0.0 {
+                    "needs --loss-rate P"
                 } else {
                     "does not exist"
                 },
@@ -75,4 +118,57 @@ pub fn estimators(
             .filter(|e| names.is_empty() || names.iter().any(|n| n == e.name()))
             .collect())
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(names: &[&str], particles: Option<usize>, loss_rate: f64) -> Result<Vec<String>> {
+        let scenario: Arc<dyn Scenario> = channel_sim::scenario::preset("occlusion")?.into();
+        let names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+        let exp = Experiment {
+            seed: 0,
+            run: 0,
+            horizon: 10,
+        };
+        let choice = Choice::of(particles, &names, loss_rate);
+        let make = estimators_with(scenario, &names, exp, choice)?;
+        Ok(make()?.iter().map(|e| e.name().to_string()).collect())
+    }
+
+    #[test]
+    fn the_particle_filter_is_opt_in_and_the_mixtures_need_a_loss_rate() {
+        assert_eq!(
+            names(&[], None, 0.0).unwrap(),
+            ["ikf", "cce", "kf-io", "adf"]
+        );
+        assert_eq!(names(&["pf"], None, 0.0).unwrap(), ["pf"]);
+        assert_eq!(
+            names(&[], Some(100), 0.2).unwrap(),
+            [
+                "ikf",
+                "cce",
+                "kf-io",
+                "adf",
+                "cce-mix",
+                "kf-io-mix",
+                "adf-mix",
+                "pf",
+                "pf-mix"
+            ]
+        );
+        let e = names(&["cce-mix"], None, 0.0).unwrap_err().to_string();
+        assert!(e.contains("needs --loss-rate P"), "{e}");
+        // The library default keeps pf.
+        let scenario: Arc<dyn Scenario> =
+            channel_sim::scenario::preset("occlusion").unwrap().into();
+        let exp = Experiment {
+            seed: 0,
+            run: 0,
+            horizon: 10,
+        };
+        let all = estimators(scenario, &[], exp).unwrap()().unwrap();
+        assert!(all.iter().any(|e| e.name() == "pf"));
+    }
 }

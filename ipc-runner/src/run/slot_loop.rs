@@ -121,7 +121,10 @@ pub fn run_loop(
             Woke::Signal => break Ending::Interrupted,
         }
     };
-    Ok(lp.finish(ending, machine))
+    let (mut report, traj) = lp.finish(ending, machine);
+    // The scenario's own name: a `--config` file's, not the `--scenario` default.
+    report.scenario = scenario.name().to_string();
+    Ok((report, traj))
 }
 
 /// The loop's state between slots.

@@ -46,6 +46,29 @@
 //! `μ̄` by less than `EPS √v̄` and `v̄` by less than `EPS v̄` (one rounding of the result; see
 //! there), so a region ten or more standard deviations away costs a few comparisons instead of
 //! its `erfc`, `exp` and `ln` evaluations.
+//!
+//! # A known loss rate ([`AssumedDensityFilter::with_loss_rate`])
+//!
+//! When the receiver cannot tell a packet lost in transport (probability `p_loss`, independent
+//! of the state) from an occlusion dropout, "no packet" has the likelihood
+//! `p_loss + (1 − p_loss) p_occ(x)`, and its posterior is the two-component mixture of the
+//! prediction `N(x̂⁻, P⁻)` (weight `∝ p_loss`) and the occlusion-dropout posterior above
+//! (weight `∝ (1 − p_loss) Z`, `Z = Σ_j Z_j = P(occluded)` under the prediction). Both are laws
+//! of `u` times the same Gaussian `x | u`: the prediction is the untruncated `t ~ N(0, 1)`.
+//! So the exact moments are those of the `t`-mixture, with `(μ_O, v_O)` the occlusion
+//! posterior's `(μ̄, v̄)`,
+//!
+//! ```text
+//! w_L = p_loss / (p_loss + (1 − p_loss) Z),   w_O = 1 − w_L       (log domain)
+//! μ̄  = w_O μ_O,   v̄ = w_L · 1 + w_O v_O + w_L w_O μ_O²
+//! ```
+//!
+//! in the same `x̂`, `P̂` as above (`μ̄ = 0`, `v̄ = 1` give back the prediction). `Z` is summed
+//! over every region (`gauss::ln_interval_prob`, log domain). The label is 0 when
+//! `p_loss > (1 − p_loss) Z_best`, the most probable region otherwise. A dropout no region
+//! can explain (`Z = 0`) is then a loss instead of an error. Arrivals are unchanged: the factor
+//! `1 − p_loss` of their likelihood is a constant. `p_loss = 0` (the default) is the filter
+//! above, bit for bit.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -54,9 +77,10 @@ use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::kalman::kalman_update;
 use crate::filter::time_update::predict;
+use crate::gauss::{ln_interval_prob, LogSumExp};
 use crate::linalg::check_finite;
 use crate::model::LinearSystem;
-use crate::packet::Packet;
+use crate::packet::{check_loss_rate, Packet};
 use crate::protocol::occlusion::Occlusion;
 use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
@@ -74,6 +98,8 @@ pub struct AssumedDensityFilter<T: Real, const NX: usize, const S: usize> {
     dropout_marginal: (T, T),
     truncate_on_arrival: bool,
     form: CovarianceUpdate,
+    /// `(p_loss, ln p_loss, ln(1 − p_loss))` of [`Self::with_loss_rate`] (`p_loss = 0`: none).
+    loss: (T, T, T),
 }
 
 impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
@@ -92,7 +118,25 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
             dropout_marginal: (T::zero(), T::zero()),
             truncate_on_arrival: true,
             form: CovarianceUpdate::Joseph,
+            loss: (T::zero(), -T::one() / T::zero(), T::zero()),
         })
+    }
+
+    /// A dropout may also be a packet lost in transport with the known probability `p_loss`
+    /// (independent of the state), which the receiver cannot tell from an occlusion dropout:
+    /// the dropout update becomes the exact moments of the two-component posterior (module
+    /// docs, "A known loss rate"). `p_loss = 0` (the default) is the filter without it.
+    /// Refuses a `p_loss` that is not finite or not in `[0, 1)`.
+    pub fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
+        let p = check_loss_rate(p_loss)?;
+        self.loss = (p, p.ln(), (-p).ln_1p());
+        Ok(self)
+    }
+
+    /// `p_loss` (0 unless set by [`Self::with_loss_rate`]).
+    #[inline]
+    pub fn loss_rate(&self) -> T {
+        self.loss.0
     }
 
     /// Whether an arrival also truncates `u` to "no region" (default `true`). `false` gives
@@ -109,7 +153,8 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         &self.est
     }
 
-    /// The most probable region at the last dropout (1..=S; 0 after an arrival).
+    /// The most probable region at the last dropout (1..=S; 0 after an arrival, and after a
+    /// dropout more probably a loss, see [`Self::with_loss_rate`]).
     #[inline]
     pub fn label(&self) -> usize {
         self.label
@@ -170,9 +215,9 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
                 self.label = 0;
             }
             None => {
-                let (x, p, best, marginal) = self.truncate(&xp, &pp, false)?;
+                let (x, p, label, marginal) = self.truncate(&xp, &pp, false)?;
                 self.est = Estimate::trusted(x, p);
-                self.label = best + 1;
+                self.label = label;
                 self.dropout_marginal = marginal;
             }
         }
@@ -194,8 +239,9 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
 
     /// Moments of `N(mx, p)` conditioned on `u = E x + n` lying in one of the disjoint
     /// intervals of the event (`p` exactly symmetric): on an arrival the gaps between the
-    /// regions, half-lines included, on a dropout the regions. Returns the moments, the index
-    /// of the most probable region (dropout) and `(m, s)` of `u`'s marginal. `u` is
+    /// regions, half-lines included, on a dropout the regions (or a loss, with a loss rate).
+    /// Returns the moments, the label of the dropout (the most probable region's `1..=S`, or 0
+    /// for a loss) and `(m, s)` of `u`'s marginal. `u` is
     /// scalar, so the update is the rank-one correction `P − (1 − v̄) P Eᵀ E P / s²`, formed on
     /// the upper triangle as `(P − P Eᵀ E P / s²) + v̄ · P Eᵀ E P / s²` and mirrored (exactly
     /// symmetric). Out of line: one copy serves both events.
@@ -239,10 +285,16 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
             sorted: &ends,
             gaps: arrival,
         };
-        let Some((mbar, vbar, best)) = union_moments(&events) else {
-            return Err(Error::Numerical {
-                what: "occlusion event has zero probability under the prior",
-            });
+        let moments = union_moments(&events);
+        let (mbar, vbar, label) = if !arrival && self.loss.0 > T::zero() {
+            self.with_loss(&ends, moments)
+        } else {
+            let Some((mbar, vbar, best)) = moments else {
+                return Err(Error::Numerical {
+                    what: "occlusion event has zero probability under the prior",
+                });
+            };
+            (mbar, vbar, best + 1)
         };
         // In standard units u = m + s·z: E[z] = mbar, Var[z] = vbar.
         // `nan` collects v − v of every entry: 0 if all are finite, NaN otherwise.
@@ -272,7 +324,40 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
             check_finite(&x, "updated state")?;
             check_finite(&p_new, "updated covariance")?;
         }
-        Ok((x, p_new, best, (m, s)))
+        Ok((x, p_new, label, (m, s)))
+    }
+
+    /// The dropout's `(μ̄, v̄, label)` with a loss rate: the mixture of the untruncated
+    /// `N(0, 1)` (a loss) and the occlusion posterior `occ` (`None`: `Z = 0`), `ends` the
+    /// regions in standard units (module docs, "A known loss rate").
+    fn with_loss(&self, ends: &[(T, T, usize); S], occ: Option<(T, T, usize)>) -> (T, T, usize) {
+        let (_, ln_p, ln_1p) = self.loss;
+        let Some((mu_o, v_o, best)) = occ else {
+            return (T::zero(), T::one(), 0);
+        };
+        let mut ln_z = LogSumExp::default();
+        let mut ln_z_best = -T::one() / T::zero();
+        for &(lo, hi, i) in ends {
+            let l = ln_interval_prob(lo, hi);
+            ln_z.push(l);
+            if i == best {
+                ln_z_best = l;
+            }
+        }
+        // r = ln((1 − p) Z / p): w_O = 1 / (1 + e^−r), w_L = 1 / (1 + e^r).
+        let r = ln_1p + ln_z.value() - ln_p;
+        let (w_o, w_l) = (
+            T::one() / (T::one() + (-r).exp()),
+            T::one() / (T::one() + r.exp()),
+        );
+        let mbar = w_o * mu_o;
+        let vbar = w_l + w_o * v_o + w_l * w_o * mu_o * mu_o;
+        let label = if ln_p > ln_1p + ln_z_best {
+            0
+        } else {
+            best + 1
+        };
+        (mbar, vbar, label)
     }
 }
 
@@ -350,6 +435,119 @@ mod tests {
         assert!((f.estimate().state() - want_x).amax() < 1e-8);
         assert!((f.estimate().covariance() - want_p).amax() < 1e-8);
         assert_eq!(h, 1);
+    }
+
+    /// With a loss rate: the posterior moments of the prediction times the likelihood of "no
+    /// packet", `p_loss + (1 − p_loss) 1{u ∈ ∪R_i}` (integrated against the noise `n`, as above),
+    /// by quadrature over u on ±12 s around the prediction; and the label: region 1 while
+    /// `(1 − p) Z₁ > p`, 0 (a loss) above that.
+    #[test]
+    fn dropout_with_a_loss_rate_matches_quadrature_over_u() {
+        let (m, occ) = paper();
+        let x0 = vector![21.0, 2.0, -1.0];
+        let p0 = matrix![6.0, 0.5, 0.1; 0.5, 2.0, 0.2; 0.1, 0.2, 1.0];
+        let xp = m.a * x0;
+        let pp = m.a * p0 * m.a.transpose() + m.b * m.q * m.b.transpose();
+        let s2 = pp[(0, 0)] + 0.1;
+        let (sd, k) = (s2.sqrt(), pp.column(0) / s2);
+        let in_region = |u: f64| {
+            [20.0, 40.0, 60.0, 80.0]
+                .iter()
+                .any(|c| (u - c).abs() <= 5.0)
+        };
+        let phi = |t: f64| 0.5 * libm::erfc(-t / core::f64::consts::SQRT_2);
+        let z1 = phi((25.0 - xp[0]) / sd) - phi((15.0 - xp[0]) / sd);
+        for p_loss in [0.05, 0.2, 0.6] {
+            let mut f = AssumedDensityFilter::new(x0, p0, occ)
+                .unwrap()
+                .with_loss_rate(p_loss)
+                .unwrap();
+            let h = f.step::<2, _>(&m, 1, None).unwrap();
+            // Simpson over u on [xp − 14 s, xp + 14 s], in pieces between the region ends (the
+            // likelihood jumps there), each piece's midpoint deciding inside or outside.
+            let (a, b) = (xp[0] - 14.0 * sd, xp[0] + 14.0 * sd);
+            let mut cuts = [a, 15.0, 25.0, 35.0, 45.0, 55.0, 65.0, 75.0, 85.0, b];
+            for c in cuts.iter_mut() {
+                *c = c.clamp(a, b);
+            }
+            let (mut z, mut m1, mut m2) = (0.0, 0.0, 0.0);
+            for w in cuts.windows(2) {
+                let (lo, hi) = (w[0], w[1]);
+                if hi <= lo {
+                    continue;
+                }
+                let lik = p_loss + (1.0 - p_loss) * f64::from(u8::from(in_region(0.5 * (lo + hi))));
+                let n = 4000;
+                let hh = (hi - lo) / n as f64;
+                for j in 0..=n {
+                    let u = lo + j as f64 * hh;
+                    let wt = if j == 0 || j == n {
+                        1.0
+                    } else if j % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
+                    let d = u - xp[0];
+                    let g = wt * hh * lik * (-0.5 * d * d / s2).exp();
+                    z += g;
+                    m1 += g * u;
+                    m2 += g * u * u;
+                }
+            }
+            let (mu, vu) = (m1 / z, m2 / z - (m1 / z).powi(2));
+            let want_x = xp + k * (mu - xp[0]);
+            let want_p = pp - k * k.transpose() * s2 + k * k.transpose() * vu;
+            assert!(
+                (f.estimate().state() - want_x).amax() < 1e-7,
+                "p_loss {p_loss}: {} vs {want_x}",
+                f.estimate().state()
+            );
+            assert!((f.estimate().covariance() - want_p).amax() < 1e-7);
+            assert_eq!(h, if (1.0 - p_loss) * z1 > p_loss { 1 } else { 0 });
+        }
+    }
+
+    #[test]
+    fn loss_rate_is_validated_zero_is_the_default_and_a_far_dropout_a_loss() {
+        let (m, occ) = paper();
+        let f =
+            AssumedDensityFilter::new(vector![21.0, 2.0, -1.0], SMatrix::identity(), occ).unwrap();
+        for bad in [-0.5, 1.0, f64::NAN, f64::INFINITY] {
+            assert!(matches!(
+                f.with_loss_rate(bad),
+                Err(Error::InvalidConfig {
+                    field: "loss_rate",
+                    ..
+                })
+            ));
+        }
+        let (mut a, mut b) = (f, f.with_loss_rate(0.0).unwrap());
+        assert_eq!(a, b);
+        for k in 1..=6 {
+            let y = (k % 3 == 0).then_some(vector![30.0, 20.0]);
+            a.step(&m, k, y.as_ref()).unwrap();
+            b.step(&m, k, y.as_ref()).unwrap();
+        }
+        assert_eq!(a, b);
+        // Far above every region (f32): without a loss rate the dropout pins u to the last
+        // region's edge; with one it is a loss (label 0) and the update is the prediction
+        // (w_O underflows to 0: x̂ exactly, P up to the rounding of P − PEᵀEP/s² + PEᵀEP/s²).
+        let m32 = m.cast::<f32>().unwrap();
+        let far = AssumedDensityFilter::<f32, 3, 4>::new(
+            vector![5000.0, 0.0, 0.0],
+            SMatrix::identity() * 0.01,
+            Seed001Example::occlusion().unwrap(),
+        )
+        .unwrap();
+        assert_eq!(far.clone().step::<2, _>(&m32, 1, None).unwrap(), 4);
+        let mut lossy = far.with_loss_rate(0.1).unwrap();
+        assert_eq!(lossy.step::<2, _>(&m32, 1, None).unwrap(), 0);
+        let mut pred = far;
+        pred.predict_to::<2, _>(&m32, 1).unwrap();
+        assert_eq!(lossy.estimate().state(), pred.estimate().state());
+        let dp = lossy.estimate().covariance() - pred.estimate().covariance();
+        assert!(dp.amax() <= 1e-6 * pred.estimate().covariance().amax());
     }
 
     #[test]
