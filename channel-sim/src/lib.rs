@@ -13,12 +13,14 @@
 //! [`scenario`] puts a plant, its channel stages and the initial distribution under a name
 //! (presets or TOML); [`scenario::resolve`] is what both processes call to get one. Beneath
 //! everything: [`error`] (the one error type of scenario construction), [`rng`] (the run's
-//! random streams) and [`validate`] (parameter checks naming the field). [`signal`] lets the
+//! random streams), [`validate`] (parameter checks naming the field) and [`flags`] (the
+//! command-line values of both binaries, and what counts as bad input). [`signal`] lets the
 //! publisher and `ipc-runner` ask for Ctrl-C without sleeping.
 
 pub mod backpressure;
 pub mod channel;
 pub mod error;
+pub mod flags;
 pub mod plant;
 pub mod publisher;
 pub mod rng;

@@ -50,7 +50,7 @@ pub struct PublisherArgs {
     #[arg(long)]
     pub steps: Option<u32>,
     /// Sampling rate in Hz; 0 publishes as fast as possible.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, value_parser = crate::flags::rate_hz)]
     pub rate: f64,
     /// What a full subscriber queue does: `block` waits (nothing is lost), `discard` drops the
     /// slot (the runner counts the gap); `auto` blocks at `--rate 0` and discards when paced.
@@ -60,10 +60,10 @@ pub struct PublisherArgs {
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
     /// Seconds to wait for a subscriber (at start and after losing one); 0 = forever.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = crate::flags::seconds)]
     pub connect_timeout: f64,
     /// Seconds to wait after the END marker for the subscriber to drain and detach.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = crate::flags::seconds)]
     pub linger: f64,
     /// Test hook: write this format version into every slot.
     #[arg(long, hide = true)]
@@ -225,11 +225,24 @@ fn wait_for_subscriber(
 
 /// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]).
 pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
-    if !(args.rate >= 0.0 && args.rate.is_finite()) {
-        bail!(
-            "--rate must be ≥ 0 (0 = as fast as possible), got {}",
-            args.rate
-        );
+    // The flags' parsers check these on the command line; a caller building the arguments
+    // in code gets the same refusal (issue #20: `Duration::from_secs_f64(inf)` panics).
+    for (flag, value, check) in [
+        (
+            "--rate",
+            args.rate,
+            crate::flags::rate_hz as fn(&str) -> Result<f64, String>,
+        ),
+        (
+            "--connect-timeout",
+            args.connect_timeout,
+            crate::flags::seconds,
+        ),
+        ("--linger", args.linger, crate::flags::seconds),
+    ] {
+        if let Err(e) = check(&value.to_string()) {
+            return Err(crate::flags::BadInput(format!("{flag}: {e}")).into());
+        }
     }
     let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);

@@ -39,7 +39,7 @@ pub struct DemoArgs {
     /// occlusion scenario's particle filter when it is asked for (`--particles`, ≈ 19 ms per
     /// step on the loaded 2-core build machine); faster rates queue slots behind it, which
     /// the latency table then shows.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = channel_sim::flags::rate_hz)]
     pub rate: f64,
     /// Experiment seed (same meaning and default as `eval --seed`).
     #[arg(long, default_value_t = 0)]
@@ -85,6 +85,52 @@ pub struct DemoArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Memory the runner may preallocate, in MiB (as `run --max-memory`): the recording of
+    /// `--steps` instants and the particles.
+    #[arg(long, value_name = "MIB", default_value_t = crate::limits::DEFAULT_MAX_MEMORY_MIB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_memory: u64,
+}
+
+/// The files `demo` writes into `--out`.
+const OUT_FILES: [&str; 6] = [
+    "estimates.csv",
+    "slots.csv",
+    "latency.csv",
+    "report.json",
+    "latency.svg",
+    "latency-trace.svg",
+];
+
+impl DemoArgs {
+    /// Before anything starts: `--out` can be filled (created if missing; every file the
+    /// demo writes there, and the plot, can be written), the plot has a known extension, and
+    /// `particles` particles fit the memory budget (they are allocated when the estimators
+    /// are built).
+    pub fn check_outputs(&self, nx: usize, particles: usize) -> Result<()> {
+        crate::plot::check_extension(&self.plot).map_err(crate::limits::BadInput)?;
+        crate::limits::check_output_dir("--out", &self.out)?;
+        for f in OUT_FILES.iter().map(Path::new).chain([self.plot.as_path()]) {
+            crate::limits::check_output("--out", &self.out.join(f))?;
+        }
+        self.check_memory(nx, 0, 0, particles)
+    }
+
+    /// What the runner preallocates for `steps` instants of `n_est` estimators and `nodes`
+    /// nodes (it records the slots), against `--max-memory` ([`RunArgs::check_memory`]).
+    pub fn check_memory(
+        &self,
+        nx: usize,
+        nodes: usize,
+        n_est: usize,
+        particles: usize,
+    ) -> Result<()> {
+        let mut r = RunArgs::new("", "");
+        r.steps = self.steps.unwrap_or(DEFAULT_STEPS);
+        r.slots_csv = Some(self.out.join("slots.csv"));
+        r.max_memory = self.max_memory;
+        Ok(r.check_memory(nx, nodes, n_est, particles)?)
+    }
 }
 
 /// Kills the child if the demo bails out early.
@@ -141,6 +187,8 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     };
     // Without --steps, the default horizon of `channel-sim` and `eval`.
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
+    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate);
+    args.check_outputs(scenario.nx(), choice.particles)?;
     let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators_with(
         scenario.clone(),
@@ -150,7 +198,14 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             run: args.run,
             horizon: steps,
         },
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
+        choice,
+    )
+    .map_err(|e| crate::limits::BadInput(format!("{e:#}")))?;
+    args.check_memory(
+        scenario.nx(),
+        scenario.nodes(),
+        make()?.len(),
+        choice.particles,
     )?;
     let prefix = args
         .prefix

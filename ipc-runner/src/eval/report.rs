@@ -3,7 +3,8 @@
 //!
 //! JSON shape (fields beyond the issue's are additions):
 //! ```text
-//! { "scenario", "runs", "horizon", "seed",
+//! { "scenario", "runs", ["runs_requested",] "horizon", "seed", "ending", ["error",]
+//!   "truth_nonfinite",
 //!   ["transport_loss", "transport_loss_unmarked", "loss_rate",]   (only when set)
 //!   "estimators": { NAME: { "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
 //!                           "median_run_avg", "diverged_runs", "valid_runs",
@@ -17,6 +18,13 @@
 //! k = 1..=T (equivalently the mean of the valid runs' averages), `avg_mse_se` its Monte-Carlo
 //! standard error (sample standard deviation of the run averages / √valid_runs),
 //! `median_run_avg` the median of the run averages. Non-finite values are written as `null`.
+//!
+//! `ending` is `completed`, `interrupted` (SIGINT/SIGTERM) or `failed` (with `error`): then
+//! `runs` are the runs done before the first one not done, of `runs_requested`, and every
+//! number is over those. `truth_nonfinite` counts the (run, k) instants whose truth had a
+//! non-finite component; they are left out of every MSE (MSE(k) is then the mean over the
+//! runs whose truth at k was finite, and `avg_mse` the mean of MSE(k) over the k that have
+//! any), so one such sample cannot turn the report into `null`s.
 
 use std::fmt::Write as _;
 
@@ -32,12 +40,23 @@ use crate::estimators::EvalOptions;
 pub struct EvalResult {
     /// Scenario name.
     pub scenario: String,
-    /// Number of runs.
+    /// Runs done and in the means (fewer than asked when the evaluation was interrupted or
+    /// failed).
     pub runs: u64,
+    /// Runs asked for (`--runs`; written only when not all were done).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub runs_requested: Option<u64>,
     /// Horizon T.
     pub horizon: u32,
     /// Experiment seed.
     pub seed: u64,
+    /// How the evaluation ended.
+    pub ending: super::EvalEnding,
+    /// Why it failed ([`super::EvalEnding::Failed`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// (run, k) instants whose truth was not finite, left out of every MSE.
+    pub truth_nonfinite: u64,
     /// `--transport-loss` (not written when 0).
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub transport_loss: f64,
@@ -178,11 +197,15 @@ pub(super) struct Accumulator {
     channel: Vec<NodeCounts>,
     trajectory: Option<Trajectory>,
     next_run: u64,
+    truth_nonfinite: u64,
 }
 
 #[derive(Default)]
 struct EstimatorAcc {
     sum_sq: Vec<f64>,
+    /// Runs in `sum_sq` per k (those whose truth at k was finite).
+    n_k: Vec<u64>,
+    valid: u64,
     run_avgs: Vec<f64>,
     diverged: u64,
     first_error: Option<String>,
@@ -206,6 +229,7 @@ impl Accumulator {
                 .iter()
                 .map(|_| EstimatorAcc {
                     sum_sq: vec![0.0; len],
+                    n_k: vec![0; options.horizon as usize + 1],
                     ..Default::default()
                 })
                 .collect(),
@@ -217,12 +241,14 @@ impl Accumulator {
                 .collect(),
             trajectory: None,
             next_run: 0,
+            truth_nonfinite: 0,
         }
     }
 
     pub(super) fn add(&mut self, out: RunOutput) {
         assert_eq!(out.run, self.next_run, "runs must be reduced in order");
         self.next_run += 1;
+        self.truth_nonfinite += out.truth_nonfinite;
         let (nx, t) = (self.nx, self.options.horizon as usize);
         for (acc, rec) in self.estimators.iter_mut().zip(out.estimators) {
             let Some(sq) = rec.sq_err else {
@@ -236,10 +262,29 @@ impl Accumulator {
                 }
                 continue;
             };
-            for (s, v) in acc.sum_sq.iter_mut().zip(&sq) {
-                *s += v;
+            acc.valid += 1;
+            // NaN marks an instant without a sample (non-finite truth, `record_estimate`).
+            let (mut run_sum, mut run_n) = (0.0, 0u64);
+            for k in 0..=t {
+                let sq_k = &sq[k * nx..][..nx];
+                if sq_k[0].is_nan() {
+                    continue;
+                }
+                for (s, v) in acc.sum_sq[k * nx..][..nx].iter_mut().zip(sq_k) {
+                    *s += v;
+                }
+                acc.n_k[k] += 1;
+                if k > 0 {
+                    // Element by element: the same sum, bit for bit, as over the whole run.
+                    for v in sq_k {
+                        run_sum += v;
+                    }
+                    run_n += 1;
+                }
             }
-            acc.run_avgs.push(sq[nx..].iter().sum::<f64>() / t as f64);
+            if run_n > 0 {
+                acc.run_avgs.push(run_sum / run_n as f64);
+            }
             for (name, values) in rec.diagnostics {
                 let slot = match acc.diag.iter().position(|(n, _, _)| *n == name) {
                     Some(i) => i,
@@ -282,13 +327,24 @@ impl Accumulator {
             .zip(self.estimators)
             .map(|(name, acc)| {
                 let n = acc.run_avgs.len() as f64;
+                let mean_k = |k: usize, v: f64| {
+                    if acc.n_k[k] == 0 {
+                        f64::NAN
+                    } else {
+                        v / acc.n_k[k] as f64
+                    }
+                };
                 let per_state: Vec<Vec<f64>> = (0..nx)
-                    .map(|i| (0..=t).map(|k| acc.sum_sq[k * nx + i] / n).collect())
+                    .map(|i| (0..=t).map(|k| mean_k(k, acc.sum_sq[k * nx + i])).collect())
                     .collect();
                 let mse: Vec<f64> = (0..=t)
-                    .map(|k| acc.sum_sq[k * nx..][..nx].iter().sum::<f64>() / n)
+                    .map(|k| mean_k(k, acc.sum_sq[k * nx..][..nx].iter().sum::<f64>()))
                     .collect();
-                let avg_mse = mse[1..].iter().sum::<f64>() / t as f64;
+                let sampled: Vec<f64> = (1..=t)
+                    .filter(|&k| acc.n_k[k] > 0)
+                    .map(|k| mse[k])
+                    .collect();
+                let avg_mse = sampled.iter().sum::<f64>() / sampled.len() as f64;
                 let mean_run = acc.run_avgs.iter().sum::<f64>() / n;
                 let var = acc
                     .run_avgs
@@ -314,7 +370,7 @@ impl Accumulator {
                     avg_mse_se: (var / n).sqrt(),
                     median_run_avg: median(acc.run_avgs),
                     diverged_runs: acc.diverged,
-                    valid_runs: n as u64,
+                    valid_runs: acc.valid,
                     first_error: acc.first_error,
                     mse_per_state: per_state,
                     diagnostics,
@@ -331,9 +387,13 @@ impl Accumulator {
             .fold((0, 0), |(d, i), c| (d + c.delivered, i + c.instants));
         EvalResult {
             scenario: self.scenario,
-            runs: self.options.runs,
+            runs: self.next_run,
+            runs_requested: (self.next_run != self.options.runs).then_some(self.options.runs),
             horizon: self.options.horizon,
             seed: self.options.seed,
+            ending: super::EvalEnding::Completed,
+            error: None,
+            truth_nonfinite: self.truth_nonfinite,
             transport_loss: self.options.transport_loss,
             transport_loss_unmarked: self.options.transport_loss_unmarked,
             loss_rate: self.options.loss_rate,
@@ -389,11 +449,35 @@ impl EvalResult {
     /// The human-readable summary table.
     pub fn summary(&self) -> String {
         let mut s = String::new();
+        let runs = match self.runs_requested {
+            Some(asked) => format!("{} of {asked} runs", self.runs),
+            None => format!("{} runs", self.runs),
+        };
         let _ = writeln!(
             s,
-            "scenario {}: {} runs, horizon {}, seed {}",
-            self.scenario, self.runs, self.horizon, self.seed
+            "scenario {}: {runs}, horizon {}, seed {}",
+            self.scenario, self.horizon, self.seed
         );
+        match (self.ending, &self.error) {
+            (super::EvalEnding::Completed, _) => {}
+            (super::EvalEnding::Interrupted, _) => {
+                let _ = writeln!(s, "ended: interrupted (the runs done before the signal)");
+            }
+            (super::EvalEnding::Failed, e) => {
+                let _ = writeln!(
+                    s,
+                    "ended: failed ({}); the runs before it",
+                    e.as_deref().unwrap_or("?")
+                );
+            }
+        }
+        if self.truth_nonfinite > 0 {
+            let _ = writeln!(
+                s,
+                "truth not finite at {} (run, k) instant(s): left out of every MSE",
+                self.truth_nonfinite
+            );
+        }
         let _ = writeln!(
             s,
             "{:<12} {:>12} {:>10} {:>14} {:>9}",

@@ -53,17 +53,25 @@ mod truth;
 mod wait;
 
 pub use args::{RunArgs, WaitMode};
-pub use report::{exit_code, finish, Ending, EstimatorReport, RunReport, EXIT_PUBLISHER_LOST};
+pub use report::{
+    conclude, exit_code, finish, Ending, EstimatorReport, ExitWith, RunReport, EXIT_PUBLISHER_LOST,
+};
 pub use slot_loop::{run_loop, Hooks, Progress};
 pub use trajectories::Trajectories;
 
+use crate::limits;
 use anyhow::Result;
 use std::sync::Arc;
 
-/// `ipc-runner run`: resolves scenario and estimators, runs the loop, prints the summary.
-/// Returns the process exit code.
+/// `ipc-runner run`: checks the outputs and the memory budget, resolves scenario and
+/// estimators, runs the loop, prints the summary and writes the files (also when the loop
+/// ends in a failure). Returns the process exit code.
 pub fn main(args: &RunArgs) -> Result<i32> {
+    args.check_outputs()?;
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
+    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate);
+    // Before any estimator is built: the particle filter allocates its particles at once.
+    args.check_memory(scenario.nx(), scenario.nodes(), 0, choice.particles)?;
     let scenario: Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators_with(
         scenario.clone(),
@@ -73,8 +81,11 @@ pub fn main(args: &RunArgs) -> Result<i32> {
             run: args.run,
             horizon: args.steps,
         },
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
-    )?;
+        choice,
+    )
+    .map_err(|e| limits::BadInput(format!("{e:#}")))?;
+    let n_est = make()?.len();
+    args.check_memory(scenario.nx(), scenario.nodes(), n_est, choice.particles)?;
     let (report, traj) = run_loop(
         args,
         scenario.nx(),
@@ -83,7 +94,5 @@ pub fn main(args: &RunArgs) -> Result<i32> {
         &make,
         Hooks::default(),
     )?;
-    finish(args, &report, &traj, scenario.ny())?;
-    println!("{}", report.summary());
-    Ok(exit_code(&report))
+    conclude(args, &report, &traj, scenario.ny())
 }

@@ -1,5 +1,12 @@
 //! What a run reports: the [`RunReport`] (the summary a person reads, the `--json` file),
 //! the output files at the end and the process's exit code.
+//!
+//! Whatever ends a run that stepped any instant — the END marker, a signal, a lost
+//! publisher, a transport failure or a refused slot in the middle of the stream — the
+//! summary is printed and every requested file written, with the ending (and the error) in
+//! both ([`conclude`]); the files' paths were checked writable before the loop started
+//! ([`super::RunArgs::check_outputs`]). A run that fails before its first instant has
+//! computed nothing and writes nothing.
 
 use crate::latency::LatencySummary;
 use anyhow::{Context, Result};
@@ -37,6 +44,9 @@ pub enum Ending {
     Interrupted,
     /// The data deadline passed and no restart was awaited.
     PublisherLost,
+    /// The loop failed after it had processed instants (transport failure, a refused slot);
+    /// [`RunReport::error`] says why.
+    Failed,
 }
 
 /// What a run did.
@@ -58,6 +68,9 @@ pub struct RunReport {
     pub publisher_losses: u32,
     /// Truth messages missing for processed instants.
     pub truth_missing: u64,
+    /// Truth messages with a non-finite component: those instants are left out of every
+    /// estimator's MSE (one would otherwise make them all NaN).
+    pub truth_nonfinite: u64,
     /// Allocations after warm-up (only with an allocation probe).
     pub allocations_after_warmup: Option<usize>,
     /// Slots received after warm-up (denominator of the above).
@@ -73,6 +86,12 @@ pub struct RunReport {
     pub warnings: Vec<String>,
     /// How the run ended.
     pub ending: Ending,
+    /// Why the run failed ([`Ending::Failed`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// The exit code of that failure ([`crate::exit_code_of`]).
+    #[serde(skip)]
+    pub error_code: i32,
 }
 
 impl RunReport {
@@ -92,6 +111,15 @@ impl RunReport {
             c.lost_in_ipc,
             c.missed_before_join,
         );
+        if let Some(e) = &self.error {
+            s.push_str(&format!("failed: {e}\n"));
+        }
+        if self.truth_nonfinite > 0 {
+            s.push_str(&format!(
+                "truth not finite at {} instant(s): left out of every MSE\n",
+                self.truth_nonfinite
+            ));
+        }
         if self.sessions > 1 || self.publisher_losses > 0 {
             s.push_str(&format!(
                 "publisher lost {} time(s); {} session(s)\n",
@@ -120,30 +148,78 @@ impl RunReport {
     }
 }
 
-/// Writes the requested output files.
+/// Writes the requested output files, each on its own: one that fails does not keep the
+/// others from being written; the errors come back together.
 pub fn finish(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize) -> Result<()> {
+    let mut failures: Vec<String> = Vec::new();
+    let mut note = |r: Result<()>| {
+        if let Err(e) = r {
+            failures.push(format!("{e:#}"));
+        }
+    };
     if let Some(p) = &args.estimates_csv {
-        traj.write_estimates_csv(p)?;
+        note(traj.write_estimates_csv(p));
     }
     if let Some(p) = &args.slots_csv {
-        traj.write_slots_csv(p, ny)?;
+        note(traj.write_slots_csv(p, ny));
     }
     if let Some(p) = &args.latency_csv {
-        traj.write_latency_csv(p)?;
+        note(traj.write_latency_csv(p));
     }
     if let Some(p) = &args.json {
-        std::fs::write(p, serde_json::to_string_pretty(report)?)
-            .with_context(|| format!("cannot write {p:?}"))?;
+        note(
+            serde_json::to_string_pretty(report)
+                .map_err(anyhow::Error::from)
+                .and_then(|j| {
+                    std::fs::write(p, j + "\n").with_context(|| format!("cannot write {p:?}"))
+                }),
+        );
     }
-    Ok(())
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        anyhow::bail!("{}", failures.join("; "))
+    }
 }
 
+/// The end of `ipc-runner run`: prints the summary, then writes the files (so a file that
+/// cannot be written loses nothing the summary shows). Returns the exit code
+/// ([`exit_code`]), or the error of a run that failed or of a file that was not written.
+pub fn conclude(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize) -> Result<i32> {
+    println!("{}", report.summary());
+    let written = finish(args, report, traj, ny);
+    if report.ending == Ending::Failed {
+        let e = report.error.as_deref().unwrap_or("the loop failed");
+        let n = report.counts.instants;
+        let msg = match written {
+            Ok(()) => format!("{e} (after {n} instants; the summary and files were written)"),
+            Err(w) => format!("{e} (after {n} instants); also: {w:#}"),
+        };
+        return Err(ExitWith(report.error_code, msg).into());
+    }
+    written?;
+    Ok(exit_code(report))
+}
+
+/// An error that carries its exit code (a failed run's: that of its cause).
+#[derive(Debug)]
+pub struct ExitWith(pub i32, pub String);
+
+impl std::fmt::Display for ExitWith {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.1)
+    }
+}
+
+impl std::error::Error for ExitWith {}
+
 /// 0 for a completed (or cleanly stopped) run, [`EXIT_PUBLISHER_LOST`] when the publisher was
-/// lost, 130 when interrupted.
+/// lost, 130 when interrupted, the cause's code when the loop failed.
 pub fn exit_code(r: &RunReport) -> i32 {
     match r.ending {
         Ending::Completed | Ending::PublisherStopped => 0,
         Ending::PublisherLost => EXIT_PUBLISHER_LOST,
         Ending::Interrupted => 130,
+        Ending::Failed => r.error_code.max(1),
     }
 }

@@ -100,9 +100,17 @@ pub fn run_loop(
     let waitset = wait::waitset(args.wait, &t)?;
     let mut waiter = Waiter::new(&t, waitset.as_ref())?;
 
+    // A failure once instants were processed ends the run with its report (report.rs): what
+    // the run computed is not lost. Before the first instant there is nothing to report.
+    let mut failure: Option<anyhow::Error> = None;
     let ending = loop {
-        if let Some(ending) = lp.drain(&mut hooks)? {
-            break ending;
+        match lp.drain(&mut hooks) {
+            Ok(Some(ending)) => break ending,
+            Ok(None) => {}
+            Err(e) => {
+                failure = Some(e);
+                break Ending::Failed;
+            }
         }
         // Nothing pending: check the deadline, then wait.
         let Some(now) = waiter.now() else {
@@ -116,12 +124,24 @@ pub fn run_loop(
                 None => continue,
             }
         }
-        match waiter.wait(due.saturating_sub(now).min(MAX_WAIT_NS))? {
-            Woke::Ready => {}
-            Woke::Signal => break Ending::Interrupted,
+        match waiter.wait(due.saturating_sub(now).min(MAX_WAIT_NS)) {
+            Ok(Woke::Ready) => {}
+            Ok(Woke::Signal) => break Ending::Interrupted,
+            Err(e) => {
+                failure = Some(e);
+                break Ending::Failed;
+            }
         }
     };
+    let processed = lp.asm.counts.instants;
+    if let Some(e) = failure.take_if(|_| processed == 0) {
+        return Err(e);
+    }
     let (mut report, traj) = lp.finish(ending, machine);
+    if let Some(e) = failure {
+        report.error_code = crate::exit_code_of(&e);
+        report.error = Some(format!("{e:#}"));
+    }
     // The scenario's own name: a `--config` file's, not the `--scenario` default.
     report.scenario = scenario.name().to_string();
     Ok((report, traj))
@@ -297,6 +317,7 @@ impl Loop<'_> {
             sessions: runner.session,
             publisher_losses: self.publisher_losses,
             truth_missing: runner.scores.truth_missing,
+            truth_nonfinite: runner.scores.truth_nonfinite,
             allocations_after_warmup: match (allocs.at_warmup, allocs.at_end) {
                 (Some(a), Some(b)) => Some(b - a),
                 _ => None,
@@ -307,6 +328,8 @@ impl Loop<'_> {
             memory_lock: machine.memory_lock,
             warnings: machine.warnings,
             ending,
+            error: None,
+            error_code: 0,
         };
         (report, runner.traj)
     }
