@@ -71,6 +71,10 @@ pub struct PublisherArgs {
     /// Test hook: replace the first measurement entry of every N-th delivered slot by NaN.
     #[arg(long, hide = true)]
     pub debug_nan_every: Option<u64>,
+    /// Test hook: publish the truth of instant K with its first component NaN (what a
+    /// foreign publisher's bug would send; the runner must count it, not average it).
+    #[arg(long, hide = true, value_name = "K")]
+    pub debug_nan_truth_at: Option<u32>,
     /// Suppress progress messages on stderr.
     #[arg(long)]
     pub quiet: bool,
@@ -369,9 +373,13 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             break;
         }
         let inst = sim.next_instant();
+        let mut x = inst.truth;
+        if args.debug_nan_truth_at == Some(inst.k) {
+            x[0] = f64::NAN;
+        }
         truth_pub
             .loan_uninit()?
-            .write_payload(Truth::new(inst.k, sid, nx, &inst.truth))
+            .write_payload(Truth::new(inst.k, sid, nx, &x))
             .send()?;
         let mut subscriber_gone = false;
         for obs in &inst.obs {
