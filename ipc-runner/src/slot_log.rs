@@ -266,7 +266,7 @@ mod tests {
         let refuse = |text: &str, max: u64| {
             std::fs::write(&p, text).unwrap();
             let e = read_slots_within(&p, 2, 1, max).unwrap_err();
-            assert!(crate::limits::BadInput::is_in(&e), "{e:#}");
+            assert!(BadInput::is_in(&e), "{e:#}");
             format!("{e:#}")
         };
         let e = refuse("k,node,delivered,y_0\n1,0,1,0.5\n1,1,0,\n\n1,0,0,\n", 10);
