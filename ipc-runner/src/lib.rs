@@ -26,7 +26,8 @@ pub use plot::{latency as plot_latency, trace as plot_trace};
 /// The exit code of a failed pipeline command: [`estpipe_wire::ContractError::exit_code`]
 /// (2 for a peer outside the wire contract) when that is the cause, 2 for bad input
 /// ([`channel_sim::flags::is_bad_input`]: flags, scenario, file content, outputs, memory
-/// budget), else 1.
+/// budget), the cause's code for a run that failed after it had written its report
+/// ([`run::ExitWith`]), else 1.
 pub fn exit_code_of(e: &anyhow::Error) -> i32 {
     if let Some(c) = e.downcast_ref::<estpipe_wire::ContractError>() {
         return c.exit_code();

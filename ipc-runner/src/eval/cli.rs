@@ -148,10 +148,10 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     )
     .map_err(CommandError::usage)?;
     let budget = Budget::mib(args.max_memory);
-    let threads = args.threads.map_or_else(
-        || std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get),
-        |t| t as usize,
-    );
+    // rayon's default (RAYON_NUM_THREADS, else one per core) when --threads is not given.
+    let threads = args
+        .threads
+        .map_or_else(rayon::current_num_threads, |t| t as usize);
     let particles = particles(args.particles, &args.estimators);
     // Before any estimator is built (the name check below builds them): a particle filter
     // allocates its particles at once.
@@ -204,7 +204,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         }
     }
     let run_config = RunConfig {
-        threads: Some(threads),
+        threads: args.threads.map(|t| t as usize),
         progress: !args.quiet,
     };
     // The first call installs the handler (iceoryx2's, as `run` uses): from here on SIGINT

@@ -165,9 +165,7 @@ pub fn evaluate_with(
 ) -> anyhow::Result<EvalResult> {
     anyhow::ensure!(options.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(options.horizon >= 1, "--horizon must be at least 1");
-    let threads = config.threads.unwrap_or_else(|| {
-        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
-    });
+    let threads = config.threads.unwrap_or_else(rayon::current_num_threads);
     // Before anything is built: the particle filters allocate their particles at once.
     let pf = product(&[
         options.particles as u64,

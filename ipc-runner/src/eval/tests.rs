@@ -497,7 +497,10 @@ fn the_memory_budget_refuses_or_shrinks_chunks_never_changes_results() {
         ..options(300, 300, 4)
     };
     let (fixed, per_run) = memory_need(s.nx(), 1, 300, 300);
-    assert!(fixed + 256 * per_run > tight.budget.bytes, "the budget must bind the chunks");
+    assert!(
+        fixed + 256 * per_run > tight.budget.bytes,
+        "the budget must bind the chunks"
+    );
     let small = evaluate_with(&*s, &o, FACTORIES, &config, &tight).unwrap();
     assert_eq!(small.to_json(), eval_with(&*s, &o, FACTORIES, 2).to_json());
 }
