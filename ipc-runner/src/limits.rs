@@ -15,6 +15,7 @@
 //!   few seconds with done/total and ETA, so a long job in a pipe or a log is visibly alive.
 
 use std::io::{BufRead, Read};
+use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -88,8 +89,10 @@ pub fn check_output(flag: &str, path: &Path) -> Result<(), BadInput> {
     }
     match std::fs::metadata(path) {
         Ok(m) if m.is_dir() => Err(fail("is a directory".into())),
+        // Non-blocking: a FIFO without a reader fails at once instead of hanging the check.
         Ok(_) => std::fs::OpenOptions::new()
             .write(true)
+            .custom_flags(libc::O_NONBLOCK)
             .open(path)
             .map(drop)
             .map_err(|e| fail(format!("cannot write ({e})"))),
@@ -309,6 +312,17 @@ mod tests {
             .unwrap_err()
             .0
             .contains("is a directory"));
+        // A FIFO nobody reads: refused at once, not a hang.
+        let fifo = dir.join("fifo");
+        if std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .is_ok_and(|s| s.success())
+        {
+            let e = check_output("--json", &fifo).unwrap_err();
+            assert!(e.0.contains("cannot write"), "{e}");
+            std::fs::remove_file(&fifo).unwrap();
+        }
         check_output_dir("--out", &dir.join("sub")).unwrap();
         assert_eq!(std::fs::read_dir(dir.join("sub")).unwrap().count(), 0);
         std::fs::remove_dir_all(&dir).unwrap();

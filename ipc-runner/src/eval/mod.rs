@@ -10,6 +10,16 @@
 //! an error (the estimator then no longer tracks instant k). Such runs are counted and left
 //! out of that estimator's means; the evaluation never stops for them.
 //!
+//! A (run, k) whose *truth* is not finite is no sample: counted (`truth_nonfinite`) and left
+//! out of every MSE, never turning the report into NaN.
+//!
+//! **Bounds and endings** ([`evaluate_with`], [`Control`]): what the evaluation holds
+//! ([`memory_need`]) is checked against a budget before the first run, and the chunk of
+//! finished runs shrinks to fit it (results unchanged); a stop request (SIGINT/SIGTERM in
+//! `ipc-runner eval`) or a run that fails ends the evaluation with the runs done before the
+//! first one not done ([`EvalEnding`]), whose results are exactly those of an evaluation of
+//! that many runs (docs/pipeline.md, "Exit codes and limits").
+//!
 //! What a scenario adds to its evaluation lives here too, not in its estimators:
 //! [`nn_bound`] (seed 003's assumption check, bound check and bound plot).
 //!
