@@ -66,6 +66,11 @@ pub struct RunArgs {
     /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
     #[arg(long, default_value_t = 30.0)]
     pub connect_timeout: f64,
+    /// A publisher whose iceoryx2 node is alive but that sent nothing past the deadline is
+    /// *stalled* (waited for, reported); it counts as lost after this many seconds of silence
+    /// (0 = never). A dead node is lost at the deadline (docs/pipeline.md, "Stalled or lost").
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = seconds)]
+    pub stall_limit: f64,
     /// After losing the publisher, wait for channel-sim to come back instead of failing.
     #[arg(long)]
     pub wait_for_restart: bool,
@@ -120,6 +125,14 @@ pub struct RunArgs {
     pub quiet: bool,
 }
 
+/// A finite, non-negative number of seconds.
+fn seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("expected seconds ≥ 0, got {s:?}")),
+    }
+}
+
 impl RunArgs {
     /// Defaults for `prefix` and `scenario` (as on the command line).
     pub fn new(scenario: &str, prefix: &str) -> Self {
@@ -133,6 +146,7 @@ impl RunArgs {
             wait: WaitMode::Spin,
             deadline_ms: 100.0,
             connect_timeout: 30.0,
+            stall_limit: 10.0,
             wait_for_restart: false,
             buffer: 256,
             cpu: None,

@@ -53,8 +53,10 @@ mod truth;
 mod wait;
 
 pub use args::{RunArgs, WaitMode};
-pub use report::{exit_code, finish, Ending, EstimatorReport, RunReport, EXIT_PUBLISHER_LOST};
-pub use slot_loop::{run_loop, Hooks, Progress};
+pub use report::{
+    exit_code, finish, Ending, EstimatorReport, RunReport, Stalls, EXIT_PUBLISHER_LOST,
+};
+pub use slot_loop::{run_loop, Hooks, Progress, PEER_CHECK_NS};
 pub use trajectories::Trajectories;
 
 use anyhow::Result;
