@@ -19,7 +19,12 @@ fn main() {
         Ok(_) => {}
         Err(e) => {
             eprintln!("channel-sim: error: {e:#}");
-            std::process::exit(1);
+            // 2 for a refusal (a peer outside the contract, iceoryx2 directories of another
+            // user: docs/security.md), as `ipc-runner`; 1 for anything else.
+            let code = e
+                .downcast_ref::<estpipe_wire::ContractError>()
+                .map_or(1, estpipe_wire::ContractError::exit_code);
+            std::process::exit(code);
         }
     }
 }
