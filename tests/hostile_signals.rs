@@ -252,6 +252,44 @@ fn a_publisher_stopped_for_250_ms_is_stalled_not_lost() {
 }
 
 #[test]
+fn a_stall_longer_than_the_stall_limit_is_a_loss() {
+    let dir = scratch("stall-limit");
+    let p = prefix("stall-limit");
+    let mut run = runner(
+        &dir,
+        "runner",
+        &p,
+        &["--wait", "block", "--stall-limit", "0.5"],
+    );
+    let publ = publisher(&dir, "pub", &p, &["--rate", "200", "--steps", "100000"]);
+    std::thread::sleep(Duration::from_millis(400));
+    let t = Instant::now();
+    publ.signal(libc::SIGSTOP);
+    let (st, _) = exit_of(&mut run);
+    let took = t.elapsed();
+    publ.signal(libc::SIGCONT);
+    let err = run.err();
+    assert_eq!(st.code(), Some(3), "{st}\n{err}");
+    // Lost after the 0.5 s limit of silence, which began with the last slot before the stop
+    // (up to one 5 ms period earlier): not before 0.45 s. The upper bound is only a sanity
+    // check.
+    assert!(took >= Duration::from_millis(450), "lost after {took:?}");
+    assert!(took < Duration::from_secs(3), "lost after {took:?}");
+    assert!(err.contains("publisher stalled"), "{err}");
+    assert!(
+        err.contains("alive but silent longer than --stall-limit 0.5 s"),
+        "{err}"
+    );
+    let r = report(&dir.join("runner.json"));
+    assert_eq!(r["ending"], "publisher_lost", "{r}");
+    assert_eq!(r["publisher_losses"], 1, "{r}");
+    assert_eq!(r["stalls"]["count"], 1, "{r}");
+    no_panic(&run);
+    drop(publ);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn sigint_and_sigterm_stop_run_in_every_wait_mode_also_mid_catch_up() {
     for mode in MODES {
         // Paced, and mid catch-up: a runner 2 ms per slot behind a full 4096-slot queue.
@@ -311,7 +349,7 @@ fn demo(dir: &Path, name: &str, extra: &[&str]) -> Proc {
 #[test]
 fn sigint_and_sigterm_stop_demo_and_its_child_within_a_second() {
     for (what, sig) in [("SIGINT", libc::SIGINT), ("SIGTERM", libc::SIGTERM)] {
-        for mode in ["spin", "block"] {
+        for mode in MODES {
             let dir = scratch("sigdemo");
             let mut d = demo(
                 &dir,

@@ -60,7 +60,8 @@ pub struct RunArgs {
     /// How to wait for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
-    /// Data deadline: the publisher counts as lost this many ms after the expected slot.
+    /// Data deadline: this many ms after the expected slot the publisher is looked at: stalled
+    /// if its iceoryx2 node is alive (waited for, see `--stall-limit`), else lost.
     #[arg(long, default_value_t = 100.0)]
     pub deadline_ms: f64,
     /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
