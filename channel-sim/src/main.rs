@@ -38,10 +38,14 @@ fn main() {
     };
     if let Err(e) = channel_sim::publisher::run(&cli.args) {
         eprintln!("channel-sim: error: {e:#}");
-        std::process::exit(if channel_sim::flags::is_bad_input(&e) {
+        // 2 for bad input and for a refusal (a peer outside the contract, iceoryx2
+        // directories of another user: docs/security.md), as `ipc-runner`; 1 for anything else.
+        let code = if channel_sim::flags::is_bad_input(&e) {
             2
         } else {
-            1
-        });
+            e.downcast_ref::<estpipe_wire::ContractError>()
+                .map_or(1, estpipe_wire::ContractError::exit_code)
+        };
+        std::process::exit(code);
     }
 }

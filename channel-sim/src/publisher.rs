@@ -16,7 +16,11 @@
 //! port behind), every 100 ms and whenever a blocked send gives up after
 //! [`BLOCK_SLICE`]; if the subscriber is gone it pauses and
 //! waits for a new one. SIGINT/SIGTERM end the run cleanly with an ABORT marker, also while a
-//! send is blocked.
+//! send is blocked, and so does the end of the `--parent-pid` process (`ipc-runner demo`
+//! passes its own: a SIGKILLed demo leaves no publisher behind). No other signal stops it
+//! (SIGCONT, SIGSTOP/SIGCONT, SIGUSR1, …): a wait it cuts short is taken up again, so the
+//! stream is the same as an undisturbed one. Every wait is cut into slices of at most
+//! [`STOP_SLICE`], so a stop is seen within one (docs/security.md, "Signals").
 
 use crate::backpressure::{Backpressure, Gate, Mode, BLOCK_SLICE};
 use crate::scenario;
@@ -25,7 +29,6 @@ use crate::wire::{slot_of, stream_header};
 use anyhow::{bail, Context, Result};
 use estpipe_wire::services::SlotService;
 use estpipe_wire::{self as wire, Slot, StreamHeader, Truth, SLOT_ABORT, SLOT_DATA, SLOT_END};
-use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::SendError;
 use iceoryx2::prelude::*;
@@ -75,6 +78,10 @@ pub struct PublisherArgs {
     /// foreign publisher's bug would send; the runner must count it, not average it).
     #[arg(long, hide = true, value_name = "K")]
     pub debug_nan_truth_at: Option<u32>,
+    /// Stop (as on SIGTERM: ABORT marker, exit 0) as soon as the process PID is no longer
+    /// this publisher's parent, e.g. because it died. `ipc-runner demo` passes its own pid.
+    #[arg(long, value_name = "PID")]
+    pub parent_pid: Option<u32>,
     /// Suppress progress messages on stderr.
     #[arg(long)]
     pub quiet: bool,
@@ -106,13 +113,25 @@ enum Stop {
     Signal,
 }
 
+/// Longest single sleep: a stop (a signal that landed just before the sleep began, or the
+/// parent's end, which sends no signal) is seen within this.
+pub const STOP_SLICE: Duration = Duration::from_millis(50);
+
+/// Sleeps for `d`, or until [`Gate::stop_requested`]. A sleep cut short by any other signal
+/// (SIGCONT, SIGSTOP then SIGCONT, SIGUSR1: iceoryx2 reports every interrupted sleep the
+/// same way) is taken up again for the time that is left, so it changes nothing.
 fn wait(node: &Node<ipc::Service>, gate: &Gate, d: Duration) -> Result<(), Stop> {
-    match node.wait(d) {
-        Ok(()) => Ok(()),
-        Err(NodeWaitFailure::Interrupt | NodeWaitFailure::TerminationRequest) => {
-            gate.request_stop();
-            Err(Stop::Signal)
+    let end = std::time::Instant::now() + d;
+    loop {
+        if gate.stop_requested() {
+            return Err(Stop::Signal);
         }
+        let left = end.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return Ok(());
+        }
+        // An error is an interrupted sleep: the loop looks at the stop flag and sleeps on.
+        let _ = node.wait(left.min(STOP_SLICE));
     }
 }
 
@@ -161,6 +180,7 @@ impl SlotSender<'_> {
     fn send(&mut self, slot: Slot, give_up: Option<std::time::Instant>) -> Result<Sent> {
         let blocking = self.gate.mode() != Mode::Discard;
         let mut last_check = std::time::Instant::now();
+        let mut internal_errors = 0u32;
         loop {
             let mut s = self.publisher.loan_uninit()?;
             *s.user_header_mut() = self.header;
@@ -175,10 +195,14 @@ impl SlotSender<'_> {
                 }
                 Ok(n) if n >= self.subscribers() => return Ok(Sent::Done),
                 Ok(_) => std::thread::sleep(NOT_CONNECTED_PAUSE),
-                // A signal interrupts iceoryx2's wait inside a blocked send, which then
-                // reports an internal error rather than the signal.
-                Err(e @ (SendError::UnableToDeliver | SendError::InternalError)) => {
-                    if e == SendError::InternalError && !self.gate.stop_requested() {
+                // Any signal interrupts iceoryx2's wait inside a blocked send (SIGCONT too),
+                // which then reports an internal error rather than the signal: unless it was
+                // a stop, the slot goes again. A cause that repeats on every try is not a
+                // signal, and fails the run.
+                Err(SendError::UnableToDeliver) => {}
+                Err(e @ SendError::InternalError) => {
+                    internal_errors += 1;
+                    if internal_errors > MAX_INTERRUPTED_SENDS && !self.gate.stop_requested() {
                         return Err(e.into());
                     }
                 }
@@ -204,6 +228,10 @@ impl SlotSender<'_> {
 
 /// Pause before sending a slot again that a not yet connected subscriber missed.
 const NOT_CONNECTED_PAUSE: Duration = Duration::from_micros(50);
+
+/// Internal errors one blocked send tolerates (each is a wait that a signal interrupted)
+/// before the error counts as real.
+const MAX_INTERRUPTED_SENDS: u32 = 1000;
 
 /// Waits until `count()` > 0, cleaning up dead nodes on the way. `Ok(false)` on timeout.
 fn wait_for_subscriber(
@@ -258,10 +286,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
     };
 
-    let node = NodeBuilder::new()
-        .name(&NodeName::new("channel-sim").map_err(|e| anyhow::anyhow!("{e:?}"))?)
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    // Before anything can wait: SIGINT/SIGTERM set a flag from here on, nothing else stops.
+    crate::signal::install();
+    let node = crate::node::create("channel-sim")?;
     // A SIGKILLed predecessor leaves its ports registered; remove them before we claim ours.
     let _ = node.try_cleanup_dead_nodes();
 
@@ -270,9 +297,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let truth = wire::truth_service(&node, &args.prefix)?;
     let ready = wire::ready_event_service(&node, &args.prefix)?;
     let gate = Gate::new();
-    // Installs iceoryx2's SIGINT/SIGTERM handler now: a run that never waits (a subscriber is
-    // already there, --rate 0) would otherwise die of the signal's default action.
-    let _ = gate.stop_requested();
+    if let Some(pid) = args.parent_pid {
+        gate.set_parent(pid);
+    }
     let data_mode = if args.backpressure.blocks(args.rate) {
         Mode::Block
     } else {
@@ -343,6 +370,10 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         ),
         Err(Stop::Signal) => {
             report.interrupted = true;
+            say(&format!(
+                "{} before a subscriber came",
+                gate.stop_reason().unwrap_or_default()
+            ));
             return Ok(report);
         }
     }
@@ -363,8 +394,8 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         if period_ns > 0 {
             let due = t0 + u64::from(i - 1) * period_ns;
             let now = wire::monotonic_ns();
-            let stopped = due > now && wait(&node, &gate, Duration::from_nanos(due - now)).is_err();
-            if stopped || gate.stop_requested() {
+            // Behind schedule (after a stop and continue) the instants due go at once.
+            if wait(&node, &gate, Duration::from_nanos(due.saturating_sub(now))).is_err() {
                 report.interrupted = true;
                 break;
             }
@@ -463,10 +494,10 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     }
     say(&format!(
         "{} after {} instants ({} slots)",
-        if report.interrupted {
-            "stopped by signal"
-        } else {
-            "done"
+        match gate.stop_reason() {
+            Some(why) if report.interrupted => why,
+            _ if report.interrupted => "stopped by signal".to_string(),
+            _ => "done".to_string(),
         },
         report.instants,
         report.slots

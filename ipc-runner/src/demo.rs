@@ -10,13 +10,20 @@
 //! `ipc-runner` binary for `cargo run -p ipc-runner`, so a separate `channel-sim` executable
 //! might not exist or might be stale, whereas `std::env::current_exe()` always is the binary
 //! that is running. `--channel-sim PATH` uses an external publisher binary instead.
+//!
+//! The child lives and dies with the demo (docs/security.md, "Signals"): it gets the demo's
+//! pid as `--parent-pid` and stops by itself when the demo is gone, even SIGKILLed; SIGINT
+//! and SIGTERM to the demo are passed on to it; and the loop polls it (every
+//! [`run::PEER_CHECK_NS`], also while it waits for the first slot), so a child that exits or
+//! crashes is noticed at once and named with its exit status.
 
 use crate::run::{self, select, Hooks, RunArgs, WaitMode};
 use anyhow::{anyhow, bail, Context, Result};
 use channel_sim::publisher::DEFAULT_STEPS;
 use channel_sim::scenario::resolve;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
 
 /// Default scenario of the demo.
 pub const DEFAULT_SCENARIO: &str = "occlusion";
@@ -133,14 +140,54 @@ impl DemoArgs {
     }
 }
 
-/// Kills the child if the demo bails out early.
+/// Ends the child if the demo bails out early.
 struct ChildGuard(Option<Child>);
 
 impl Drop for ChildGuard {
     fn drop(&mut self) {
         if let Some(c) = self.0.as_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
+            let _ = end_child(c, true, CHILD_GRACE);
+        }
+    }
+}
+
+/// How long the child has to exit after SIGTERM before it is killed. It stops within one of
+/// its wait slices (50 ms); the rest is room for a loaded machine.
+const CHILD_GRACE: Duration = Duration::from_millis(900);
+
+/// How long a child that completed its stream has to exit by itself (it leaves as soon as the
+/// demo's subscriber is gone) before it is sent SIGTERM.
+const CHILD_LINGER: Duration = Duration::from_secs(2);
+
+/// Ends `c`: SIGTERM first if `terminate`, else only after `grace` without an exit; then
+/// `grace` again, then SIGKILL. Its exit status.
+fn end_child(c: &mut Child, terminate: bool, grace: Duration) -> std::io::Result<ExitStatus> {
+    if terminate {
+        signal_child(c, libc::SIGTERM);
+    }
+    for term in [!terminate, false] {
+        let start = Instant::now();
+        while start.elapsed() < grace {
+            if let Some(s) = c.try_wait()? {
+                return Ok(s);
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        if term {
+            signal_child(c, libc::SIGTERM);
+        }
+    }
+    let _ = c.kill();
+    c.wait()
+}
+
+/// Sends `sig` to the child (a no-op once it has been waited for).
+fn signal_child(c: &mut Child, sig: libc::c_int) {
+    if matches!(c.try_wait(), Ok(None)) {
+        if let Ok(pid) = libc::pid_t::try_from(c.id()) {
+            // SAFETY: kill(2) on our own child, not yet waited for: the pid is still its.
+            #[allow(unsafe_code)]
+            let _ = unsafe { libc::kill(pid, sig) };
         }
     }
 }
@@ -170,6 +217,8 @@ fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
 
 /// `ipc-runner demo`. Returns the exit code.
 pub fn main(args: &DemoArgs) -> Result<i32> {
+    // SIGINT/SIGTERM set a flag from here on (the loop ends, the child is told).
+    channel_sim::signal::install();
     let (scenario_name, scenario) = match (&args.scenario, &args.config) {
         (Some(n), _) => (n.clone(), resolve(n, None)?),
         (None, Some(c)) => (c.display().to_string(), resolve(DEFAULT_SCENARIO, Some(c))?),
@@ -225,12 +274,18 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         .args(["--steps", &steps.to_string()])
         .args(["--rate", &args.rate.to_string()])
         .args(["--prefix", &prefix])
+        .args(["--parent-pid", &std::process::id().to_string()])
         .arg("--quiet")
         .stdin(Stdio::null());
     let child = cmd
         .spawn()
         .with_context(|| format!("cannot start the publisher {cmd:?}"))?;
+    let child_pid = child.id();
     let mut guard = ChildGuard(Some(child));
+    let publisher = match &args.channel_sim {
+        Some(p) => format!("the publisher {}", p.display()),
+        None => "the publisher (ipc-runner channel-sim)".to_string(),
+    };
 
     let mut rargs = RunArgs::new(&scenario_name, &prefix);
     rargs.config = args.config.clone();
@@ -253,7 +308,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
 
     eprintln!(
         "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
-         (prefix {prefix})",
+         (prefix {prefix}, publisher pid {child_pid})",
         if args.rate > 0.0 {
             format!("{} Hz", args.rate)
         } else {
@@ -278,8 +333,15 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             c.delivered, c.dropped_by_channel, c.lost_in_ipc
         ));
     };
+    let mut exited: Option<ExitStatus> = None;
+    let mut peer = || -> Option<String> {
+        let s = guard.0.as_mut()?.try_wait().ok()??;
+        exited = Some(s);
+        Some(format!("{publisher} exited with {s}"))
+    };
     let hooks = Hooks {
         progress: Some(&mut progress),
+        peer: Some(&mut peer),
         ..Hooks::default()
     };
     let result = run::run_loop(
@@ -291,11 +353,33 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         hooks,
     );
     bar.finish_and_clear();
-    let (report, traj) = result?;
-    let status = guard.0.take().map(|mut c| c.wait()).transpose()?;
+    let (report, traj) = match result {
+        Ok(r) => r,
+        // The publisher ended before its first slot: a `--channel-sim` that is no publisher,
+        // or one that refused its arguments or its environment (its own error came first).
+        Err(e) if exited.is_some() => {
+            eprintln!("demo: error: {e:#}");
+            return Ok(2);
+        }
+        Err(e) => return Err(e),
+    };
+    // The loop's subscriber is gone: a child that completed its stream leaves by itself; one
+    // that is still running after a stop or a loss is told (SIGTERM), and killed if it must.
+    let completed = matches!(
+        report.ending,
+        run::Ending::Completed | run::Ending::PublisherStopped
+    );
+    let status = match guard.0.take() {
+        Some(mut c) => Some(end_child(
+            &mut c,
+            !completed,
+            if completed { CHILD_LINGER } else { CHILD_GRACE },
+        )?),
+        None => None,
+    };
     if let Some(s) = status {
         if !s.success() {
-            eprintln!("demo: the publisher exited with {s}");
+            eprintln!("demo: {publisher} exited with {s}");
         }
     }
     run::finish(&rargs, &report, &traj, scenario.ny())?;

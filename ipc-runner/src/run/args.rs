@@ -64,12 +64,18 @@ pub struct RunArgs {
     /// How to wait for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
-    /// Data deadline: the publisher counts as lost this many ms after the expected slot.
+    /// Data deadline: this many ms after the expected slot the publisher is looked at: stalled
+    /// if its iceoryx2 node is alive (waited for, see `--stall-limit`), else lost.
     #[arg(long, default_value_t = 100.0, value_parser = channel_sim::flags::positive_millis)]
     pub deadline_ms: f64,
     /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
     #[arg(long, default_value_t = 30.0, value_parser = channel_sim::flags::seconds)]
     pub connect_timeout: f64,
+    /// A publisher whose iceoryx2 node is alive but that sent nothing past the deadline is
+    /// *stalled* (waited for, reported); it counts as lost after this many seconds of silence
+    /// (0 = never). A dead node is lost at the deadline (docs/pipeline.md, "Stalled or lost").
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = channel_sim::flags::seconds)]
+    pub stall_limit: f64,
     /// After losing the publisher, wait for channel-sim to come back instead of failing.
     #[arg(long)]
     pub wait_for_restart: bool,
@@ -151,6 +157,7 @@ impl RunArgs {
             wait: WaitMode::Spin,
             deadline_ms: 100.0,
             connect_timeout: 30.0,
+            stall_limit: 10.0,
             wait_for_restart: false,
             buffer: 256,
             cpu: None,

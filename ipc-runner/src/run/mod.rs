@@ -30,9 +30,11 @@
 //!
 //! Faults: when no slot arrives within `period + --deadline-ms` of the previous one the
 //! runner cleans up dead nodes (`try_cleanup_dead_nodes`: a SIGKILLed publisher is otherwise
-//! invisible), reports the publisher as lost and exits with [`EXIT_PUBLISHER_LOST`], or with
-//! `--wait-for-restart` waits for a new channel-sim and starts a new session (fresh
-//! estimators; the new process starts its stream at k = 1).
+//! invisible). A publisher still registered then is alive: *stalled*, waited for and reported
+//! (up to `--stall-limit`). One that is gone is lost: the runner exits with
+//! [`EXIT_PUBLISHER_LOST`], or with `--wait-for-restart` waits for a new channel-sim and
+//! starts a new session (fresh estimators; the new process starts its stream at k = 1). Only
+//! SIGINT/SIGTERM stop the loop; any other signal is a wake-up (docs/security.md, "Signals").
 //!
 //! The parts, one file each: `args` ([`RunArgs`]), `slot_loop` (the loop, [`run_loop`]),
 //! `instant` (one instant's work), `publish`, `truth` (the evaluation beside the loop),
@@ -54,9 +56,10 @@ mod wait;
 
 pub use args::{RunArgs, WaitMode};
 pub use report::{
-    conclude, exit_code, finish, Ending, EstimatorReport, ExitWith, RunReport, EXIT_PUBLISHER_LOST,
+    conclude, exit_code, finish, Ending, EstimatorReport, ExitWith, RunReport, Stalls,
+    EXIT_PUBLISHER_LOST,
 };
-pub use slot_loop::{run_loop, Hooks, Progress};
+pub use slot_loop::{run_loop, Hooks, Progress, PEER_CHECK_NS};
 pub use trajectories::Trajectories;
 
 use crate::limits;

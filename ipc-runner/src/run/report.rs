@@ -49,6 +49,29 @@ pub enum Ending {
     Failed,
 }
 
+/// Silences of a publisher that was alive (its iceoryx2 node was) past the data deadline:
+/// stalled, not lost (docs/pipeline.md, "Stalled or lost").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Stalls {
+    /// Stalls.
+    pub count: u32,
+    /// The longest silence in ms: from the last slot before it to the first one after it (or
+    /// to the end of the run).
+    pub longest_ms: f64,
+    /// All stalls' silences together, ms.
+    pub total_ms: f64,
+}
+
+impl Stalls {
+    /// Records a stall that was `silence_ns` long.
+    pub fn record(&mut self, silence_ns: u64) {
+        let ms = silence_ns as f64 / 1e6;
+        self.count += 1;
+        self.longest_ms = self.longest_ms.max(ms);
+        self.total_ms += ms;
+    }
+}
+
 /// What a run did.
 #[derive(Clone, Debug, Serialize)]
 pub struct RunReport {
@@ -64,8 +87,10 @@ pub struct RunReport {
     pub latency: LatencySummary,
     /// Streams followed (1 + publisher restarts).
     pub sessions: u32,
-    /// Times the data deadline passed.
+    /// Times the publisher was lost (dead, or stalled past `--stall-limit`).
     pub publisher_losses: u32,
+    /// Times the publisher was alive but silent past the data deadline, and for how long.
+    pub stalls: Stalls,
     /// Truth messages missing for processed instants.
     pub truth_missing: u64,
     /// Truth messages with a non-finite component: those instants are left out of every
@@ -124,6 +149,14 @@ impl RunReport {
             s.push_str(&format!(
                 "publisher lost {} time(s); {} session(s)\n",
                 self.publisher_losses, self.sessions
+            ));
+        }
+        let st = &self.stalls;
+        if st.count > 0 {
+            s.push_str(&format!(
+                "publisher stalled {} time(s) (alive but silent past the deadline): longest \
+                 {:.1} ms, {:.1} ms in all\n",
+                st.count, st.longest_ms, st.total_ms
             ));
         }
         s.push_str("estimator         MSE vs truth   instants   rejected\n");
