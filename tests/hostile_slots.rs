@@ -1,0 +1,1 @@
+//! Hostile slots (filled in below).
