@@ -224,7 +224,7 @@ pub enum SlotFault {
 }
 
 impl SlotFault {
-    /// Every fault, in the order of [`SlotFault::index`].
+    /// Every fault, in the order of the declaration.
     pub const ALL: [SlotFault; 11] = [
         Self::Version,
         Self::Kind,
