@@ -181,3 +181,77 @@ fn a_node_out_of_range_is_refused_with_one_line() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_missing_node_process_is_handed_on_as_lost_when_the_others_stop() {
+    // Nodes 0 and 1 at 200 Hz; node 2's process never comes. With no END from node 2 the
+    // stream never completes: the run ends when the slots stop (publisher lost), and every
+    // pending instant is handed on without node 2, counted apart from IPC losses. (The
+    // deadline is long: the two processes' clocks start apart, and a short one would count
+    // node 1's slots as late.)
+    let dir = scratch("nodes-deadline");
+    let p = prefix("nodes-deadline");
+    let json = dir.join("runner.json");
+    let mut run = Proc::start(
+        &dir,
+        "runner",
+        &[
+            "run",
+            "--scenario",
+            S,
+            "--prefix",
+            &p,
+            "--steps",
+            "40",
+            "--instant-deadline-ms",
+            "5000",
+            "--json",
+            json.to_str().unwrap(),
+        ],
+    );
+    run.wait_for_stderr("waiting for channel-sim", 30);
+    let mut pubs: Vec<Proc> = [0u8, 1]
+        .iter()
+        .map(|n| {
+            let n = n.to_string();
+            Proc::start(
+                &dir,
+                &format!("pub-node{n}"),
+                &[
+                    "channel-sim",
+                    "--scenario",
+                    S,
+                    "--prefix",
+                    &p,
+                    "--rate",
+                    "200",
+                    "--steps",
+                    "40",
+                    "--node",
+                    &n,
+                    "--quiet",
+                ],
+            )
+        })
+        .collect();
+    let st = run.wait(60);
+    for p in &mut pubs {
+        assert!(p.wait(60).success(), "{}", p.err());
+    }
+    assert_eq!(
+        st.code(),
+        Some(ipc_runner::run::EXIT_PUBLISHER_LOST),
+        "{}",
+        run.err()
+    );
+    let r = report(&json);
+    let c = &r["counts"];
+    assert_eq!(c["instants"], 40, "{r}");
+    assert_eq!(c["received"], 80, "{r}");
+    assert_eq!(c["lost_deadline"], 40, "{r}");
+    assert_eq!(c["markers"], 2, "{r}");
+    for other in ["lost_in_ipc", "lost_overrun", "late"] {
+        assert_eq!(c[other], 0, "{other}: {r}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -794,6 +794,16 @@ impl Assembler {
         emit(j as u32, &p.obs[..nodes]);
     }
 
+    /// Hands on every pending instant without the slots that have not come (counted as lost
+    /// by the deadline): the publishers are gone or the run ends, and what arrived is still
+    /// stepped.
+    pub fn flush(&mut self, emit: &mut impl FnMut(u32, &[Observation])) {
+        while self.ring[(self.base as usize) % WINDOW].known != 0 {
+            self.give_up(GiveUp::Deadline, emit);
+            self.advance(emit);
+        }
+    }
+
     /// When the oldest pending instant's deadline passes (paced mode), if one is pending.
     pub fn next_expiry(&self) -> Option<u64> {
         let p = &self.ring[(self.base as usize) % WINDOW];

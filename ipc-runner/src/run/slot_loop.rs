@@ -134,6 +134,9 @@ pub fn run_loop(
             Woke::Signal => break Ending::Interrupted,
         }
     };
+    if ending == Ending::Interrupted {
+        lp.flush();
+    }
     let (mut report, traj) = lp.finish(ending, machine);
     // The scenario's own name: a `--config` file's, not the `--scenario` default.
     report.scenario = scenario.name().to_string();
@@ -261,6 +264,15 @@ impl Loop<'_> {
         self.say(&format!("first {m} (further ones are counted silently)"));
     }
 
+    /// Hands on every pending instant without its missing slots (the publishers are gone, or
+    /// the run ends).
+    fn flush(&mut self) {
+        let (t, runner) = (self.t, &mut self.runner);
+        self.asm.flush(&mut |k, obs: &[Observation]| {
+            runner.on_instant(t, k, obs);
+        });
+    }
+
     /// Hands on the pending instants whose deadline passed (paced mode).
     #[inline]
     fn expire(&mut self, now: u64) {
@@ -306,6 +318,7 @@ impl Loop<'_> {
             return Some(Ending::PublisherLost);
         };
         self.publisher_losses += 1;
+        self.flush();
         let cleaned = self.t.node.try_cleanup_dead_nodes();
         self.say(&format!(
             "publisher lost: no slot for {:.1} ms after instant {} (deadline {} ms past the \
