@@ -4,7 +4,14 @@
 //! Life cycle: create the services → wait for a subscriber (the first slots would otherwise
 //! be lost before the connection exists) → publish instants k = 1..=steps, each as truth then
 //! one slot per node, paced at `--rate` Hz, notifying the `slots-ready` event after each
-//! instant → publish an END marker → linger until the subscriber has detached (bounded).
+//! instant → publish every node's END marker → linger until the subscriber has detached
+//! (bounded).
+//!
+//! `--node N` publishes node N's slots only, as one sensor node's own process would (wire
+//! version 3: every node is its own stream, `docs/wire.md`, Stream rules). The simulation
+//! still runs every node with the same seeds, so node N's slots are bit for bit those of the
+//! all-nodes publisher; the process that publishes node 0 also publishes the truth. One
+//! process per node, started in any order, feeds the runner exactly what one publisher does.
 //!
 //! Every slot carries the scenario's [`StreamHeader`] (its shape and model fingerprint) as
 //! its user header, so a runner built for another scenario refuses the stream before it steps
@@ -59,6 +66,10 @@ pub struct PublisherArgs {
     /// slot (the runner counts the gap); `auto` blocks at `--rate 0` and discards when paced.
     #[arg(long, value_enum, default_value_t = Backpressure::Auto)]
     pub backpressure: Backpressure,
+    /// Publish only this sensor node's slots (0-based; default: every node). The process that
+    /// publishes node 0 also publishes the truth.
+    #[arg(long)]
+    pub node: Option<u8>,
     /// Service-name prefix (use distinct prefixes for parallel runs).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
@@ -279,6 +290,19 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let nodes = u8::try_from(scenario.nodes()).context("too many nodes")?;
+    if let Some(n) = args.node {
+        if n >= nodes {
+            return Err(wire::ContractError::Refused(format!(
+                "--node {n}: scenario {} has {nodes} node(s), 0..={}",
+                scenario.name(),
+                nodes - 1
+            ))
+            .into());
+        }
+    }
+    // The nodes this process publishes, and whether it publishes the truth (node 0's).
+    let mine = |m: u8| args.node.is_none_or(|n| n == m);
+    let with_truth = mine(0);
     let nx = scenario.nx();
     let say = |m: &str| {
         if !args.quiet {
@@ -313,15 +337,29 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         .create()
         .map_err(|e| {
             anyhow::anyhow!(
-                "cannot publish on {}/slots ({e:?}): is another channel-sim running with this \
-             --prefix?",
-                args.prefix
+                "cannot publish on {}/slots ({e:?}): are {} publishers already running with \
+                 this --prefix?",
+                args.prefix,
+                wire::MAX_NODES
             )
         })?;
-    let truth_pub = truth
-        .publisher_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("cannot publish on {}/truth: {e:?}", args.prefix))?;
+    let truth_pub = if with_truth {
+        Some(truth.publisher_builder().create().map_err(|e| {
+            anyhow::anyhow!(
+                "cannot publish on {}/truth ({e:?}): is another publisher of node 0 running \
+                 with this --prefix?",
+                args.prefix
+            )
+        })?)
+    } else {
+        None
+    };
+    let send_truth = |t: Truth| -> Result<()> {
+        if let Some(p) = &truth_pub {
+            p.loan_uninit()?.write_payload(t).send()?;
+        }
+        Ok(())
+    };
     let notifier = ready
         .notifier_builder()
         .default_event_id(wire::READY_EVENT)
@@ -348,11 +386,15 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     };
 
     say(&format!(
-        "scenario {} (seed {}, run {}), {steps} instants × {nodes} nodes at {} on prefix {:?}; \
+        "scenario {} (seed {}, run {}), {steps} instants × {} at {} on prefix {:?}; \
          waiting for a subscriber",
         scenario.name(),
         args.seed,
         args.run,
+        match args.node {
+            Some(n) => format!("node {n} of {nodes}"),
+            None => format!("{nodes} nodes"),
+        },
         if period_ns == 0 {
             "full speed".to_string()
         } else {
@@ -380,16 +422,15 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
 
     let mut sim = scenario.start(args.seed, args.run);
     let x0 = sim.initial_truth();
-    truth_pub
-        .loan_uninit()?
-        .write_payload(Truth::new(0, sid, nx, &x0))
-        .send()?;
+    send_truth(Truth::new(0, sid, nx, &x0))?;
 
     let t0 = wire::monotonic_ns();
     let stream_start_ns = t0;
     let mut last_check = t0;
     let mut delivered_count = 0u64;
-    let mut k_done = 0u32;
+    // Per node, the last instant whose slot was handed to the publisher: its END/ABORT
+    // marker's k and seq (docs/wire.md, Stream rules).
+    let mut sent_k = [0u32; wire::MAX_NODES];
     'instants: for i in 1..=steps {
         if period_ns > 0 {
             let due = t0 + u64::from(i - 1) * period_ns;
@@ -408,12 +449,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         if args.debug_nan_truth_at == Some(inst.k) {
             x[0] = f64::NAN;
         }
-        truth_pub
-            .loan_uninit()?
-            .write_payload(Truth::new(inst.k, sid, nx, &x))
-            .send()?;
+        send_truth(Truth::new(inst.k, sid, nx, &x))?;
         let mut subscriber_gone = false;
-        for obs in &inst.obs {
+        for obs in inst.obs.iter().filter(|o| mine(o.node)) {
             let mut slot = slot_of(
                 obs,
                 nodes,
@@ -444,9 +482,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
                     break 'instants;
                 }
             }
+            sent_k[usize::from(obs.node)] = obs.k;
         }
         notifier.notify()?;
-        k_done = inst.k;
         report.instants = i;
         // A dead subscriber stays registered (and keeps its queue) until someone cleans up.
         // After the send: the scan of the node directory (sub-millisecond) runs in the slack
@@ -480,9 +518,15 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // The marker waits for room whatever the mode (bounded by --linger): a discarded END
     // would leave the runner waiting for its deadline.
     gate.set_mode(Mode::Final);
-    let marker = Slot::marker(kind, report.slots, k_done, nodes, sid, 0);
     let give_up = std::time::Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));
-    sender.send(marker, Some(give_up))?;
+    for m in (0..nodes).filter(|&m| mine(m)) {
+        let marker = Slot {
+            period_ns,
+            stream_start_ns,
+            ..Slot::marker(kind, sent_k[usize::from(m)], m, nodes, sid, 0)
+        };
+        sender.send(marker, Some(give_up))?;
+    }
     notifier.notify()?;
     report.discarded = sender.discarded;
     report.resent = sender.resent;

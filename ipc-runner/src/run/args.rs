@@ -68,6 +68,15 @@ pub struct RunArgs {
     /// if its iceoryx2 node is alive (waited for, see `--stall-limit`), else lost.
     #[arg(long, default_value_t = 100.0, value_parser = channel_sim::flags::positive_millis)]
     pub deadline_ms: f64,
+    /// Instants a node's k (or its END/ABORT's) may advance past its last instant; the gap is
+    /// filled with lost slots, a larger jump is a counted stream error (docs/wire.md).
+    #[arg(long, default_value_t = super::assemble::DEFAULT_MAX_GAP)]
+    pub max_gap: u32,
+    /// Paced streams: how long an instant waits for its other nodes' slots after its first
+    /// one arrived before it is handed on without them (counted as lost by the deadline);
+    /// 0 = for ever. Blocking streams (`--rate 0`) never lose a slot by this deadline.
+    #[arg(long, default_value_t = super::assemble::DEFAULT_INSTANT_DEADLINE_MS)]
+    pub instant_deadline_ms: f64,
     /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
     #[arg(long, default_value_t = 30.0, value_parser = channel_sim::flags::seconds)]
     pub connect_timeout: f64,
@@ -158,6 +167,8 @@ impl RunArgs {
             deadline_ms: 100.0,
             connect_timeout: 30.0,
             stall_limit: 10.0,
+            max_gap: super::assemble::DEFAULT_MAX_GAP,
+            instant_deadline_ms: super::assemble::DEFAULT_INSTANT_DEADLINE_MS,
             wait_for_restart: false,
             buffer: 256,
             cpu: None,

@@ -145,6 +145,27 @@ impl RunReport {
                 self.truth_nonfinite
             ));
         }
+        let lost_other = c.lost_deadline + c.lost_overrun + c.lost_after_end;
+        if lost_other + c.late + c.out_of_order > 0 {
+            s.push_str(&format!(
+                "slots lost by the instant deadline {}, by overrun {}, after a node's end {}; \
+                 {} late, {} duplicate\n",
+                c.lost_deadline, c.lost_overrun, c.lost_after_end, c.late, c.out_of_order
+            ));
+        }
+        if c.skipped.total() > 0 {
+            s.push_str(&format!(
+                "slots skipped: {} ({})\n",
+                c.skipped.total(),
+                c.skipped.describe()
+            ));
+        }
+        if c.anomalies.period_ns + c.anomalies.send_ns > 0 {
+            s.push_str(&format!(
+                "fields ignored: period_ns {}, send_ns {}\n",
+                c.anomalies.period_ns, c.anomalies.send_ns
+            ));
+        }
         if self.sessions > 1 || self.publisher_losses > 0 {
             s.push_str(&format!(
                 "publisher lost {} time(s); {} session(s)\n",

@@ -6,14 +6,14 @@
 use crate::latency::Latency;
 use crate::transport::Transport;
 use crate::Estimator;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use channel_sim::Observation;
-use estpipe_wire::{self as wire, ContractError, StreamHeader, WIRE_VERSION};
+use estpipe_wire::{self as wire, SlotFault, StreamHeader};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::time::Duration;
 
 use super::args::{RunArgs, WaitMode};
-use super::assemble::{Assembler, Counts, Pushed};
+use super::assemble::{self, Assembler, Counts, Limits, Pushed, Reason};
 use super::instant::Runner;
 use super::report::{Ending, RunReport, Stalls};
 use super::system;
@@ -62,12 +62,13 @@ pub const PEER_CHECK_NS: u64 = 10_000_000;
 
 /// Runs the loop with estimators from `make` (called again for every new stream) until the
 /// stream ends. Errors are configuration/transport failures; a lost publisher is reported in
-/// [`RunReport::ending`].
+/// [`RunReport::ending`]. Every node's ny comes from the scenario's stream header (`_ny` is
+/// not used: nodes may differ).
 pub fn run_loop(
     args: &RunArgs,
     nx: usize,
     nodes: u8,
-    ny: u8,
+    _ny: u8,
     make: &dyn Fn() -> Result<Vec<Box<dyn Estimator>>>,
     mut hooks: Hooks<'_>,
 ) -> Result<(RunReport, Trajectories)> {
@@ -77,7 +78,18 @@ pub fn run_loop(
     let machine = Machine::set_up(args);
     let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
     let runner = Runner::new(&t, args, make()?, nx, nodes)?;
-    let mut asm = Assembler::new(nodes, ny);
+    if !(args.instant_deadline_ms >= 0.0 && args.instant_deadline_ms.is_finite()) {
+        return Err(wire::ContractError::Refused(format!(
+            "--instant-deadline-ms must be a number ≥ 0 (0 = for ever), got {}",
+            args.instant_deadline_ms
+        ))
+        .into());
+    }
+    let limits = Limits {
+        max_gap: args.max_gap,
+        instant_deadline_ns: (args.instant_deadline_ms * 1e6) as u64,
+    };
+    let mut asm = Assembler::new(&expected, limits);
     asm.set_subscribed_ns(t.subscribed_ns);
     let mut lp = Loop {
         args,
@@ -92,7 +104,6 @@ pub fn run_loop(
         last_peer_check: 0,
         last_progress: 0,
         expected,
-        checked_stream: None,
         last_update_ns: 0,
     };
 
@@ -140,8 +151,10 @@ pub fn run_loop(
             }
             lp.say(&format!("publisher lost: {why}"));
             lp.publisher_losses += 1;
+            lp.flush();
             break Ending::PublisherLost;
         }
+        lp.expire(now);
         let due = lp.deadline.due();
         if now > due {
             match lp.missed(now) {
@@ -149,6 +162,7 @@ pub fn run_loop(
                 None => continue,
             }
         }
+        let due = lp.asm.next_expiry().map_or(due, |t| t.min(due));
         match waiter.wait(due.saturating_sub(now).min(max_wait_ns)) {
             Ok(Woke::Ready) => {}
             Ok(Woke::Signal) => break Ending::Interrupted,
@@ -158,6 +172,9 @@ pub fn run_loop(
             }
         }
     };
+    if matches!(ending, Ending::Interrupted | Ending::Failed) {
+        lp.flush();
+    }
     let processed = lp.asm.counts.instants;
     if let Some(e) = failure.take_if(|_| processed == 0) {
         return Err(e);
@@ -188,8 +205,6 @@ struct Loop<'a> {
     last_progress: u64,
     /// The header of the scenario the estimators were built for.
     expected: StreamHeader,
-    /// The stream whose header was checked against `expected`.
-    checked_stream: Option<u64>,
     /// When the estimate publisher last looked for new subscribers.
     last_update_ns: u64,
 }
@@ -217,45 +232,52 @@ impl Loop<'_> {
             };
             let recv_ns = wire::monotonic_ns();
             let slot = sample.payload();
-            if slot.version != WIRE_VERSION {
-                let e = wire::WireError::Version {
-                    found: slot.version,
-                };
-                return Err(ContractError::Refused(e.to_string()).into());
+            let header = sample.user_header();
+            // Before any estimator has stepped, a stream of another shape or model is refused
+            // (exit 2), never fed to estimators built for this one; later such a slot is
+            // counted and skipped (docs/wire.md, What the runner does with a bad slot).
+            if self.asm.counts.instants == 0
+                && self.asm.counts.received == 0
+                && !assemble::same_stream_shape(header, &self.expected)
+            {
+                header.check(&self.expected)?;
             }
-            // Once per stream, before any of its slots reaches an estimator: a stream of
-            // another shape or model is refused, never fed to estimators built for this one.
-            if self.checked_stream != Some(slot.stream_id) {
-                sample.user_header().check(&self.expected)?;
-                self.checked_stream = Some(slot.stream_id);
-            }
+            // Whatever it carries, a slot shows the publisher alive.
             if let Some(silence) = self.deadline.data(recv_ns) {
                 self.stall_ended(silence);
             }
-            if slot.kind == wire::SLOT_DATA {
-                self.deadline.period_ns = slot.period_ns;
-                self.runner.slot.send_ns = slot.send_ns;
-                self.runner.slot.recv_ns = recv_ns;
-            }
-            self.runner.slot.stream_id = slot.stream_id;
+            self.runner.slot.send_ns = assemble::usable_send_ns(slot, recv_ns).unwrap_or(0);
+            self.runner.slot.recv_ns = recv_ns;
+            // Estimates and truth belong to node 0's stream (its process publishes the truth).
+            self.runner.slot.stream_id = self.asm.stream_of(0).unwrap_or(slot.stream_id);
             let (t, runner) = (self.t, &mut self.runner);
-            let mut pushed = self.asm.push(slot, &mut |k, obs: &[Observation]| {
-                runner.on_instant(t, k, obs);
-            });
-            if pushed == Ok(Pushed::NewStream) {
-                self.new_stream()?;
-                let runner = &mut self.runner;
-                pushed = self.asm.push(slot, &mut |k, obs: &[Observation]| {
+            let mut pushed = self
+                .asm
+                .push(slot, header, recv_ns, &mut |k, obs: &[Observation]| {
                     runner.on_instant(t, k, obs);
                 });
+            if pushed == Pushed::NewStream {
+                self.new_stream()?;
+                self.runner.slot.stream_id = self.asm.stream_of(0).unwrap_or(slot.stream_id);
+                let runner = &mut self.runner;
+                pushed = self
+                    .asm
+                    .push(slot, header, recv_ns, &mut |k, obs: &[Observation]| {
+                        runner.on_instant(t, k, obs);
+                    });
             }
-            let pushed = pushed.with_context(|| "refusing slot from channel-sim")?;
-            // After the instant this slot may have completed was published.
-            if slot.kind == wire::SLOT_DATA {
-                Latency::record(&mut self.runner.latency.transport, slot.send_ns, recv_ns);
+            if let Some(r) = self.asm.take_first_seen() {
+                self.warn(r, slot);
             }
-            if self.args.slots_csv.is_some() && pushed == Pushed::Data {
-                self.runner.traj.record_slot(slot);
+            if pushed == Pushed::Data {
+                // A period beyond the bound is not used for the data deadline.
+                if slot.period_ns <= assemble::MAX_PERIOD_NS {
+                    self.deadline.period_ns = slot.period_ns;
+                }
+                // After the instant this slot may have completed was published.
+                if self.runner.slot.send_ns != 0 {
+                    Latency::record(&mut self.runner.latency.transport, slot.send_ns, recv_ns);
+                }
             }
             drop(sample);
             if let Some(e) = self.runner.out.take_error() {
@@ -286,6 +308,36 @@ impl Loop<'_> {
         }
     }
 
+    /// Says once per reason that slots are being counted and skipped (or a field ignored).
+    fn warn(&self, r: Reason, slot: &wire::Slot) {
+        let m = match r {
+            Reason::Fault(SlotFault::Version) => wire::WireError::Version {
+                found: slot.version,
+            }
+            .to_string(),
+            r => r.describe(),
+        };
+        self.say(&format!("first {m} (further ones are counted silently)"));
+    }
+
+    /// Hands on every pending instant without its missing slots (the publishers are gone, or
+    /// the run ends).
+    fn flush(&mut self) {
+        let (t, runner) = (self.t, &mut self.runner);
+        self.asm.flush(&mut |k, obs: &[Observation]| {
+            runner.on_instant(t, k, obs);
+        });
+    }
+
+    /// Hands on the pending instants whose deadline passed (paced mode).
+    #[inline]
+    fn expire(&mut self, now: u64) {
+        let (t, runner) = (self.t, &mut self.runner);
+        self.asm.expire(now, &mut |k, obs: &[Observation]| {
+            runner.on_instant(t, k, obs);
+        });
+    }
+
     /// While idle, at most every [`UPDATE_CONNECTIONS_NS`]: hands a subscriber that connected
     /// since the last estimate the estimate history (`docs/wire.md`, QoS), which iceoryx2
     /// otherwise delivers only with the next `send()`.
@@ -299,7 +351,7 @@ impl Loop<'_> {
 
     /// channel-sim restarted: a new session with fresh estimators.
     fn new_stream(&mut self) -> Result<()> {
-        let old = self.asm.stream();
+        let old = self.asm.stream_of(0);
         self.asm.reset();
         self.runner.session += 1;
         self.runner.estimators = (self.make)()?;
@@ -374,6 +426,7 @@ impl Loop<'_> {
             self.stalls.record(silence_ns);
         }
         self.publisher_losses += 1;
+        self.flush();
         let why = if publishers > 0 {
             format!(
                 "; alive but silent longer than --stall-limit {} s",
@@ -394,6 +447,9 @@ impl Loop<'_> {
             return Some(Ending::PublisherLost);
         }
         self.say("waiting for channel-sim to restart (--wait-for-restart)");
+        // The lost publisher's stream is over: a restarted one may begin anywhere (its
+        // first slot may itself have been lost) and starts a new session.
+        self.asm.lose_streams();
         self.deadline.last_data_ns = None;
         self.deadline.waiting_since = now;
         None
