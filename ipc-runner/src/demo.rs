@@ -60,6 +60,9 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 0.0, value_name = "P",
           value_parser = crate::eval::cli::loss_probability)]
     pub loss_rate: f64,
+    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
     /// How the loop waits for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
@@ -150,7 +153,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             run: args.run,
             horizon: steps,
         },
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate),
     )?;
     let prefix = args
         .prefix
@@ -182,6 +185,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.estimators = args.estimators.clone();
     rargs.particles = args.particles;
     rargs.loss_rate = args.loss_rate;
+    rargs.gate = args.gate;
     rargs.wait = args.wait;
     rargs.cpu = args.cpu;
     rargs.latest_estimates = args.latest_estimates;

@@ -1,11 +1,54 @@
 //! The application's dynamic [`Estimator`] over a core one: a name, the estimate and its
-//! covariance as `f64`s, diagnostics, and the stepping of [`Fed`].
+//! covariance as `f64`s, diagnostics, the stepping of [`Fed`] and, with `--gate P`, the
+//! innovation gate (docs/gate.md).
 
+use std::sync::Mutex;
+
+use channel_sim::Observation;
+use estimator_core::filter::{GateCounts, GatedStep, InnovationGate};
 use estimator_core::Error;
 
 use super::fed::Fed;
 use super::slots::FromSlots;
 use crate::{CovarianceKind, Estimator};
+
+/// The gated step of a [`Fed`] estimator, with the estimator's measurement type erased.
+type GatedFedStep<E> =
+    fn(&mut Fed<E>, u32, &[Observation], &InnovationGate<f64>) -> Result<GateCounts, Error>;
+
+/// An estimator's gate: the configuration, its step, and the counts of the run so far.
+struct Gate<E> {
+    gate: InnovationGate<f64>,
+    step: GatedFedStep<E>,
+    tested: u64,
+    rejected: u64,
+}
+
+fn gated_fed_step<E, const NX: usize>(
+    fed: &mut Fed<E>,
+    k: u32,
+    obs: &[Observation],
+    gate: &InnovationGate<f64>,
+) -> Result<GateCounts, Error>
+where
+    E: GatedStep<f64, NX> + Clone,
+    E::Measurement: FromSlots,
+{
+    fed.step_by::<NX>(k, obs, |e, k, y| e.step_gated(k, y, gate))
+}
+
+/// `name` with the suffix `+gate`, so that no report can be mistaken for the ungated
+/// estimator's. Interned: the names are a small fixed set, each leaked once.
+pub(crate) fn gated_name(name: &'static str) -> &'static str {
+    static NAMES: Mutex<Vec<(&'static str, &'static str)>> = Mutex::new(Vec::new());
+    let mut names = NAMES.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, g)) = names.iter().find(|(n, _)| *n == name) {
+        return g;
+    }
+    let g: &'static str = Box::leak(format!("{name}+gate").into_boxed_str());
+    names.push((name, g));
+    g
+}
 
 /// Reports an estimator's per-step diagnostics (see [`Estimator::diagnostics`]).
 pub(crate) type Diagnostics<E> = fn(&E, &mut dyn FnMut(&'static str, f64));
@@ -17,6 +60,7 @@ pub(crate) struct Adapted<E, const NX: usize> {
     diagnostics: Diagnostics<E>,
     full_information: bool,
     cov_kind: CovarianceKind,
+    gate: Option<Gate<E>>,
 }
 
 impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
@@ -28,6 +72,7 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
             diagnostics: trace_p,
             full_information: false,
             cov_kind: CovarianceKind::Estimate,
+            gate: None,
         }
     }
 
@@ -48,6 +93,27 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
     pub(crate) fn with_full_information(mut self, full_information: bool) -> Self {
         self.full_information = full_information;
         self
+    }
+}
+
+impl<E, const NX: usize> Adapted<E, NX>
+where
+    E: GatedStep<f64, NX> + Clone,
+    E::Measurement: FromSlots,
+{
+    /// Behind the χ² innovation gate of probability `p` when `gate` is `Some(p)`, renamed
+    /// `<name>+gate` (docs/gate.md); unchanged with `None`.
+    pub(crate) fn with_gate(mut self, gate: Option<f64>) -> Result<Self, Error> {
+        if let Some(p) = gate {
+            self.gate = Some(Gate {
+                gate: InnovationGate::chi2(p)?,
+                step: gated_fed_step::<E, NX>,
+                tested: 0,
+                rejected: 0,
+            });
+            self.name = gated_name(self.name);
+        }
+        Ok(self)
     }
 }
 
@@ -80,8 +146,16 @@ where
         self.name
     }
 
-    fn step(&mut self, k: u32, obs: &[channel_sim::Observation]) -> Result<(), Error> {
-        self.fed.step::<NX>(k, obs)
+    fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
+        match &mut self.gate {
+            None => self.fed.step::<NX>(k, obs),
+            Some(g) => {
+                let c = (g.step)(&mut self.fed, k, obs, &g.gate)?;
+                g.tested += u64::from(c.tested);
+                g.rejected += u64::from(c.rejected);
+                Ok(())
+            }
+        }
     }
 
     fn estimate(&self, out: &mut [f64]) {
@@ -95,6 +169,11 @@ where
 
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
         (self.diagnostics)(self.fed.get(), sink);
+        // Counts so far: eval's mean over runs at k = T times the valid runs is the total.
+        if let Some(g) = &self.gate {
+            sink("gate_tested", g.tested as f64);
+            sink("gate_rejected", g.rejected as f64);
+        }
     }
 
     fn full_information(&self) -> bool {

@@ -73,7 +73,7 @@ pub fn main(args: &RunArgs) -> Result<i32> {
             run: args.run,
             horizon: args.steps,
         },
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate),
     )?;
     let (report, traj) = run_loop(
         args,
