@@ -5,6 +5,7 @@
 use std::sync::Mutex;
 
 use channel_sim::Observation;
+use estimator_core::filter::gate::GateState;
 use estimator_core::filter::{GateCounts, GatedStep, InnovationGate};
 use estimator_core::Error;
 
@@ -20,8 +21,7 @@ type GatedFedStep<E> =
 struct Gate<E> {
     gate: InnovationGate<f64>,
     step: GatedFedStep<E>,
-    tested: u64,
-    rejected: u64,
+    state: GateState,
 }
 
 fn gated_fed_step<E, const NX: usize>(
@@ -108,8 +108,7 @@ where
             self.gate = Some(Gate {
                 gate: InnovationGate::chi2(p)?,
                 step: gated_fed_step::<E, NX>,
-                tested: 0,
-                rejected: 0,
+                state: GateState::default(),
             });
             self.name = gated_name(self.name);
         }
@@ -150,9 +149,9 @@ where
         match &mut self.gate {
             None => self.fed.step::<NX>(k, obs),
             Some(g) => {
-                let c = (g.step)(&mut self.fed, k, obs, &g.gate)?;
-                g.tested += u64::from(c.tested);
-                g.rejected += u64::from(c.rejected);
+                let gate = g.state.gate_for_next(&g.gate);
+                let c = (g.step)(&mut self.fed, k, obs, &gate)?;
+                g.state.record(c, &gate);
                 Ok(())
             }
         }
@@ -171,8 +170,9 @@ where
         (self.diagnostics)(self.fed.get(), sink);
         // Counts so far: eval's mean over runs at k = T times the valid runs is the total.
         if let Some(g) = &self.gate {
-            sink("gate_tested", g.tested as f64);
-            sink("gate_rejected", g.rejected as f64);
+            sink("gate_tested", f64::from(g.state.counts.tested));
+            sink("gate_rejected", f64::from(g.state.counts.rejected));
+            sink("gate_forced", f64::from(g.state.forced));
         }
     }
 

@@ -21,5 +21,7 @@ pub fn build(
     _seed: u64,
     _run: u64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(scenario, "ikf", false, options.gate)?.into_iter().collect())
+    Ok(linear_kf(scenario, "ikf", false, options.gate)?
+        .into_iter()
+        .collect())
 }

@@ -26,6 +26,7 @@ use channel_sim::channel::tobit::TobitCensoring;
 use channel_sim::plant::Plant;
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::{Observation, Scenario};
+use estimator_core::filter::gate::GateState;
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
 use estimator_core::filter::{GatedStep as _, InnovationGate, TobitFusion};
 use estimator_core::{Error, Estimator as _, OnModel};
@@ -181,7 +182,7 @@ struct Shared<const NX: usize, const NY: usize, const L: usize> {
     done_k: u32,
     last: Result<(), Error>,
     /// `--gate`: the gate and the measurements it tested and rejected so far (all nodes).
-    gate: Option<(InnovationGate<f64>, u64, u64)>,
+    gate: Option<(InnovationGate<f64>, GateState)>,
 }
 
 impl<const NX: usize, const NY: usize, const L: usize> Shared<NX, NY, L> {
@@ -204,8 +205,7 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
     let gate = match gate {
         Some(p) => Some((
             InnovationGate::chi2(p).map_err(|e| anyhow::anyhow!("tobit: {e}"))?,
-            0,
-            0,
+            GateState::default(),
         )),
         None => None,
     };
@@ -244,13 +244,12 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
             let s = &mut *s;
             s.last = match &mut s.gate {
                 None => s.fed.step::<NX>(k, obs),
-                Some((gate, tested, rejected)) => s
-                    .fed
-                    .step_by::<NX>(k, obs, |e, k, y| e.step_gated(k, y, gate))
-                    .map(|c| {
-                        *tested += u64::from(c.tested);
-                        *rejected += u64::from(c.rejected);
-                    }),
+                Some((gate, state)) => {
+                    let gate = state.gate_for_next(gate);
+                    s.fed
+                        .step_by::<NX>(k, obs, |e, k, y| e.step_gated(k, y, &gate))
+                        .map(|c| state.record(c, &gate))
+                }
             };
             s.done_k = k;
         }
@@ -308,9 +307,10 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         // The views share one filter: every view reports its counts over all nodes.
-        if let Some((_, tested, rejected)) = s.gate {
-            sink("gate_tested", tested as f64);
-            sink("gate_rejected", rejected as f64);
+        if let Some((_, g)) = &s.gate {
+            sink("gate_tested", f64::from(g.counts.tested));
+            sink("gate_rejected", f64::from(g.counts.rejected));
+            sink("gate_forced", f64::from(g.forced));
         }
         match self.node {
             Some(m) => {

@@ -109,7 +109,8 @@ impl GateTotals {
         let last = |n: &str| {
             let v = &diagnostics.iter().find(|(d, _)| d == n)?.1;
             let m = *v.last()?;
-            m.is_finite().then(|| (m * valid_runs as f64).round() as u64)
+            m.is_finite()
+                .then(|| (m * valid_runs as f64).round() as u64)
         };
         let (tested, rejected) = (last("gate_tested")?, last("gate_rejected")?);
         Some(Self {

@@ -356,7 +356,8 @@ impl<
 /// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
 /// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
 /// region).
-impl<T: Real,
+impl<
+        T: Real,
         const NX: usize,
         const NE: usize,
         const S: usize,

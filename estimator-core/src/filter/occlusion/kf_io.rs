@@ -235,7 +235,8 @@ impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<
 /// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
 /// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
 /// region).
-impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>> GatedStep<T, NX> for OnModel<M, KfIo<T, NX, S>, NY>
+impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<M, KfIo<T, NX, S>, NY>
 {
     fn step_gated(
         &mut self,

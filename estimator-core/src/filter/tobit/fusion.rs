@@ -212,8 +212,7 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<
             if let Some(z) = y[m].delivered() {
                 let r = diagonal_variances(&models[m].measurement_cov(k))?;
                 let q_m = bqb / self.filter.alpha[m];
-                let used =
-                    self.filter.locals[m].admits(&a, &q_m, &models[m].c(k), &r, z, gate)?;
+                let used = self.filter.locals[m].admits(&a, &q_m, &models[m].c(k), &r, z, gate)?;
                 counts.add(GateCounts::one(used));
                 received[m] = used.then_some(z);
             }
