@@ -145,16 +145,26 @@ where
         self.name
     }
 
+    /// The estimator's step (behind its gate, with `--gate`). A refused step (a
+    /// measurement whose update overflows, such as 1e300) is then taken as the instant's
+    /// slot lost in transport, the prediction only, so that the estimator stays on time (it
+    /// used to keep x̂_{k−1} and predict one instant short from there); the error is still
+    /// returned, and counted by the commands. Nothing changes in a run without errors.
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        match &mut self.gate {
+        let done = match &mut self.gate {
             None => self.fed.step::<NX>(k, obs),
             Some(g) => {
                 let gate = g.state.gate_for_next(&g.gate);
-                let c = (g.step)(&mut self.fed, k, obs, &gate)?;
-                g.state.record(c, &gate);
-                Ok(())
+                (g.step)(&mut self.fed, k, obs, &gate).map(|c| g.state.record(c, &gate))
+            }
+        };
+        if let Err(e) = done {
+            if !matches!(e, Error::OutOfOrder { .. }) {
+                // Still an error if even the prediction fails: the state is then kept.
+                let _ = self.fed.step::<NX>(k, &[]);
             }
         }
+        done
     }
 
     fn estimate(&self, out: &mut [f64]) {
