@@ -177,12 +177,18 @@ where
     0
 }
 
-fn seed001_filters() -> (
-    OnModel<LinearModel<f64, 3, 3, 2, 2>, IntermittentKalmanFilter<f64, 3>, 2>,
-    OnModel<LinearModel<f64, 3, 3, 2, 2>, CrossCoupledEstimator<f64, 3, 1, 4, 15>, 2>,
-    OnModel<LinearModel<f64, 3, 3, 2, 2>, AssumedDensityFilter<f64, 3, 4>, 2>,
-    OnModel<LinearModel<f64, 3, 3, 2, 2>, KfIo<f64, 3, 4>, 2>,
-) {
+/// A seed 001 filter on its model.
+type On<F> = OnModel<LinearModel<f64, 3, 3, 2, 2>, F, 2>;
+
+/// IKF, CCE, ADF and KF-IO from the paper's prior.
+type Seed001Filters = (
+    On<IntermittentKalmanFilter<f64, 3>>,
+    On<CrossCoupledEstimator<f64, 3, 1, 4, 15>>,
+    On<AssumedDensityFilter<f64, 3, 4>>,
+    On<KfIo<f64, 3, 4>>,
+);
+
+fn seed001_filters() -> Seed001Filters {
     let m = Seed001Example::model().unwrap();
     let (x0, p0, occ) = (
         Seed001Example::x0(),

@@ -51,7 +51,7 @@ fn outcome(
         ..EvalOptions::default()
     };
     let nx = scenario.nx();
-    let per_run: Vec<Vec<(&'static str, f64, u64, (u64, u64))>> = (0..runs)
+    let per_run: Vec<Outcome> = (0..runs)
         .into_par_iter()
         .map(|run| {
             let mut sim = scenario.start(seed, run);

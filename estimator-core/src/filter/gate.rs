@@ -88,7 +88,10 @@ impl<T: Real> InnovationGate<T> {
     /// Explicit thresholds, `thresholds[n − 1]` for `n` degrees of freedom (each positive;
     /// `+∞` admits every finite NIS of that size).
     pub fn with_thresholds(thresholds: [T; MAX_DOF]) -> Result<Self> {
-        if thresholds.iter().any(|t| !(*t > T::zero())) {
+        if thresholds
+            .iter()
+            .any(|t| t.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater))
+        {
             return Err(Error::InvalidConfig {
                 field: "gate thresholds",
                 reason: "must be positive",
@@ -369,7 +372,7 @@ pub fn chi2_quantile(p: f64, n: usize) -> Result<f64> {
         }
         let f = chi2_pdf(x, n);
         let mut next = x + (q - tail) / f;
-        if !(next > lo && next < hi) || !next.is_finite() {
+        if !(next > lo && next < hi && next.is_finite()) {
             next = 0.5 * (lo + hi);
         }
         if (next - x).abs() <= 4.0 * f64::EPSILON * x {
@@ -460,7 +463,8 @@ fn chi2_sf(x: f64, n: usize) -> f64 {
     }
     let h = 0.5 * x;
     let mut sum = 0.0;
-    if n % 2 == 0 {
+    let even = n.is_multiple_of(2);
+    if even {
         // Σ_{j<n/2} h^j / j!
         let mut term = 1.0;
         sum = 1.0;
@@ -478,7 +482,7 @@ fn chi2_sf(x: f64, n: usize) -> f64 {
         }
     }
     let series = libm::exp(-h) * sum;
-    if n % 2 == 0 {
+    if even {
         series
     } else {
         libm::erfc(libm::sqrt(h)) + series
