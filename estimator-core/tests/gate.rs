@@ -384,3 +384,71 @@ fn seed003_baselines_gate_the_held_measurement() {
     run("kf", kf, gate);
     run("kf-indep", indep, gate);
 }
+
+/// Seed 004's local filters and fusion: an admitted step is the ungated one, bit for bit; a
+/// node's outlier is stepped as that node's dropped packet (θ = 1, the held ȳ) and counted.
+#[test]
+fn tobit_fusion_gates_each_node() {
+    use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
+    use estimator_core::filter::TobitFusion;
+    use estimator_core::protocol::event_trigger::EventTriggerConfig;
+    let w = 0.052 * core::f64::consts::PI;
+    let b = SVector::<f64, 2>::new(0.16, 0.18);
+    let m = LinearModel::<f64, 2, 2, 2, 2>::new(
+        matrix![w.cos(), w.sin(); -w.sin(), w.cos()],
+        SMatrix::identity(),
+        SMatrix::identity(),
+        SMatrix::identity(),
+        b * b.transpose() * 0.05 + SMatrix::identity() * 1e-6,
+        matrix![0.5, 0.0; 0.0, 0.5],
+    )
+    .unwrap();
+    let cfg = |sigma: f64| {
+        TobitFilterConfig::new(
+            SVector::<f64, 2>::new(-100.0, -100.0),
+            BoundScalars::paper_example(),
+            EventTriggerConfig::new_allowing_paper_violation(sigma, 5.0, 0.1, 1.5).unwrap(),
+            1.5,
+            2.0,
+        )
+        .unwrap()
+    };
+    let f = TobitFusion::<f64, 2, 2, 2>::new(
+        [cfg(0.1), cfg(0.2)],
+        SVector::<f64, 2>::new(5.0, 0.0),
+        SMatrix::identity(),
+    )
+    .unwrap();
+    let gate = InnovationGate::chi2(0.9999).unwrap();
+    let (mut plain, mut gated) = (
+        OnModel::new([m; 2], f),
+        Gated::new(OnModel::new([m; 2], f), gate),
+    );
+    let mut reference = OnModel::new([m; 2], f);
+    let mut g = Normal(9);
+    let mut x = SVector::<f64, 2>::new(5.0, 0.0);
+    for k in 1..=40usize {
+        x = m.a * x;
+        let y = |g: &mut Normal| x + SVector::<f64, 2>::from_fn(|_, _| 0.5f64.sqrt() * g.next());
+        let (y0, y1) = (y(&mut g), y(&mut g));
+        let packets = [Packet::Delivered(y0), Packet::Delivered(y1)];
+        if k == 20 {
+            let bad = [
+                Packet::Delivered(SVector::<f64, 2>::new(1e150, 0.0)),
+                Packet::Delivered(y1),
+            ];
+            gated.step(k, &bad).unwrap();
+            reference
+                .step(k, &[Packet::Dropped, Packet::Delivered(y1)])
+                .unwrap();
+            plain = reference;
+        } else {
+            gated.step(k, &packets).unwrap();
+            plain.step(k, &packets).unwrap();
+            reference.step(k, &packets).unwrap();
+        }
+        assert_eq!(gated.estimate(), plain.estimate(), "k = {k}");
+    }
+    assert_eq!(gated.counts().tested, 80);
+    assert_eq!(gated.counts().rejected, 1);
+}
