@@ -36,7 +36,30 @@ fn occlusion_demo_matches_in_process_eval_exactly() {
     );
 }
 
+/// `demo --gate P` (docs/gate.md): the gated estimators (`<name>+gate`) over shared memory
+/// are `eval --gate P`'s bit for bit, their rejection counts are eval's, and the summary
+/// prints them; the replay of the slot log with `--gate P` agrees.
+#[test]
+fn gated_demo_matches_in_process_eval_exactly() {
+    let scenario = channel_sim::scenario::preset("occlusion").unwrap();
+    check_gated(
+        &["--scenario", "occlusion", "--gate", "0.99"],
+        scenario.as_ref(),
+        80,
+        Some(0.99),
+    );
+}
+
 fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u32) {
+    check_gated(scenario_args, scenario, steps, None);
+}
+
+fn check_gated(
+    scenario_args: &[&str],
+    scenario: &dyn channel_sim::Scenario,
+    steps: u32,
+    gate: Option<f64>,
+) {
     let dir = scratch("demo");
     let prefix = common::prefix("demo");
     let out = dir.join("out");
@@ -92,6 +115,7 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
         runs: 1,
         horizon: steps,
         seed: SEED,
+        gate,
         ..EvalOptions::default()
     };
     let config = RunConfig {
@@ -124,6 +148,19 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
             }
         }
         let (_, res) = ev.estimators.iter().find(|(n, _)| n == name).unwrap();
+        if gate.is_some() && name != "pf" && name != "nn" {
+            assert!(name.ends_with("+gate"), "{name}");
+            let g = res
+                .gate
+                .unwrap_or_else(|| panic!("{name}: eval has no gate counts"));
+            assert!(g.tested > 0, "{name}");
+            assert_eq!(rep["gate"]["tested"], g.tested, "{name}");
+            assert_eq!(rep["gate"]["rejected"], g.rejected, "{name}");
+            assert!(text.contains(&format!(
+                "{name}: innovation gate rejected {} of {}",
+                g.rejected, g.tested
+            )));
+        }
         let ours = rep["mse"].as_f64().unwrap();
         assert_eq!(
             ours.to_bits(),

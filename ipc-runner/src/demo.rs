@@ -67,6 +67,9 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 0.0, value_name = "P",
           value_parser = crate::eval::cli::loss_probability)]
     pub loss_rate: f64,
+    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
     /// How the loop waits for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
@@ -236,7 +239,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     };
     // Without --steps, the default horizon of `channel-sim` and `eval`.
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
-    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate);
+    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     args.check_outputs(scenario.nx(), choice.particles)?;
     let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators_with(
@@ -292,6 +295,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.estimators = args.estimators.clone();
     rargs.particles = args.particles;
     rargs.loss_rate = args.loss_rate;
+    rargs.gate = args.gate;
     rargs.wait = args.wait;
     rargs.cpu = args.cpu;
     rargs.latest_estimates = args.latest_estimates;

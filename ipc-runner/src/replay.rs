@@ -36,6 +36,9 @@ pub struct ReplayArgs {
     #[arg(long, default_value_t = 0.0, value_name = "P",
           value_parser = crate::eval::cli::loss_probability)]
     pub loss_rate: f64,
+    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
     /// Experiment seed the estimators are built for (as `eval --seed`).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -84,7 +87,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     }
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
-    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate);
+    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     let budget = Budget::mib(args.max_memory);
     let pf = product(&[
         choice.particles as u64,
@@ -140,6 +143,12 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             rejected[e],
             last.unwrap_or(&[])
         );
+        if let Some((tested, rejected)) = crate::estimators::gate_counts(&**est_e) {
+            println!(
+                "{:<12} innovation gate rejected {rejected} of {tested} measurements",
+                est_e.name()
+            );
+        }
     }
     if let Some(p) = &args.output {
         let mut w = std::io::BufWriter::new(

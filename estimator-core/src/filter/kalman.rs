@@ -5,6 +5,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{kalman_innovation, GateCounts, GatedStep, InnovationGate};
 use crate::filter::time_update::{check_predicted, predict_raw};
 use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{all_finite, check_finite, symmetrize};
@@ -149,6 +150,62 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         Ok(())
     }
 
+    /// [`KalmanFilter::step`] behind an innovation gate (docs/gate.md): a `y_k` whose NIS
+    /// against the prediction `gate` does not admit is not used (the step is the prediction
+    /// only). Returns whether `y_k` was used. An admitted step is [`KalmanFilter::step`], bit
+    /// for bit; so is every step with [`InnovationGate::off`]. On error nothing changes.
+    pub fn step_gated<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if !gate.is_off() {
+            check_finite(y, "measurement")?;
+            let j = k.saturating_sub(1);
+            let (x, p) = (self.est.state(), self.est.covariance());
+            let (xp, pp) = predict_raw(x, p, &model.a(j), &model.process_cov(j));
+            if !(all_finite(&xp) && all_finite(&pp)) {
+                check_predicted(&xp, &pp)?;
+            }
+            let (nu, s) = kalman_innovation(&xp, &pp, &model.c(k), &model.measurement_cov(k), y);
+            if !gate.admits(&nu, &s)? {
+                self.est = Estimate::trusted(xp, pp);
+                return Ok(false);
+            }
+        }
+        self.step(model, k, y)?;
+        Ok(true)
+    }
+
+    /// [`KalmanFilter::update_with`] behind an innovation gate: a `y` whose NIS against the
+    /// current estimate `gate` does not admit leaves the filter as it is. Returns whether `y`
+    /// was used. On error nothing changes.
+    pub fn update_gated_with<const NY: usize>(
+        &mut self,
+        c: &SMatrix<T, NY, NX>,
+        r: &SMatrix<T, NY, NY>,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if !gate.is_off() {
+            check_finite(y, "measurement")?;
+            let (nu, s) = kalman_innovation(
+                self.est.state(),
+                self.est.covariance(),
+                c,
+                &symmetrize(r),
+                y,
+            );
+            if !gate.admits(&nu, &s)? {
+                return Ok(false);
+            }
+        }
+        self.update_with(c, r, y)?;
+        Ok(true)
+    }
+
     /// `step`'s scalar path: every target without `simd`, and the exact error after the
     /// lanes refused (then out of line and cold, so that the lanes' fast path stays small).
     #[cfg_attr(simd_lanes, cold, inline(never))]
@@ -189,6 +246,21 @@ impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Esti
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// The gated step: `y_k` is used iff the gate admits it.
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> GatedStep<T, NX>
+    for OnModel<M, KalmanFilter<T, NX>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let used = self.filter.step_gated(&self.model, k, y, gate)?;
+        Ok(GateCounts::one(used))
     }
 }
 

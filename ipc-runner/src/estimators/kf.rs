@@ -19,7 +19,7 @@ use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::sim::MAX_NODES;
 use channel_sim::Scenario;
-use estimator_core::filter::KalmanFilter;
+use estimator_core::filter::{GateCounts, GatedStep, InnovationGate, KalmanFilter};
 use estimator_core::{Error, Estimate, Packet};
 use nalgebra::{DMatrix, SVector};
 
@@ -32,19 +32,23 @@ use crate::Estimator;
 /// Builds `kf` for a composed scenario with a linear description.
 pub fn build(
     scenario: &dyn Scenario,
-    _options: &EvalOptions,
+    options: &EvalOptions,
     _seed: u64,
     _run: u64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(scenario, "kf", true)?.into_iter().collect())
+    Ok(linear_kf(scenario, "kf", true, options.gate)?
+        .into_iter()
+        .collect())
 }
 
 /// A Kalman filter on `scenario`'s linear description named `name`, or `None` when the
-/// scenario has none. `full_information` selects the oracle (`kf`) or the channel-fed filter.
+/// scenario has none. `full_information` selects the oracle (`kf`) or the channel-fed filter;
+/// `gate`, the innovation gate's probability (`--gate`, docs/gate.md).
 pub fn linear_kf(
     scenario: &dyn Scenario,
     name: &'static str,
     full_information: bool,
+    gate: Option<f64>,
 ) -> anyhow::Result<Option<Box<dyn Estimator>>> {
     let Some(composed) = scenario.as_any().downcast_ref::<ComposedScenario>() else {
         return Ok(None);
@@ -57,6 +61,7 @@ pub fn linear_kf(
     let spec = Spec {
         name,
         full_information,
+        gate,
         plant,
         x0: init.estimator_mean.as_slice(),
         p0: &init.estimator_cov,
@@ -90,6 +95,7 @@ pub fn linear_kf(
 struct Spec<'a> {
     name: &'static str,
     full_information: bool,
+    gate: Option<f64>,
     plant: Arc<dyn Plant>,
     x0: &'a [f64],
     p0: &'a DMatrix<f64>,
@@ -134,6 +140,37 @@ impl<const NX: usize, const NY: usize> estimator_core::Estimator<f64, NX> for No
     }
 }
 
+/// Behind a gate: each delivered measurement is tested against the estimate it would update
+/// (after the prediction and the earlier nodes' updates); a rejected one is skipped.
+impl<const NX: usize, const NY: usize> GatedStep<f64, NX> for NodeByNode<NX, NY> {
+    fn step_gated(
+        &mut self,
+        _k: usize,
+        y: &Self::Measurement,
+        gate: &InnovationGate<f64>,
+    ) -> Result<GateCounts, Error> {
+        let mut kf = self.kf;
+        kf.predict_with(&self.model[0].a, &self.model[0].q)?;
+        let mut counts = GateCounts::NONE;
+        for (node, y) in y.iter().enumerate() {
+            if let Some(y) = y.delivered() {
+                if node >= self.nodes {
+                    return Err(Error::InvalidConfig {
+                        field: "node",
+                        reason: "observation from a node the model does not have",
+                    });
+                }
+                let m = &self.model[node];
+                counts.add(GateCounts::one(
+                    kf.update_gated_with::<NY>(&m.c, &m.r, y, gate)?,
+                ));
+            }
+        }
+        self.kf = kf;
+        Ok(counts)
+    }
+}
+
 /// `NodeByNode`'s model at instant `k`.
 fn remodel<const NX: usize, const NY: usize>(
     e: &mut NodeByNode<NX, NY>,
@@ -156,6 +193,7 @@ fn boxed<const NX: usize, const NY: usize>(spec: Spec<'_>) -> anyhow::Result<Box
     };
     Ok(Box::new(
         Adapted::<_, NX>::new(spec.name, Fed::on_plant(est, spec.plant, remodel))
-            .with_full_information(spec.full_information),
+            .with_full_information(spec.full_information)
+            .with_gate(spec.gate)?,
     ))
 }

@@ -74,6 +74,11 @@ pub struct EvalArgs {
     /// The transport losses look like channel dropouts (the receiver sees only "no packet").
     #[arg(long, requires = "transport_loss")]
     pub transport_loss_unmarked: bool,
+    /// Innovation gate of probability P (docs/gate.md): every estimator with an innovation
+    /// ignores a measurement whose NIS exceeds the χ² quantile of P, and is named
+    /// `<name>+gate`; the summary and JSON count the rejections. Default: off.
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
 }
 
 /// Most worker threads `--threads` accepts (each holds a run's records).
@@ -176,6 +181,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         loss_rate: args.loss_rate,
         transport_loss: args.transport_loss,
         transport_loss_unmarked: args.transport_loss_unmarked,
+        gate: args.gate,
     };
     if !options.estimators.is_empty() {
         let all = EvalOptions {
@@ -189,7 +195,10 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
                 .map(|e| e.name())
                 .collect();
         for n in &options.estimators {
-            if !available.contains(&n.as_str()) {
+            if !available
+                .iter()
+                .any(|a| crate::estimators::names_match(a, n))
+            {
                 let hint = if n.ends_with("-mix") && options.loss_rate == 0.0 {
                     " (the -mix estimators need --loss-rate P)"
                 } else {

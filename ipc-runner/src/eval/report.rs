@@ -5,10 +5,11 @@
 //! ```text
 //! { "scenario", "runs", ["runs_requested",] "horizon", "seed", "ending", ["error",]
 //!   "truth_nonfinite",
-//!   ["transport_loss", "transport_loss_unmarked", "loss_rate",]   (only when set)
+//!   ["transport_loss", "transport_loss_unmarked", "loss_rate", "gate",]   (only when set)
 //!   "estimators": { NAME: { "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
 //!                           "median_run_avg", "diverged_runs", "valid_runs",
 //!                           "first_error", "mse_per_state": [[MSE_i(k)]…],
+//!                           ["gate": { "tested", "rejected", "rejection_rate" },]  (`+gate`)
 //!                           <diagnostic name>: [mean over runs per k]… } },
 //!   "channel": { "delivery_rate", "nodes": [ { "node", "instants", "delivered", "dropped",
 //!                "sent", "triggered", "blocked", "censored", "random_loss", "occluded",
@@ -66,6 +67,9 @@ pub struct EvalResult {
     /// `--loss-rate` of the `-mix` estimators (not written when 0).
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub loss_rate: f64,
+    /// `--gate P`, the innovation gate's probability (not written when off; docs/gate.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gate: Option<f64>,
     /// Per estimator, in registry order.
     #[serde(serialize_with = "ordered_map")]
     pub estimators: Vec<(String, EstimatorResult)>,
@@ -98,9 +102,42 @@ pub struct EstimatorResult {
     pub first_error: Option<String>,
     /// Per-state MSE: `mse_per_state[i][k]`.
     pub mse_per_state: Vec<Vec<f64>>,
+    /// The innovation gate's totals over the valid runs (gated estimators only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gate: Option<GateTotals>,
     /// Named diagnostics, mean over valid runs per k.
     #[serde(flatten, serialize_with = "ordered_map")]
     pub diagnostics: Vec<(String, Vec<f64>)>,
+}
+
+/// What a gated estimator's innovation gate did over the valid runs (docs/gate.md).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct GateTotals {
+    /// Delivered measurements tested.
+    pub tested: u64,
+    /// Of those, rejected (not used).
+    pub rejected: u64,
+    /// `rejected / tested`.
+    pub rejection_rate: f64,
+}
+
+impl GateTotals {
+    /// From the diagnostics `gate_tested`, `gate_rejected` (mean over the valid runs per k of
+    /// the counts so far): their value at `k = T` times the valid runs.
+    fn of(diagnostics: &[(String, Vec<f64>)], valid_runs: u64) -> Option<Self> {
+        let last = |n: &str| {
+            let v = &diagnostics.iter().find(|(d, _)| d == n)?.1;
+            let m = *v.last()?;
+            m.is_finite()
+                .then(|| (m * valid_runs as f64).round() as u64)
+        };
+        let (tested, rejected) = (last("gate_tested")?, last("gate_rejected")?);
+        Some(Self {
+            tested,
+            rejected,
+            rejection_rate: rejected as f64 / tested.max(1) as f64,
+        })
+    }
 }
 
 /// Channel statistics.
@@ -352,7 +389,7 @@ impl Accumulator {
                     .map(|r| (r - mean_run).powi(2))
                     .sum::<f64>()
                     / (n - 1.0);
-                let diagnostics = acc
+                let diagnostics: Vec<(String, Vec<f64>)> = acc
                     .diag
                     .into_iter()
                     .map(|(name, sums, counts)| {
@@ -364,6 +401,7 @@ impl Accumulator {
                         (name.to_owned(), mean)
                     })
                     .collect();
+                let gate = GateTotals::of(&diagnostics, n as u64);
                 let result = EstimatorResult {
                     mse,
                     avg_mse,
@@ -373,6 +411,7 @@ impl Accumulator {
                     valid_runs: acc.valid,
                     first_error: acc.first_error,
                     mse_per_state: per_state,
+                    gate,
                     diagnostics,
                 };
                 ((*name).to_owned(), result)
@@ -397,6 +436,7 @@ impl Accumulator {
             transport_loss: self.options.transport_loss,
             transport_loss_unmarked: self.options.transport_loss_unmarked,
             loss_rate: self.options.loss_rate,
+            gate: self.options.gate,
             estimators,
             channel: ChannelSummary {
                 delivery_rate: delivered as f64 / instants.max(1) as f64,
@@ -507,6 +547,19 @@ impl EvalResult {
                     100.0 * worst,
                     r.avg_mse,
                     avg(tr)
+                );
+            }
+        }
+        for (name, r) in &self.estimators {
+            if let (Some(g), Some(p)) = (r.gate, self.gate) {
+                let _ = writeln!(
+                    s,
+                    "{name}: innovation gate P = {p} rejected {} of {} measurements ({:.3} %; \
+                     1 − P = {:.3} %)",
+                    g.rejected,
+                    g.tested,
+                    100.0 * g.rejection_rate,
+                    100.0 * (1.0 - p)
                 );
             }
         }

@@ -58,6 +58,11 @@ pub struct RunArgs {
     #[arg(long, default_value_t = 0.0, value_name = "P",
           value_parser = crate::eval::cli::loss_probability)]
     pub loss_rate: f64,
+    /// Innovation gate of probability P (docs/gate.md): every estimator with an innovation
+    /// ignores a measurement whose NIS exceeds the χ² quantile of P, and is named
+    /// `<name>+gate`; the summary counts the rejections. Default: off.
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
     /// Service-name prefix (must match channel-sim's).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
@@ -162,6 +167,7 @@ impl RunArgs {
             estimators: Vec::new(),
             particles: None,
             loss_rate: 0.0,
+            gate: None,
             prefix: prefix.to_string(),
             wait: WaitMode::Spin,
             deadline_ms: 100.0,

@@ -196,6 +196,8 @@ impl Runner {
                 mse: self.scores.mse(e),
                 mse_instants: self.scores.err_n[e],
                 rejected: self.rejected[e],
+                gate: crate::estimators::gate_counts(&**est)
+                    .map(|(tested, rejected)| super::report::GateCount { tested, rejected }),
             })
             .collect()
     }

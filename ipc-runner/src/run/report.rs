@@ -30,6 +30,19 @@ pub struct EstimatorReport {
     pub mse_instants: u64,
     /// Steps the estimator refused (e.g. non-finite measurement); its state was kept.
     pub rejected: u64,
+    /// `--gate P`: measurements its innovation gate tested and rejected (docs/gate.md;
+    /// not written for an ungated estimator).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gate: Option<GateCount>,
+}
+
+/// What an estimator's innovation gate did in a run.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct GateCount {
+    /// Delivered measurements tested.
+    pub tested: u64,
+    /// Of those, rejected (not used).
+    pub rejected: u64,
 }
 
 /// How the run ended.
@@ -186,6 +199,14 @@ impl RunReport {
                 "{:<16} {:>13.6} {:>10} {:>10}\n",
                 e.name, e.mse, e.mse_instants, e.rejected
             ));
+        }
+        for e in &self.estimators {
+            if let Some(g) = e.gate {
+                s.push_str(&format!(
+                    "{}: innovation gate rejected {} of {} measurements\n",
+                    e.name, g.rejected, g.tested
+                ));
+            }
         }
         s.push_str(&self.latency.table());
         if let Some(a) = self.allocations_after_warmup {

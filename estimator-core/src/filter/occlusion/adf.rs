@@ -75,6 +75,7 @@ use nalgebra::{SMatrix, SVector};
 use super::truncnorm::{truncated_std_normal, union_moments, Intervals};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{admits_linear, GateCounts, GatedStep, InnovationGate};
 use crate::filter::kalman::kalman_update;
 use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob, LogSumExp};
@@ -378,6 +379,32 @@ impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
+/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
+/// region).
+impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<M, AssumedDensityFilter<T, NX, S>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let Packet::Delivered(z) = y else {
+            return self.step(k, y).map(|()| GateCounts::NONE);
+        };
+        let est = self.filter.estimate();
+        let used = admits_linear(gate, &self.model, k, est.state(), est.covariance(), z)?;
+        if used {
+            self.step(k, y)?;
+        } else {
+            self.filter.predict_to(&self.model, k)?;
+        }
+        Ok(GateCounts::one(used))
     }
 }
 

@@ -48,6 +48,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{admits_linear, GateCounts, GatedStep, InnovationGate};
 use crate::filter::kalman::kalman_update;
 use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
@@ -349,6 +350,39 @@ impl<
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
+/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
+/// region).
+impl<
+        T: Real,
+        const NX: usize,
+        const NE: usize,
+        const S: usize,
+        const N: usize,
+        const NY: usize,
+        M: LinearSystem<T, NX, NY>,
+    > GatedStep<T, NX> for OnModel<M, CrossCoupledEstimator<T, NX, NE, S, N>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let Packet::Delivered(z) = y else {
+            return self.step(k, y).map(|()| GateCounts::NONE);
+        };
+        let est = self.filter.estimate();
+        let used = admits_linear(gate, &self.model, k, est.state(), est.covariance(), z)?;
+        if used {
+            self.step(k, y)?;
+        } else {
+            self.filter.predict_to(&self.model, k)?;
+        }
+        Ok(GateCounts::one(used))
     }
 }
 

@@ -35,9 +35,10 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob, LogSumExp};
-use crate::linalg::{check_finite, solve_spd_right, symmetrize};
+use crate::linalg::{all_finite, check_finite, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::{check_loss_rate, Packet};
 use crate::protocol::occlusion::Occlusion;
@@ -125,6 +126,33 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             }
             None => SVector::<T, NY>::zeros(),
         };
+        let (xp, pp, p, s_prime) = self.prior(model, k)?;
+        let c = model.c(k);
+        let pct = pp * c.transpose();
+        let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
+        let x = xp + gain * (y_tilde - c * xp * p);
+        let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
+        check_finite(&x, "updated state")?;
+        check_finite(&p_new, "updated covariance")?;
+        self.est = Estimate::trusted(x, p_new);
+        self.arrival_prob = p;
+        Ok(())
+    }
+
+    /// The prediction of instant `k`, the arrival probability `p_k` and `S' = S_y / p_k`
+    /// (module docs).
+    ///
+    /// `S'` is formed as the module docs write it; only if that is not finite (after one
+    /// accepted huge measurement, `x̂⁻x̂⁻ᵀ` in `X` overflows and `0 · ∞` turns `S'` into NaN
+    /// at `p_k = 1`, so every later step used to fail) is it formed again as
+    /// `C P⁻ Cᵀ + DRDᵀ + (√(1 − p) C x̂⁻)(√(1 − p) C x̂⁻)ᵀ`, the same matrix without the
+    /// overflowing product: the filter recovers instead of refusing every instant.
+    #[allow(clippy::type_complexity)]
+    fn prior<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T, SMatrix<T, NY, NY>)> {
         let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
         let e = &self.occ.e;
         let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
@@ -141,15 +169,34 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         let s_prime = symmetrize(
             &(c * pp * c.transpose() * p + c * big_x * c.transpose() * (T::one() - p) + r),
         );
-        let pct = pp * c.transpose();
-        let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
-        let x = xp + gain * (y_tilde - c * xp * p);
-        let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
-        check_finite(&x, "updated state")?;
-        check_finite(&p_new, "updated covariance")?;
-        self.est = Estimate::trusted(x, p_new);
-        self.arrival_prob = p;
-        Ok(())
+        if all_finite(&s_prime) {
+            return Ok((xp, pp, p, s_prime));
+        }
+        let cx = c * xp * (T::one() - p).sqrt();
+        let s_prime = symmetrize(&(c * pp * c.transpose() + r + cx * cx.transpose()));
+        Ok((xp, pp, p, s_prime))
+    }
+
+    /// Whether `gate` admits the delivered `y_k`: the NIS of the filter's own innovation
+    /// `ỹ − p_k C x̂⁻` with `ỹ = y_k` against `S_y = p_k S'` (docs/gate.md). A delivery at
+    /// `p_k = 0` (certainly occluded) is never admitted. The off gate admits without a test.
+    pub fn admits<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if gate.is_off() {
+            return Ok(true);
+        }
+        check_finite(y, "measurement")?;
+        let (xp, _, p, s_prime) = self.prior(model, k)?;
+        if p <= T::zero() {
+            return Ok(false);
+        }
+        let nu = y - model.c(k) * xp * p;
+        gate.admits(&nu, &(s_prime * p))
     }
 
     /// Instant `k ≥ 1` without information (a packet lost in transport,
@@ -182,6 +229,31 @@ impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
+/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
+/// region).
+impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<M, KfIo<T, NX, S>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let Packet::Delivered(z) = y else {
+            return self.step(k, y).map(|()| GateCounts::NONE);
+        };
+        let used = self.filter.admits(&self.model, k, z, gate)?;
+        if used {
+            self.step(k, y)?;
+        } else {
+            self.filter.predict_to(&self.model, k)?;
+        }
+        Ok(GateCounts::one(used))
     }
 }
 

@@ -22,6 +22,7 @@ use super::config::TobitFilterConfig;
 use super::local::{diagonal_variances, TobitFilter};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::linalg::{check_finite, inverse_spd, solve_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
@@ -189,6 +190,35 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
             &r,
             received,
         )
+    }
+}
+
+/// Behind a gate: each node's delivered measurement is tested by its local filter
+/// ([`TobitFilter::admits`]); a rejected one is stepped as dropped (θ = 1).
+impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<[M; L], TobitFusion<T, NX, NY, L>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &[Packet<T, NY>; L],
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let (models, prev) = (&self.model, k.saturating_sub(1));
+        let (a, bqb) = (models[0].a(prev), models[0].process_cov(prev));
+        let mut counts = GateCounts::NONE;
+        let mut received: [Option<&SVector<T, NY>>; L] = [None; L];
+        for m in 0..L {
+            if let Some(z) = y[m].delivered() {
+                let r = diagonal_variances(&models[m].measurement_cov(k))?;
+                let q_m = bqb / self.filter.alpha[m];
+                let used = self.filter.locals[m].admits(&a, &q_m, &models[m].c(k), &r, z, gate)?;
+                counts.add(GateCounts::one(used));
+                received[m] = used.then_some(z);
+            }
+        }
+        self.filter.step_models(models, k, received)?;
+        Ok(counts)
     }
 }
 

@@ -36,6 +36,7 @@ use super::config::{Kappas, TobitFilterConfig, UpsilonPlacement};
 use super::gain::GainProblem;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
@@ -246,6 +247,28 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         Ok(())
     }
 
+    /// Whether `gate` admits the received `y` (docs/gate.md): the NIS of the innovation of
+    /// (22), `y − ŷ_{t|t−1}`, against `Φ` of (37) at θ = 0 — the paper's bound on its
+    /// covariance, so a consistent filter rejects fewer than `1 − p` of its good measurements.
+    /// Arguments as [`TobitFilter::plan`]. A `Φ` that cannot be factored (components whose
+    /// `Φ_jj` underflowed, to which the gain gives no weight) cannot be tested: admitted.
+    pub fn admits(
+        &self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if gate.is_off() {
+            return Ok(true);
+        }
+        let plan = self.plan(a, bqb, c, r, Some(y))?;
+        let nu = plan.y_bar - plan.stats.mean;
+        Ok(gate.admits(&nu, &plan.problem.phi()).unwrap_or(true))
+    }
+
     /// One instant `k ≥ 1` of a model: `A_{k−1}`, `B Q_{k−1} Bᵀ` scaled by `q_scale`
     /// (α_m⁻¹ under fusion, 1 alone), `C_k`, and the diagonal of the measurement covariance.
     pub fn step_model<M: LinearSystem<T, NX, NY>>(
@@ -285,6 +308,31 @@ impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Esti
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate: a delivered packet the gate rejects is stepped as dropped (θ = 1, the
+/// held ȳ — never the rejected measurement — enters (30)), as a lost one is.
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> GatedStep<T, NX>
+    for OnModel<M, TobitFilter<T, NX, NY>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let Some(z) = y.delivered() else {
+            return self.step(k, y).map(|()| GateCounts::NONE);
+        };
+        let (m, prev) = (&self.model, k.saturating_sub(1));
+        let r = diagonal_variances(&m.measurement_cov(k))?;
+        let used = self
+            .filter
+            .admits(&m.a(prev), &m.process_cov(prev), &m.c(k), &r, z, gate)?;
+        let received = if used { Some(z) } else { None };
+        self.filter.step_model(&self.model, k, T::one(), received)?;
+        Ok(GateCounts::one(used))
     }
 }
 
