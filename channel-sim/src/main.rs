@@ -19,7 +19,9 @@ fn main() {
         Ok(_) => {}
         Err(e) => {
             eprintln!("channel-sim: error: {e:#}");
-            std::process::exit(1);
+            // A scenario that cannot be built is bad input (exit code 2), as in ipc-runner.
+            let bad_input = e.downcast_ref::<channel_sim::ScenarioError>().is_some();
+            std::process::exit(if bad_input { 2 } else { 1 });
         }
     }
 }

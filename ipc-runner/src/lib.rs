@@ -22,8 +22,12 @@ pub mod transport;
 pub use plot::{latency as plot_latency, trace as plot_trace};
 
 /// The exit code of a failed pipeline command: [`estpipe_wire::ContractError::exit_code`]
-/// (2 for a peer outside the wire contract) when that is the cause, else 1.
+/// (2 for a peer outside the wire contract) when that is the cause, 2 for a scenario that
+/// cannot be built (a bad `--config` file, an unknown `--scenario`: bad input), else 1.
 pub fn exit_code_of(e: &anyhow::Error) -> i32 {
+    if e.downcast_ref::<channel_sim::ScenarioError>().is_some() {
+        return 2;
+    }
     e.downcast_ref::<estpipe_wire::ContractError>()
         .map_or(1, estpipe_wire::ContractError::exit_code)
 }

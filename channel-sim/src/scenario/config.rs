@@ -663,15 +663,40 @@ pub fn matrix(rows: &Rows, field: &str) -> Result<DMatrix<f64>, ScenarioError> {
     Ok(m)
 }
 
-/// A TOML error as one line: `line L: message`.
+/// A TOML error as one line: `line L (`key`): message`, with the key assigned on that line.
+/// The parser's message names the value's problem, not always the field, and inside a
+/// `[[stages]]` table (a tagged enum) it points at the table: then the line is the first one
+/// from there whose value holds the literal the message quotes (`-3` in "invalid value:
+/// integer `-3`, expected u32").
 fn one_line(text: &str, e: &toml::de::Error) -> String {
     let msg = e.message().trim().replace('\n', " ");
-    match e.span() {
-        Some(span) => {
-            let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
-            format!("line {line}: {msg}")
+    let Some(span) = e.span() else {
+        return msg;
+    };
+    let start = span.start.min(text.len());
+    let mut line = text[..start].matches('\n').count() + 1;
+    fn key_of(source: &str) -> Option<(&str, &str)> {
+        source
+            .split_once('=')
+            .map(|(k, v)| (k.trim(), v))
+            .filter(|(k, _)| {
+                !k.is_empty()
+                    && k.len() <= 40
+                    && k.chars()
+                        .all(|c| c.is_alphanumeric() || "_-.\"".contains(c))
+            })
+    }
+    let quoted = msg.split('`').nth(1).filter(|q| !q.is_empty());
+    if let Some(q) = quoted {
+        if let Some((i, _)) = text.lines().enumerate().skip(line - 1).find(|(_, l)| {
+            key_of(l).is_some_and(|(_, v)| v.split('#').next().unwrap_or("").contains(q))
+        }) {
+            line = i + 1;
         }
-        None => msg,
+    }
+    match text.lines().nth(line - 1).and_then(key_of) {
+        Some((key, _)) => format!("line {line} (`{key}`): {msg}"),
+        None => format!("line {line}: {msg}"),
     }
 }
 
