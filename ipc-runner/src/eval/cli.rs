@@ -40,7 +40,8 @@ pub struct EvalArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
-    /// Particles of the `pf` reference filter on occlusion scenarios. Off by default in
+    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
+    /// a preset or a TOML file, and `nn-token-bucket`). Off by default in
     /// `eval` (unless `--estimators` names `pf` or `pf-mix`: then 5000): at 5000 particles it
     /// costs ~3 CPU-ms per step, 100× the other estimators together, so a 2000-run
     /// evaluation would take minutes instead of seconds. Typical: `--particles 5000 --runs 200`.
