@@ -73,7 +73,7 @@ fn cases() -> Vec<(&'static str, String, &'static str)> {
         // Shapes.
         (
             "c with 9 rows",
-            ex("c = [[1.0, 0.0]]", &format!("c = [{}]", vec!["[1.0, 0.0]"; 9].join(", "))),
+            ex("c = [[1.0, 0.0]]", &format!("c = [{}]", ["[1.0, 0.0]"; 9].join(", "))),
             "sensors[0].c",
         ),
         ("c with 3 columns", ex("c = [[1.0, 0.0]]", "c = [[1.0, 0.0, 0.0]]"), "sensors[0].c"),

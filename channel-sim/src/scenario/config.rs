@@ -527,12 +527,12 @@ pub fn build(file: ScenarioFile, default_name: &str) -> Result<ComposedScenario,
     ComposedScenario::new(name, Arc::new(plant), initial, stages)
 }
 
-/// Instants over which [`check_overflow`] follows the model's moments.
+/// Instants over which the overflow check of [`build`] follows the model's moments.
 pub const OVERFLOW_CHECK_STEPS: usize = 20;
 
-/// The largest magnitude a moment may reach in [`check_overflow`]: f64's range less a
-/// margin of 10⁸ for the estimators' own sums and products of those moments (an MSE sums
-/// squared errors over runs; a Joseph update adds congruences).
+/// The largest magnitude a moment may reach in the overflow check of [`build`]: f64's range
+/// less a margin of 10⁸ for the estimators' own sums and products of those moments (an MSE
+/// sums squared errors over runs; a Joseph update adds congruences).
 pub const MOMENT_LIMIT: f64 = 1e300;
 
 /// Refuses a model whose numbers are finite but whose products are not: from both priors

@@ -66,7 +66,7 @@ impl<E> Fed<E> {
                     est.step(j, &gap)?;
                 }
                 if let Some((plant, remodel)) = &self.varying {
-                    remodel(&mut est, super::linear_of(&**plant)?, got as usize);
+                    remodel(&mut est, super::linear_of(&**plant)?, got);
                 }
                 est.step(got, &y)?;
                 self.est = est;
