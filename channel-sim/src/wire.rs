@@ -52,7 +52,7 @@ pub fn observation_of(slot: &Slot) -> Result<Observation, WireError> {
 /// The header every slot of a stream of `scenario` carries: its name, nodes, nx, ny per node
 /// and [`Scenario::fingerprint`].
 pub fn stream_header(scenario: &dyn Scenario) -> StreamHeader {
-    let ny = vec![scenario.ny(); scenario.nodes()];
+    let ny: Vec<usize> = (0..scenario.nodes()).map(|m| scenario.node_ny(m)).collect();
     StreamHeader::new(
         scenario.name(),
         scenario.nodes(),

@@ -58,8 +58,9 @@ pub struct DemoArgs {
     /// `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (occlusion scenarios; far slower per step than
-    /// the other estimators). Default: not run, as in `eval`, unless `--estimators` names it
+    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
+    /// a preset or a TOML file, and `nn-token-bucket`; far slower per step than the other
+    /// estimators). Default: not run, as in `eval`, unless `--estimators` names it
     /// (then 5000).
     #[arg(long)]
     pub particles: Option<usize>,

@@ -1,4 +1,5 @@
-//! The linear-Gaussian plant: `x_{k+1} = A_k x_k + B_k w_k`, `w_k ~ N(0, Q)`, and sensors
+//! The linear-Gaussian plant: `x_{k+1} = A_k x_k + B_k w_k`, `w_k ~ N(0, Q)` (plus a known
+//! `B_u u_k` with a [`Control`] input), and sensors
 //! `z_{m,k} = C_{m,k} x_k + D_{m,k} v_{m,k}`, `v_{m,k} ~ N(0, R_m)`, independent across nodes.
 //! The plant of the `linear`, `occlusion` and `tobit-fusion` presets and of every TOML file.
 
@@ -7,6 +8,7 @@ use std::any::Any;
 use estpipe_wire::Fnv1a64;
 use nalgebra::{DMatrix, DVector};
 
+use super::control::Control;
 use super::time_matrix::TimeMatrix;
 use super::{fingerprint_matrix, LinearDescription, Plant, PlantRun};
 use crate::error::ScenarioError;
@@ -36,6 +38,7 @@ pub struct LinearPlant {
     sensors: Vec<LinearSensor>,
     q_factor: DMatrix<f64>,
     r_factors: Vec<DMatrix<f64>>,
+    control: Option<Control>,
 }
 
 impl LinearPlant {
@@ -68,17 +71,17 @@ impl LinearPlant {
                 ),
             ));
         }
-        let ny = sensors[0].c.shape().0;
         let mut r_factors = Vec::with_capacity(sensors.len());
         for (m, s) in sensors.iter().enumerate() {
             let field = |f: &str| format!("sensors[{m}].{f}");
-            let (rows, cols) = s.c.shape();
-            if rows == 0 || rows > MAX_NY || rows != ny || cols != nx {
+            // Each sensor has its own ny (its rows); the columns are the plant's nx.
+            let (ny, cols) = s.c.shape();
+            if ny == 0 || ny > MAX_NY || cols != nx {
                 return Err(ScenarioError::invalid(
                     field("c"),
                     format!(
-                        "must be {ny}×{nx} (every sensor has the same 1 ≤ ny ≤ {MAX_NY}, \
-                         nx columns), got {rows}×{cols}"
+                        "must have 1 to {MAX_NY} rows (the sensor's ny) and nx = {nx} \
+                         columns, got {ny}×{cols}"
                     ),
                 ));
             }
@@ -96,7 +99,26 @@ impl LinearPlant {
             sensors,
             q_factor,
             r_factors,
+            control: None,
         })
+    }
+
+    /// The same plant driven by a known input as well: `x_{k+1} = A x_k + B_u u_k + B w_k`
+    /// (`control` validated for this plant's nx).
+    pub fn with_control(mut self, control: Control) -> Result<Self, ScenarioError> {
+        if control.b().nrows() != self.a.shape().0 {
+            return Err(ScenarioError::invalid(
+                "control.b",
+                format!("must have nx = {} rows", self.a.shape().0),
+            ));
+        }
+        self.control = Some(control);
+        Ok(self)
+    }
+
+    /// The control input, if any.
+    pub fn control(&self) -> Option<&Control> {
+        self.control.as_ref()
     }
 
     /// The sensors.
@@ -115,7 +137,13 @@ impl Plant for LinearPlant {
         self.a.shape().0
     }
     fn ny(&self) -> usize {
-        self.sensors[0].c.shape().0
+        (0..self.sensors.len())
+            .map(|m| self.node_ny(m))
+            .max()
+            .unwrap_or(0)
+    }
+    fn node_ny(&self, node: usize) -> usize {
+        self.sensors[node].c.shape().0
     }
     fn nodes(&self) -> usize {
         self.sensors.len()
@@ -136,6 +164,10 @@ impl Plant for LinearPlant {
             s.c.fingerprint(h);
             s.d.fingerprint(h);
             fingerprint_matrix(h, &s.r);
+        }
+        // Only with an input, so that the plants without one keep their fingerprints.
+        if let Some(c) = &self.control {
+            c.fingerprint(h);
         }
     }
     fn linear(&self) -> Option<&dyn LinearDescription> {
@@ -162,9 +194,13 @@ impl LinearDescription for LinearPlant {
         let d = s.d.at(k);
         symmetric(&*d * &s.r * d.transpose())
     }
+    fn input(&self, k: usize) -> Option<DVector<f64>> {
+        self.control.as_ref().map(|c| c.input(k))
+    }
     fn time_invariant(&self) -> bool {
         let constant = |m: &TimeMatrix| matches!(m, TimeMatrix::Constant(_));
-        constant(&self.a)
+        self.control.is_none()
+            && constant(&self.a)
             && constant(&self.b)
             && self
                 .sensors
@@ -189,6 +225,9 @@ impl PlantRun for LinearRun {
         let prev = k.saturating_sub(1) as usize;
         let w = &p.q_factor * standard_normal(p.q.nrows(), rng);
         self.x = &*p.a.at(prev) * &self.x + &*p.b.at(prev) * w;
+        if let Some(c) = &p.control {
+            self.x += c.input(prev);
+        }
         for (m, s) in p.sensors.iter().enumerate() {
             let v = &p.r_factors[m] * standard_normal(s.r.nrows(), rng);
             let zm = &*s.c.at(k as usize) * &self.x + &*s.d.at(k as usize) * v;

@@ -61,13 +61,31 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         Ok(())
     }
 
-    /// Time update from instant `k` to `k + 1`: `x ← A_k x`, `P ← A_k P A_kᵀ + B_k Q_k B_kᵀ`.
+    /// Time update from instant `k` to `k + 1`: `x ← A_k x (+ G_k u_k)`,
+    /// `P ← A_k P A_kᵀ + B_k Q_k B_kᵀ`.
     pub fn predict<const NY: usize, M: LinearSystem<T, NX, NY>>(
         &mut self,
         model: &M,
         k: usize,
     ) -> Result<()> {
-        self.predict_with(&model.a(k), &model.process_cov(k))
+        match model.input(k) {
+            None => self.predict_with(&model.a(k), &model.process_cov(k)),
+            Some(gu) => self.predict_with_input(&model.a(k), &model.process_cov(k), &gu),
+        }
+    }
+
+    /// [`KalmanFilter::predict_with`] plus a known input term: `x ← A x + gu`.
+    pub fn predict_with_input(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        q: &SMatrix<T, NX, NX>,
+        gu: &SVector<T, NX>,
+    ) -> Result<()> {
+        let (x, p) = predict_raw(self.est.state(), self.est.covariance(), a, &symmetrize(q));
+        let x = x + gu;
+        check_predicted(&x, &p)?;
+        self.est = Estimate::trusted(x, p);
+        Ok(())
     }
 
     /// Time update with explicit matrices `A` and effective process covariance `Q`.
@@ -126,6 +144,14 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         // prediction always makes the update fail (NaN and ∞ reach S or x⁺ through every
         // product, 0·∞ included), and the error is then the one `predict` would have given.
         let j = k.saturating_sub(1);
+        // A known input: the scalar path, which adds it to the prediction (the lanes fuse
+        // the prediction into the update).
+        if let Some(gu) = model.input(j) {
+            let (x, p, nis) = self.step_scalar(model, j, k, y, Some(&gu))?;
+            self.est = Estimate::trusted(x, p);
+            self.nis = nis;
+            return Ok(());
+        }
         // With `simd`, predict and update on lanes (the same bits as the scalar path); a
         // refusal there takes the scalar path, which names the error.
         #[cfg(simd_lanes)]
@@ -143,7 +169,7 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         let lanes = None;
         let (x, p, nis) = match lanes {
             Some(out) => out,
-            None => self.step_scalar(model, j, k, y)?,
+            None => self.step_scalar(model, j, k, y, None)?,
         };
         self.est = Estimate::trusted(x, p);
         self.nis = nis;
@@ -217,9 +243,13 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         j: usize,
         k: usize,
         y: &SVector<T, NY>,
+        gu: Option<&SVector<T, NX>>,
     ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
         let (x, p) = (self.est.state(), self.est.covariance());
-        let (x_pred, p_pred) = predict_raw(x, p, &model.a(j), &model.process_cov(j));
+        let (mut x_pred, p_pred) = predict_raw(x, p, &model.a(j), &model.process_cov(j));
+        if let Some(gu) = gu {
+            x_pred += gu;
+        }
         kalman_update_scalar(
             &x_pred,
             &p_pred,

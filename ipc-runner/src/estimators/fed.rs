@@ -77,7 +77,15 @@ impl<E> Fed<E> {
             Err(Error::OutOfOrder { expected, got }) if got > expected => {
                 let (mut est, gap) = (self.est.clone(), E::Measurement::from_slots(&[]));
                 for j in expected..got {
+                    // Each gap instant on its own model (a time-varying plant, a control
+                    // input's u_{j−1}).
+                    if let Some((plant, remodel)) = &self.varying {
+                        remodel(&mut est, super::linear_of(&**plant)?, j);
+                    }
                     est.step(j, &gap)?;
+                }
+                if let Some((plant, remodel)) = &self.varying {
+                    remodel(&mut est, super::linear_of(&**plant)?, got);
                 }
                 let counts = step(&mut est, got, &y)?;
                 self.est = est;

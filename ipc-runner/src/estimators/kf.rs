@@ -10,7 +10,9 @@
 //! a dropped packet as y = 0 is deliberately not offered: it is neither optimal nor a bound.
 //!
 //! Applies to every scenario whose plant offers a [`LinearDescription`]. Multi-node scenarios
-//! update node by node (sequential updates are exact because nodes' noises are independent).
+//! update node by node (sequential updates are exact because nodes' noises are independent),
+//! nodes of different ny included (each padded to the largest, see `snapshot`). A known
+//! control input enters the prediction (`B_u u_{k−1}`).
 //! Diagnostics: `trace_p`, the trace of the filter's covariance P_k.
 
 use std::sync::Arc;
@@ -118,7 +120,11 @@ impl<const NX: usize, const NY: usize> estimator_core::Estimator<f64, NX> for No
     fn step(&mut self, _k: usize, y: &Self::Measurement) -> Result<(), Error> {
         // Work on a copy and commit at the end: an error leaves the filter untouched.
         let mut kf = self.kf;
-        kf.predict_with(&self.model[0].a, &self.model[0].q)?;
+        let m0 = &self.model[0];
+        match &m0.u {
+            None => kf.predict_with(&m0.a, &m0.q)?,
+            Some(u) => kf.predict_with_input(&m0.a, &m0.q, u)?,
+        }
         for (node, y) in y.iter().enumerate() {
             if let Some(y) = y.delivered() {
                 if node >= self.nodes {

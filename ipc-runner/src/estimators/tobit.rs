@@ -66,6 +66,13 @@ pub fn build(
         return Ok(Vec::new());
     };
     let (nx, ny, l) = (scenario.nx(), scenario.ny(), scenario.nodes());
+    if let Some(m) = (0..l).find(|&m| scenario.node_ny(m) != ny) {
+        anyhow::bail!(
+            "tobit: the Tobit fusion filters need the same n_y at every node, but node {m} \
+             measures {} and another {ny} components",
+            scenario.node_ny(m)
+        );
+    }
     macro_rules! by_l {
         ($n:literal) => {
             match l {

@@ -52,7 +52,8 @@ pub struct EvalArgs {
     #[arg(long, hide = true, default_value_t = crate::limits::PROGRESS_LINE_EVERY.as_secs_f64(),
           value_parser = channel_sim::flags::seconds)]
     pub progress_every: f64,
-    /// Particles of the `pf` reference filter on occlusion scenarios. Off by default in
+    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
+    /// a preset or a TOML file, and `nn-token-bucket`). Off by default in
     /// `eval` (unless `--estimators` names `pf` or `pf-mix`: then 5000): at 5000 particles it
     /// costs ~3 CPU-ms per step, 100× the other estimators together, so a 2000-run
     /// evaluation would take minutes instead of seconds. Typical: `--particles 5000 --runs 200`.

@@ -47,8 +47,9 @@ pub struct RunArgs {
     /// scenario; `pf` only with `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (occlusion scenarios; far slower per step than
-    /// the other estimators). Default: `pf` is not run unless `--estimators` names it (then
+    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
+    /// a preset or a TOML file, and `nn-token-bucket`; far slower per step than the other
+    /// estimators). Default: `pf` is not run unless `--estimators` names it (then
     /// 5000).
     #[arg(long)]
     pub particles: Option<usize>,

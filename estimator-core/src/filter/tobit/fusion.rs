@@ -150,12 +150,26 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         r: &[SVector<T, NY>; L],
         received: [Option<&SVector<T, NY>>; L],
     ) -> Result<()> {
+        self.step_with_input(a, bqb, None, c, r, received)
+    }
+
+    /// [`TobitFusion::step`] for a system with a known input term `gu` = G u_{k−1}, which
+    /// every local filter adds to its prior mean.
+    pub fn step_with_input(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &[SMatrix<T, NY, NX>; L],
+        r: &[SVector<T, NY>; L],
+        received: [Option<&SVector<T, NY>>; L],
+    ) -> Result<()> {
         let mut locals = self.locals;
         let mut xs = [SVector::<T, NX>::zeros(); L];
         let mut ps = [SMatrix::<T, NX, NX>::zeros(); L];
         for m in 0..L {
             let q_m = bqb / self.alpha[m];
-            locals[m].step(a, &q_m, &c[m], &r[m], received[m])?;
+            locals[m].step_with_input(a, &q_m, gu, &c[m], &r[m], received[m])?;
             (xs[m], ps[m]) = locals[m].estimate().into_parts();
         }
         let (xg, pg) = federated_fuse(&xs, &ps)?;
@@ -183,9 +197,10 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
             c[m] = models[m].c(k);
             r[m] = diagonal_variances(&models[m].measurement_cov(k))?;
         }
-        self.step(
+        self.step_with_input(
             &models[0].a(prev),
             &models[0].process_cov(prev),
+            models[0].input(prev).as_ref(),
             &c,
             &r,
             received,

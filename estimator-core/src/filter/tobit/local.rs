@@ -143,6 +143,21 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         r: &SVector<T, NY>,
         received: Option<&SVector<T, NY>>,
     ) -> Result<LocalStepPlan<T, NX, NY>> {
+        self.plan_with_input(a, bqb, None, c, r, received)
+    }
+
+    /// [`TobitFilter::plan`] for a system with a known input term `gu` = G u_{t−1}: the
+    /// prior mean (21) becomes `A x̂ + G u`, and every term of (30) built on it (Ω₁, the
+    /// Tobit statistics) uses that prior.
+    pub fn plan_with_input(
+        &self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        received: Option<&SVector<T, NY>>,
+    ) -> Result<LocalStepPlan<T, NX, NY>> {
         check_finite(a, "A")?;
         check_finite(bqb, "process covariance")?;
         check_finite(c, "C")?;
@@ -154,7 +169,13 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             None => (T::one(), self.y_held),
         };
         let (x, p) = (*self.est.state(), *self.est.covariance());
-        let x_prior = a * x;
+        let x_prior = match gu {
+            None => a * x,
+            Some(gu) => {
+                check_finite(gu, "input")?;
+                a * x + gu
+            }
+        };
         let p_prior = symmetrize(&(a * p * a.transpose() + bqb));
         check_finite(&p_prior, "predicted bound")?;
         let tau = self.cfg.tau;
@@ -230,7 +251,20 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         r: &SVector<T, NY>,
         received: Option<&SVector<T, NY>>,
     ) -> Result<()> {
-        let plan = self.plan(a, bqb, c, r, received)?;
+        self.step_with_input(a, bqb, None, c, r, received)
+    }
+
+    /// [`TobitFilter::step`] with a known input term (see [`TobitFilter::plan_with_input`]).
+    pub fn step_with_input(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        received: Option<&SVector<T, NY>>,
+    ) -> Result<()> {
+        let plan = self.plan_with_input(a, bqb, gu, c, r, received)?;
         let k = plan.problem.gain()?;
         let x = plan.x_prior + k * (plan.y_bar - plan.stats.mean);
         let p = plan.problem.bound(&k);
@@ -280,9 +314,10 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
     ) -> Result<()> {
         let prev = k.saturating_sub(1);
         let r = diagonal_variances(&model.measurement_cov(k))?;
-        self.step(
+        self.step_with_input(
             &model.a(prev),
             &(model.process_cov(prev) * q_scale),
+            model.input(prev).as_ref(),
             &model.c(k),
             &r,
             received,
