@@ -98,14 +98,97 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         self.arrival_prob
     }
 
-    /// `P(u in no region)` for `u ~ N(m, s²)`.
+    /// `P(u in no region)` for `u ~ N(m, s²)`: the log-sum-exp of the gaps' `ln P` in gap
+    /// order, bit for bit, but without evaluating a gap whose term provably cannot change
+    /// the sum. [`LogSumExp`] keeps `(top, sum)` with `sum ≥ 1` once a finite term is in; a
+    /// term `x < top − 40` adds `exp(x − top) < 4.3·10⁻¹⁸`, under half an ulp of `sum`, so
+    /// the state stays the same bits. A gap in standard units `(a, b)` has
+    /// `ln P ≤ −a²/2` for `a > 0` and `≤ −b²/2` for `b < 0` (`Q(a) ≤ e^{−a²/2}/2`), so
+    /// a gap whose bound is 40 below the running top is skipped. Gaps before the first
+    /// evaluated one are skipped only when it exceeds all of them by
+    /// `40 + ln(S + 1)`: their whole sum then vanishes in its `1` the same way; otherwise
+    /// every gap is evaluated ([`Self::prob_outside_all`]). The gap with the largest bound
+    /// is evaluated first, as the reference for the leading gaps.
     fn prob_outside(&self, m: T, s: T) -> T {
+        let margin = T::lit(40.0);
+        let lead_margin = T::lit(40.0 + libm::log((S + 1) as f64));
+        let mut anchor = (0, -T::one() / T::zero());
+        for j in 0..=S {
+            let u = Self::gap_bound(self.gap(j, m, s));
+            if u > anchor.1 {
+                anchor = (j, u);
+            }
+        }
+        let (lo, hi) = self.gap(anchor.0, m, s);
+        let at_anchor = ln_interval_prob(lo, hi);
+        let mut total = LogSumExp::default();
+        let mut top = -T::one() / T::zero();
+        let mut skipped_lead = -T::one() / T::zero();
+        for j in 0..=S {
+            let x = if j == anchor.0 {
+                at_anchor
+            } else {
+                let (lo, hi) = self.gap(j, m, s);
+                let u = Self::gap_bound((lo, hi));
+                if top.finite() {
+                    if u < top - margin {
+                        continue;
+                    }
+                } else if top == -T::one() / T::zero() && u < at_anchor - lead_margin {
+                    if u > skipped_lead {
+                        skipped_lead = u;
+                    }
+                    continue;
+                }
+                ln_interval_prob(lo, hi)
+            };
+            if top == -T::one() / T::zero()
+                && skipped_lead > -T::one() / T::zero()
+                && !(x > skipped_lead + lead_margin)
+            {
+                return self.prob_outside_all(m, s);
+            }
+            total.push(x);
+            if !(x <= top) {
+                top = x; // a larger term, or NaN (which then stays)
+            }
+        }
+        total.value().exp().min(T::one())
+    }
+
+    /// Gap `j` (`0..=S`: below the first region, between regions, above the last) in
+    /// standard units of `u ~ N(m, s²)`.
+    #[inline]
+    fn gap(&self, j: usize, m: T, s: T) -> (T, T) {
         let inf = T::one() / T::zero();
+        let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
+        let hi = if j == S { inf } else { self.sorted[j].0 };
+        ((lo - m) / s, (hi - m) / s)
+    }
+
+    /// An upper bound of `ln P(a < Z < b)`: `−a²/2` for `a > 0`, `−b²/2` for `b < 0`, else
+    /// 0 (NaN for NaN ends, which compares false and so is never skipped).
+    #[inline]
+    fn gap_bound((a, b): (T, T)) -> T {
+        let half = T::lit(0.5);
+        if a > T::zero() {
+            -half * a * a
+        } else if b < T::zero() {
+            -half * b * b
+        } else if a.partial_cmp(&b).is_none() {
+            a + b
+        } else {
+            T::zero()
+        }
+    }
+
+    /// [`Self::prob_outside`] evaluating every gap.
+    #[cold]
+    fn prob_outside_all(&self, m: T, s: T) -> T {
         let mut total = LogSumExp::default();
         for j in 0..=S {
-            let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
-            let hi = if j == S { inf } else { self.sorted[j].0 };
-            total.push(ln_interval_prob((lo - m) / s, (hi - m) / s));
+            let (lo, hi) = self.gap(j, m, s);
+            total.push(ln_interval_prob(lo, hi));
         }
         total.value().exp().min(T::one())
     }
