@@ -237,15 +237,17 @@ fn mat_vec(m: &DMatrix<f64>, x: &[f64], out: &mut [f64]) {
     }
 }
 
-/// `Σ_j m_ij x_j`, from `j = 0` up.
+/// `Σ_j m_ij x_j`, from `j = 0` up (`m` is stored column by column).
 #[inline]
 fn row_dot(m: &DMatrix<f64>, i: usize, x: &[f64]) -> f64 {
-    if m.ncols() == 0 {
+    let rows = m.nrows();
+    let mut col = m.as_slice()[i..].iter().step_by(rows).zip(x);
+    let Some((m0, x0)) = col.next() else {
         return 0.0;
-    }
-    let mut acc = m[(i, 0)] * x[0];
-    for j in 1..m.ncols() {
-        acc = m[(i, j)] * x[j] + acc;
+    };
+    let mut acc = m0 * x0;
+    for (mj, xj) in col {
+        acc = mj * xj + acc;
     }
     acc
 }

@@ -105,14 +105,15 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
     /// the state stays the same bits. A gap in standard units `(a, b)` has
     /// `ln P ≤ −a²/2` for `a > 0` and `≤ −b²/2` for `b < 0` (`Q(a) ≤ e^{−a²/2}/2`), so
     /// a gap whose bound is 40 below the running top is skipped. Gaps before the first
-    /// evaluated one are skipped only when it exceeds all of them by
-    /// `40 + ln(S + 1)`: their whole sum then vanishes in its `1` the same way; otherwise
-    /// every gap is evaluated ([`Self::prob_outside_all`]). The gap with the largest bound
-    /// is evaluated first, as the reference for the leading gaps.
+    /// evaluated one are skipped when it exceeds all of their bounds by `41 + S`
+    /// (`≥ 40 + ln(S + 1)`: their whole sum then vanishes in its `1` the same way); when it
+    /// does not, they are evaluated after all, in order, before it. The gap with the
+    /// largest bound is evaluated first, as the reference for the leading gaps.
     fn prob_outside(&self, m: T, s: T) -> T {
+        let neg_inf = -T::one() / T::zero();
         let margin = T::lit(40.0);
-        let lead_margin = T::lit(40.0 + libm::log((S + 1) as f64));
-        let mut anchor = (0, -T::one() / T::zero());
+        let lead_margin = T::lit(41.0 + S as f64);
+        let mut anchor = (0, neg_inf);
         for j in 0..=S {
             let u = Self::gap_bound(self.gap(j, m, s));
             if u > anchor.1 {
@@ -122,8 +123,8 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         let (lo, hi) = self.gap(anchor.0, m, s);
         let at_anchor = ln_interval_prob(lo, hi);
         let mut total = LogSumExp::default();
-        let mut top = -T::one() / T::zero();
-        let mut skipped_lead = -T::one() / T::zero();
+        let mut top = neg_inf;
+        let mut skipped_lead = neg_inf;
         for j in 0..=S {
             let x = if j == anchor.0 {
                 at_anchor
@@ -134,7 +135,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
                     if u < top - margin {
                         continue;
                     }
-                } else if top == -T::one() / T::zero() && u < at_anchor - lead_margin {
+                } else if top == neg_inf && u < at_anchor - lead_margin {
                     if u > skipped_lead {
                         skipped_lead = u;
                     }
@@ -142,11 +143,18 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
                 }
                 ln_interval_prob(lo, hi)
             };
-            if top == -T::one() / T::zero()
-                && skipped_lead > -T::one() / T::zero()
-                && !(x > skipped_lead + lead_margin)
-            {
-                return self.prob_outside_all(m, s);
+            if top == neg_inf && skipped_lead > neg_inf && !(x > skipped_lead + lead_margin) {
+                // The leading gaps were skipped against the anchor, but this term is not
+                // far enough above them: push them as the plain sum would have.
+                for i in 0..j {
+                    let (lo, hi) = self.gap(i, m, s);
+                    let l = ln_interval_prob(lo, hi);
+                    total.push(l);
+                    if !(l <= top) {
+                        top = l;
+                    }
+                }
+                skipped_lead = neg_inf;
             }
             total.push(x);
             if !(x <= top) {
@@ -182,17 +190,6 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         }
     }
 
-    /// [`Self::prob_outside`] evaluating every gap.
-    #[cold]
-    fn prob_outside_all(&self, m: T, s: T) -> T {
-        let mut total = LogSumExp::default();
-        for j in 0..=S {
-            let (lo, hi) = self.gap(j, m, s);
-            total.push(ln_interval_prob(lo, hi));
-        }
-        total.value().exp().min(T::one())
-    }
-
     /// One instant `k ≥ 1`: predict, then the linear MMSE update with `ỹ = z_k` (arrival) or
     /// `ỹ = 0` (dropout). On error nothing changes.
     pub fn step<const NY: usize, M: LinearSystem<T, NX, NY>>(
@@ -201,14 +198,41 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         k: usize,
         y: Option<&SVector<T, NY>>,
     ) -> Result<()> {
+        self.advance(model, k, Some(y))
+    }
+
+    /// Instant `k ≥ 1` without information (a packet lost in transport,
+    /// [`Packet::Lost`]): the prediction only; the arrival probability keeps its last value. On error nothing changes.
+    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+    ) -> Result<()> {
+        self.advance(model, k, None)
+    }
+
+    /// Instant `k`: `y` is `Some(Some(z_k))` on arrival, `Some(None)` on a dropout, `None`
+    /// for a loss (prediction only). The one place that predicts, so that the prediction is
+    /// inlined once into every step.
+    #[inline(always)]
+    fn advance<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: Option<Option<&SVector<T, NY>>>,
+    ) -> Result<()> {
         let y_tilde = match y {
-            Some(y) => {
+            Some(Some(y)) => {
                 check_finite(y, "measurement")?;
                 *y
             }
-            None => SVector::<T, NY>::zeros(),
+            _ => SVector::<T, NY>::zeros(),
         };
         let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
+        if y.is_none() {
+            self.est = Estimate::trusted(xp, pp);
+            return Ok(());
+        }
         let e = &self.occ.e;
         let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
         // × (1 − p_loss): the packet must also survive the transport (exactly × 1 by default).
@@ -234,18 +258,6 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         self.arrival_prob = p;
         Ok(())
     }
-
-    /// Instant `k ≥ 1` without information (a packet lost in transport,
-    /// [`Packet::Lost`]): the prediction only; the arrival probability keeps its last value. On error nothing changes.
-    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-    ) -> Result<()> {
-        let (x, p) = predict(model, k, self.est.state(), self.est.covariance())?;
-        self.est = Estimate::trusted(x, p);
-        Ok(())
-    }
 }
 
 /// Delivered or dropped: the linear MMSE update (`ỹ = z_k` or `0`); lost: prediction only.
@@ -255,11 +267,12 @@ impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<
     type Measurement = Packet<T, NY>;
 
     fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        match y {
-            Packet::Delivered(y) => self.filter.step(&self.model, k, Some(y)),
-            Packet::Dropped => self.filter.step(&self.model, k, None),
-            Packet::Lost => self.filter.predict_to(&self.model, k),
-        }
+        let y = match y {
+            Packet::Delivered(y) => Some(Some(y)),
+            Packet::Dropped => Some(None),
+            Packet::Lost => None,
+        };
+        self.filter.advance(&self.model, k, y)
     }
 
     #[inline]
