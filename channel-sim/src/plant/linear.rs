@@ -240,14 +240,13 @@ fn mat_vec(m: &DMatrix<f64>, x: &[f64], out: &mut [f64]) {
 /// `Σ_j m_ij x_j`, from `j = 0` up (`m` is stored column by column).
 #[inline]
 fn row_dot(m: &DMatrix<f64>, i: usize, x: &[f64]) -> f64 {
-    let rows = m.nrows();
-    let mut col = m.as_slice()[i..].iter().step_by(rows).zip(x);
-    let Some((m0, x0)) = col.next() else {
+    let (rows, cols, d) = (m.nrows(), m.ncols().min(x.len()), m.as_slice());
+    if cols == 0 {
         return 0.0;
-    };
-    let mut acc = m0 * x0;
-    for (mj, xj) in col {
-        acc = mj * xj + acc;
+    }
+    let mut acc = d[i] * x[0];
+    for j in 1..cols {
+        acc = d[i + j * rows] * x[j] + acc;
     }
     acc
 }
