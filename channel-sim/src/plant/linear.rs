@@ -230,7 +230,8 @@ impl PlantRun for LinearRun {
 }
 
 /// `out = m x`, each entry `Σ_j m_ij x_j` summed from `j = 0` up, as nalgebra's `gemv`
-/// (column by column, `y ← m_j x_j + y`) sums it: the same bits without allocating.
+/// (column by column, `y ← m_j x_j + y`; the sum commutes bit for bit) sums it: the same bits
+/// without allocating.
 fn mat_vec(m: &DMatrix<f64>, x: &[f64], out: &mut [f64]) {
     for (i, o) in out.iter_mut().enumerate().take(m.nrows()) {
         *o = row_dot(m, i, x);
@@ -246,7 +247,7 @@ fn row_dot(m: &DMatrix<f64>, i: usize, x: &[f64]) -> f64 {
     }
     let mut acc = d[i] * x[0];
     for j in 1..cols {
-        acc = d[i + j * rows] * x[j] + acc;
+        acc += d[i + j * rows] * x[j];
     }
     acc
 }

@@ -167,6 +167,13 @@ fn run() -> Result<()> {
     Ok(())
 }
 
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("report: {e:#}");
+        std::process::exit(1);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::carried;
@@ -185,12 +192,5 @@ mod tests {
         // Carried twice, still one note.
         assert_eq!(carried(&format!("x\n{fw}"), "firmware").unwrap(), fw);
         assert!(carried(old, "criterion").is_none());
-    }
-}
-
-fn main() {
-    if let Err(e) = run() {
-        eprintln!("report: {e:#}");
-        std::process::exit(1);
     }
 }

@@ -31,6 +31,8 @@
 //! and the equations above are unchanged otherwise (`p_loss = 0`, the default, is the filter
 //! above).
 
+use core::cmp::Ordering;
+
 use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
@@ -143,22 +145,25 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
                 }
                 ln_gap_prob(lo, hi)
             };
-            if top == neg_inf && skipped_lead > neg_inf && !(x > skipped_lead + lead_margin) {
+            if top == neg_inf
+                && skipped_lead > neg_inf
+                && x.partial_cmp(&(skipped_lead + lead_margin)) != Some(Ordering::Greater)
+            {
                 // The leading gaps were skipped against the anchor, but this term is not
                 // far enough above them: push them as the plain sum would have.
                 for i in 0..j {
                     let (lo, hi) = self.gap(i, m, s);
                     let l = ln_gap_prob(lo, hi);
                     total.push(l);
-                    if !(l <= top) {
+                    if raises(l, top) {
                         top = l;
                     }
                 }
                 skipped_lead = neg_inf;
             }
             total.push(x);
-            if !(x <= top) {
-                top = x; // a larger term, or NaN (which then stays)
+            if raises(x, top) {
+                top = x;
             }
         }
         total.value().exp().min(T::one())
@@ -258,6 +263,13 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         self.arrival_prob = p;
         Ok(())
     }
+}
+
+/// Whether the term `x` becomes [`LogSumExp`]'s top after `top`: a larger one, or NaN, which
+/// then stays.
+#[inline]
+fn raises<T: Real>(x: T, top: T) -> bool {
+    top.partial_cmp(&top).is_some() && (x > top || x.partial_cmp(&x).is_none())
 }
 
 /// [`ln_interval_prob`] bit for bit, without the far end's `ln Q` when it cannot matter. For
