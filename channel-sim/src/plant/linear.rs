@@ -6,13 +6,13 @@
 use std::any::Any;
 
 use estpipe_wire::Fnv1a64;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 use super::control::Control;
 use super::time_matrix::TimeMatrix;
 use super::{fingerprint_matrix, LinearDescription, Plant, PlantRun};
 use crate::error::ScenarioError;
-use crate::rng::{standard_normal, SimRng};
+use crate::rng::{fill_standard_normal, SimRng};
 use crate::sim::{MAX_NODES, MAX_NX, MAX_NY};
 use crate::validate::{check_finite, check_pd, check_shape};
 
@@ -149,9 +149,18 @@ impl Plant for LinearPlant {
         self.sensors.len()
     }
     fn start(&self, x0: &[f64]) -> Box<dyn PlantRun> {
+        let nw = self.q.nrows();
+        let nv = self.sensors.iter().map(|s| s.r.nrows()).max().unwrap_or(0);
+        let nx = x0.len();
         Box::new(LinearRun {
             plant: self.clone(),
-            x: DVector::from_column_slice(x0),
+            x: x0.to_vec(),
+            scratch: Scratch {
+                normal: vec![0.0; nw.max(nv)],
+                noise: vec![0.0; nw.max(nv)],
+                ax: vec![0.0; nx],
+                bw: vec![0.0; nx],
+            },
         })
     }
     fn fingerprint(&self, h: &mut Fnv1a64) {
@@ -212,28 +221,74 @@ impl LinearDescription for LinearPlant {
 #[derive(Debug)]
 struct LinearRun {
     plant: LinearPlant,
-    x: DVector<f64>,
+    x: Vec<f64>,
+    scratch: Scratch,
+}
+
+/// The buffers of one step, allocated once per run (a step allocates nothing).
+#[derive(Debug)]
+struct Scratch {
+    normal: Vec<f64>,
+    noise: Vec<f64>,
+    ax: Vec<f64>,
+    bw: Vec<f64>,
 }
 
 impl PlantRun for LinearRun {
     fn state(&self) -> &[f64] {
-        self.x.as_slice()
+        &self.x
     }
 
     fn advance(&mut self, k: u32, rng: &mut SimRng, z: &mut [[f64; MAX_NY]]) {
         let p = &self.plant;
+        let s = &mut self.scratch;
         let prev = k.saturating_sub(1) as usize;
-        let w = &p.q_factor * standard_normal(p.q.nrows(), rng);
-        self.x = &*p.a.at(prev) * &self.x + &*p.b.at(prev) * w;
+        // w = L_Q n, x = A x + B w, then per node v = L_R n, z = C x + D v: the random draws
+        // in that order, every product summed as nalgebra's `gemv` sums it (`mat_vec`).
+        let nw = p.q.nrows();
+        fill_standard_normal(&mut s.normal[..nw], rng);
+        mat_vec(&p.q_factor, &s.normal[..nw], &mut s.noise[..nw]);
+        mat_vec(&p.a.at(prev), &self.x, &mut s.ax);
+        mat_vec(&p.b.at(prev), &s.noise[..nw], &mut s.bw);
+        for ((x, ax), bw) in self.x.iter_mut().zip(&s.ax).zip(&s.bw) {
+            *x = ax + bw;
+        }
         if let Some(c) = &p.control {
             self.x += c.input(prev);
         }
-        for (m, s) in p.sensors.iter().enumerate() {
-            let v = &p.r_factors[m] * standard_normal(s.r.nrows(), rng);
-            let zm = &*s.c.at(k as usize) * &self.x + &*s.d.at(k as usize) * v;
-            z[m][..zm.len()].copy_from_slice(zm.as_slice());
+        for ((s_m, l_r), z_m) in p.sensors.iter().zip(&p.r_factors).zip(z.iter_mut()) {
+            let nv = s_m.r.nrows();
+            fill_standard_normal(&mut s.normal[..nv], rng);
+            mat_vec(l_r, &s.normal[..nv], &mut s.noise[..nv]);
+            let (c, d) = (s_m.c.at(k as usize), s_m.d.at(k as usize));
+            for i in 0..c.nrows() {
+                z_m[i] = row_dot(&c, i, &self.x) + row_dot(&d, i, &s.noise[..nv]);
+            }
         }
     }
+}
+
+/// `out = m x`, each entry `Σ_j m_ij x_j` summed from `j = 0` up, as nalgebra's `gemv`
+/// (column by column, `y ← m_j x_j + y`; the sum commutes bit for bit) sums it: the same bits
+/// without allocating.
+fn mat_vec(m: &DMatrix<f64>, x: &[f64], out: &mut [f64]) {
+    for (i, o) in out.iter_mut().enumerate().take(m.nrows()) {
+        *o = row_dot(m, i, x);
+    }
+}
+
+/// `Σ_j m_ij x_j`, from `j = 0` up (`m` is stored column by column).
+#[inline]
+fn row_dot(m: &DMatrix<f64>, i: usize, x: &[f64]) -> f64 {
+    let (rows, cols, d) = (m.nrows(), m.ncols().min(x.len()), m.as_slice());
+    if cols == 0 {
+        return 0.0;
+    }
+    let mut acc = d[i] * x[0];
+    for j in 1..cols {
+        acc += d[i + j * rows] * x[j];
+    }
+    acc
 }
 
 /// `(m + mᵀ)/2`.
@@ -252,7 +307,7 @@ mod tests {
     use super::*;
     use crate::rng::{run_rng, Stream};
     use crate::validate::check_psd;
-    use nalgebra::dmatrix;
+    use nalgebra::{dmatrix, DVector};
 
     fn plant() -> LinearPlant {
         LinearPlant::new(

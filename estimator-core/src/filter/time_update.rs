@@ -27,8 +27,10 @@ pub fn predict_raw<T: Real, const NX: usize>(
 }
 
 /// The prediction to instant `k` from the model's `A_{k−1}`, `B Q Bᵀ` and input term of
-/// `k − 1`, refused when not finite ("predicted state" / "predicted covariance").
-#[inline]
+/// `k − 1`, refused when not finite ("predicted state" / "predicted covariance"). Always
+/// inlined: it is the first half of every step, and as a call it returns `(x⁻, P⁻)` through
+/// memory.
+#[inline(always)]
 pub fn predict<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>>(
     model: &M,
     k: usize,

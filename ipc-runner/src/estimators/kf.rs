@@ -22,6 +22,7 @@ use channel_sim::scenario::ComposedScenario;
 use channel_sim::sim::MAX_NODES;
 use channel_sim::Scenario;
 use estimator_core::filter::{GateCounts, GatedStep, InnovationGate, KalmanFilter};
+use estimator_core::linalg::symmetrize;
 use estimator_core::{Error, Estimate, Packet};
 use nalgebra::{DMatrix, SVector};
 
@@ -112,12 +113,30 @@ struct NodeByNode<const NX: usize, const NY: usize> {
     model: [Snapshot<NX, NY>; MAX_NODES],
     nodes: usize,
     kf: KalmanFilter<f64, NX>,
+    /// Node 0's `B Q Bᵀ` and `D R Dᵀ` are their own symmetric parts, bit for bit (what
+    /// `predict_with` and `update_with` would symmetrise): a one-node instant may then take
+    /// the core's fused step, which computes the same bits ([`fused_ok`]).
+    fused: bool,
+}
+
+/// Whether node 0's covariances are unchanged by `predict_with`'s and `update_with`'s
+/// symmetrisation, so that `KalmanFilter::step` on them gives the same bits as the two calls.
+fn fused_ok<const NX: usize, const NY: usize>(m: &Snapshot<NX, NY>) -> bool {
+    symmetrize(&m.q) == m.q && symmetrize(&m.r) == m.r
 }
 
 impl<const NX: usize, const NY: usize> estimator_core::Estimator<f64, NX> for NodeByNode<NX, NY> {
     type Measurement = [Packet<f64, NY>; MAX_NODES];
 
-    fn step(&mut self, _k: usize, y: &Self::Measurement) -> Result<(), Error> {
+    fn step(&mut self, k: usize, y: &Self::Measurement) -> Result<(), Error> {
+        // One node delivering a finite measurement: the fused predict + update of the core
+        // (the same arithmetic, one pass; on error it leaves the filter untouched). A
+        // non-finite y takes the path below, which reports the prediction's error first.
+        if self.fused && self.nodes == 1 && y[1..].iter().all(|p| p.delivered().is_none()) {
+            if let Some(y0) = y[0].delivered().filter(|v| v.iter().all(|e| e.is_finite())) {
+                return self.kf.step(&self.model[0], k, y0);
+            }
+        }
         // Work on a copy and commit at the end: an error leaves the filter untouched.
         let mut kf = self.kf;
         let m0 = &self.model[0];
@@ -184,6 +203,7 @@ fn remodel<const NX: usize, const NY: usize>(
     k: usize,
 ) {
     e.model = Snapshot::nodes(model, e.nodes, k);
+    e.fused = fused_ok(&e.model[0]);
 }
 
 /// The filter of `spec` at `NX`, `NY`.
@@ -192,8 +212,10 @@ fn boxed<const NX: usize, const NY: usize>(spec: Spec<'_>) -> anyhow::Result<Box
         .map_err(|e| anyhow::anyhow!("{}: initial.estimator_cov: {e}", spec.name))?;
     let nodes = spec.plant.nodes();
     let model = super::linear_of(&*spec.plant)?;
+    let model = Snapshot::nodes(model, nodes, 1);
     let est = NodeByNode::<NX, NY> {
-        model: Snapshot::nodes(model, nodes, 1),
+        fused: fused_ok(&model[0]),
+        model,
         nodes,
         kf,
     };

@@ -317,14 +317,22 @@ impl RunEstimator {
         truth: &[f64],
     ) {
         let diags = &mut self.diagnostics;
-        let mut sink = |name, value| {
-            let slot = match diags.iter().position(|(n, _)| *n == name) {
-                Some(i) => i,
-                None => {
-                    diags.push((name, vec![f64::NAN; len]));
-                    diags.len() - 1
-                }
+        // An estimator reports the same names in the same order at every k: the n-th name of
+        // this call is looked up at index n first (the same `&'static str` compares by
+        // address), and searched for only when it is not there.
+        let mut next = 0;
+        let mut sink = |name: &'static str, value| {
+            let slot = match diags.get(next) {
+                Some((n, _)) if core::ptr::eq(*n, name) || *n == name => next,
+                _ => match diags.iter().position(|(n, _)| *n == name) {
+                    Some(i) => i,
+                    None => {
+                        diags.push((name, vec![f64::NAN; len]));
+                        diags.len() - 1
+                    }
+                },
             };
+            next = slot + 1;
             diags[slot].1[k] = value;
         };
         e.diagnostics(&mut sink);
