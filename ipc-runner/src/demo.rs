@@ -240,7 +240,8 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     };
     // Without --steps, the default horizon of `channel-sim` and `eval`.
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
-    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let choice =
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     args.check_outputs(scenario.nx(), choice.particles)?;
     let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators_with(

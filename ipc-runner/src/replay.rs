@@ -87,7 +87,8 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     }
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
-    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let choice =
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     let budget = Budget::mib(args.max_memory);
     let pf = product(&[
         choice.particles as u64,

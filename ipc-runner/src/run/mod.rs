@@ -72,7 +72,8 @@ use std::sync::Arc;
 pub fn main(args: &RunArgs) -> Result<i32> {
     args.check_outputs()?;
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
-    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let choice =
+        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     // Before any estimator is built: the particle filter allocates its particles at once.
     args.check_memory(scenario.nx(), scenario.nodes(), 0, choice.particles)?;
     let scenario: Arc<dyn channel_sim::Scenario> = scenario.into();
