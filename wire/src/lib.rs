@@ -16,6 +16,7 @@
 //! | [`services`] | service names, QoS and opening the services with them |
 //! | [`qos`] | [`qos::PubSubQos`]: what a publish-subscribe service is created with |
 //! | [`explain`] | what a failed open means, in one line |
+//! | [`net`] | the byte form of every payload between hosts (the zenoh bridge), decoded with every check |
 //! | [`layout`] | every payload's field offsets, sizes and alignments (what the docs and the C header are checked against) |
 //! | [`error`] | [`WireError`] (a bad payload) and [`ContractError`] (a peer outside the contract) |
 //! | [`clock`] | [`monotonic_ns`], the one clock of every timestamp |
@@ -31,6 +32,7 @@ pub mod explain;
 pub mod fingerprint;
 pub mod header;
 pub mod layout;
+pub mod net;
 pub mod qos;
 pub mod services;
 pub mod slot;
