@@ -17,6 +17,7 @@ enum Cmd {
     Replay(ipc_runner::replay::ReplayArgs),
     StreamHeader(ipc_runner::stream_header::StreamHeaderArgs),
     ChannelSim(channel_sim::publisher::PublisherArgs),
+    Bridge(estpipe_bridge::BridgeArgs),
 }
 
 fn main() {
@@ -27,6 +28,7 @@ fn main() {
         Cmd::Replay(a) => ipc_runner::replay::main(&a),
         Cmd::StreamHeader(a) => ipc_runner::stream_header::main(&a),
         Cmd::ChannelSim(a) => channel_sim::publisher::run(&a).map(|_| 0),
+        Cmd::Bridge(a) => estpipe_bridge::main(&a),
     };
     match result {
         Ok(code) => std::process::exit(code),

@@ -27,6 +27,9 @@ enum Command {
     Run(ipc_runner::run::RunArgs),
     /// Run the estimators over a recorded slot log (CSV, see docs/replay.md).
     Replay(ipc_runner::replay::ReplayArgs),
+    /// Carry a prefix's services over zenoh to another host, every message checked on
+    /// arrival (docs/bridge.md).
+    Bridge(estpipe_bridge::BridgeArgs),
     /// Print the stream header a publisher of this scenario must write into every slot
     /// (JSON; see docs/wire.md).
     StreamHeader(ipc_runner::stream_header::StreamHeaderArgs),
@@ -81,6 +84,7 @@ fn main() {
         Command::Demo(a) => pipeline(ipc_runner::demo::main(&a)),
         Command::Run(a) => pipeline(ipc_runner::run::main(&a)),
         Command::Replay(a) => pipeline(ipc_runner::replay::main(&a)),
+        Command::Bridge(a) => pipeline(estpipe_bridge::main(&a)),
         Command::StreamHeader(a) => pipeline(ipc_runner::stream_header::main(&a)),
         Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
     };

@@ -285,7 +285,9 @@ pub fn decode_slot(buf: &[u8]) -> Result<(StreamHeader, Slot), NetError> {
             return Err(NetError::Invalid("slot's nodes ≠ stream header's"));
         }
         if s.delivered == 1 && s.ny != h.ny[usize::from(s.node)] {
-            return Err(NetError::Invalid("slot's ny ≠ stream header's ny of its node"));
+            return Err(NetError::Invalid(
+                "slot's ny ≠ stream header's ny of its node",
+            ));
         }
         if s.delivered == 1 && !s.y[..usize::from(s.ny)].iter().all(|v| v.is_finite()) {
             return Err(NetError::Invalid("non-finite measurement"));
@@ -449,7 +451,10 @@ mod tests {
         // Unused covariance entries are NaN, which PartialEq never equals: compare the bits of
         // every field through the encoding, and the fields that are numbers directly.
         assert_eq!(encode_estimate(&back), encode_estimate(&e));
-        assert_eq!((back.k, back.nx, &back.x[..2], &back.p[..3]), (7, 2, &e.x[..2], &e.p[..3]));
+        assert_eq!(
+            (back.k, back.nx, &back.x[..2], &back.p[..3]),
+            (7, 2, &e.x[..2], &e.p[..3])
+        );
     }
 
     #[test]
@@ -486,7 +491,10 @@ mod tests {
         let h = header();
         let mut s = slot();
         s.ny = 2;
-        assert_eq!(decode_slot(&encode_slot(&h, &s)).unwrap_err().reason(), "invalid");
+        assert_eq!(
+            decode_slot(&encode_slot(&h, &s)).unwrap_err().reason(),
+            "invalid"
+        );
         let mut s = slot();
         s.node = 2;
         s.seq += 1;

@@ -25,6 +25,9 @@ pub struct Counts {
     pub dropped_by_channel: u64,
     /// Slots lost inside the IPC (sequence gaps), handed on as lost.
     pub lost_in_ipc: u64,
+    /// Slots a bridge wrote for what the network lost (`FLAG_NET_LOST`, docs/bridge.md):
+    /// received, but without information.
+    pub lost_on_network: u64,
     /// Slots before the first one this runner saw of a stream (joined mid-stream).
     pub missed_before_join: u64,
     /// Slots that arrived out of order or duplicated (ignored; never expected).
@@ -168,11 +171,15 @@ impl Assembler {
         self.fill_to(slot.seq, emit);
         let mut obs = channel_sim::wire::observation_of(slot)?;
         obs.ny = self.ny;
-        self.counts.received += 1;
-        if obs.delivered {
-            self.counts.delivered += 1;
+        if obs.flags & estpipe_wire::FLAG_NET_LOST != 0 {
+            self.counts.lost_on_network += 1;
         } else {
-            self.counts.dropped_by_channel += 1;
+            self.counts.received += 1;
+            if obs.delivered {
+                self.counts.delivered += 1;
+            } else {
+                self.counts.dropped_by_channel += 1;
+            }
         }
         self.obs[usize::from(obs.node)] = obs;
         self.next_seq = slot.seq + 1;
