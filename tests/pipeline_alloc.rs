@@ -87,7 +87,7 @@ fn run_mode(mode: WaitMode, publish: Option<bool>) -> Outcome {
         .run(Hooks {
             alloc_probe: Some(probe),
             warmup: WARMUP,
-            progress: None,
+            ..Hooks::default()
         })
         .unwrap();
     assert!(publ.wait(30).success());

@@ -20,7 +20,7 @@ fn config() -> std::path::PathBuf {
 fn demo_matches_in_process_eval_exactly_and_replays() {
     let cfg = config();
     let scenario = channel_sim::scenario::config::load(&cfg).unwrap();
-    check(&["--config", cfg.to_str().unwrap()], &scenario, 150);
+    let _ = check(&["--config", cfg.to_str().unwrap()], &scenario, 150);
 }
 
 /// The default scenario of the demo, with every real-time estimator that applies to it and
@@ -29,14 +29,65 @@ fn demo_matches_in_process_eval_exactly_and_replays() {
 #[test]
 fn occlusion_demo_matches_in_process_eval_exactly() {
     let scenario = channel_sim::scenario::preset("occlusion").unwrap();
-    check(
+    let _ = check(
         &["--scenario", "occlusion", "--particles", "5000"],
         scenario.as_ref(),
         60,
     );
 }
 
-fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u32) {
+/// `demo --gate P` (docs/gate.md): the gated estimators (`<name>+gate`) over shared memory
+/// are `eval --gate P`'s bit for bit, their rejection counts are eval's, and the summary
+/// prints them; the replay of the slot log with `--gate P` agrees.
+#[test]
+fn gated_demo_matches_in_process_eval_exactly() {
+    let scenario = channel_sim::scenario::preset("occlusion").unwrap();
+    check_gated(
+        &["--scenario", "occlusion", "--gate", "0.99"],
+        scenario.as_ref(),
+        80,
+        Some(0.99),
+    );
+}
+
+/// A user's own model with occlusion regions (a TOML `kind = "occlusion"` stage): the demo
+/// runs the occlusion estimators and their known-loss-rate variants on it, bit for bit as
+/// `eval` and the replay of its slot log.
+#[test]
+fn user_occlusion_model_demo_matches_in_process_eval_exactly() {
+    let cfg = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../channel-sim/scenarios/occlusion-user.toml");
+    let scenario = channel_sim::scenario::config::load(&cfg).unwrap();
+    let names = check(
+        &["--config", cfg.to_str().unwrap(), "--loss-rate", "0.05"],
+        &scenario,
+        100,
+    );
+    for want in [
+        "ikf",
+        "cce",
+        "kf-io",
+        "adf",
+        "cce-mix",
+        "kf-io-mix",
+        "adf-mix",
+    ] {
+        assert!(names.iter().any(|n| n == want), "{want} not in {names:?}");
+    }
+}
+
+/// Runs the demo with `scenario_args` and checks it against `eval`; returns the names of the
+/// estimators the demo ran.
+fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u32) -> Vec<String> {
+    check_gated(scenario_args, scenario, steps, None)
+}
+
+fn check_gated(
+    scenario_args: &[&str],
+    scenario: &dyn channel_sim::Scenario,
+    steps: u32,
+    gate: Option<f64>,
+) -> Vec<String> {
     let dir = scratch("demo");
     let prefix = common::prefix("demo");
     let out = dir.join("out");
@@ -87,11 +138,17 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
 
     // The same experiment in-process, by `eval` (run 0 of seed SEED, one run).
     let nx = scenario.nx();
+    let loss_rate = scenario_args
+        .iter()
+        .position(|a| *a == "--loss-rate")
+        .map_or(0.0, |i| scenario_args[i + 1].parse().unwrap());
     #[allow(clippy::needless_update)]
     let options = EvalOptions {
         runs: 1,
         horizon: steps,
         seed: SEED,
+        gate,
+        loss_rate,
         ..EvalOptions::default()
     };
     let config = RunConfig {
@@ -124,6 +181,19 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
             }
         }
         let (_, res) = ev.estimators.iter().find(|(n, _)| n == name).unwrap();
+        if gate.is_some() && name != "pf" && name != "nn" {
+            assert!(name.ends_with("+gate"), "{name}");
+            let g = res
+                .gate
+                .unwrap_or_else(|| panic!("{name}: eval has no gate counts"));
+            assert!(g.tested > 0, "{name}");
+            assert_eq!(rep["gate"]["tested"], g.tested, "{name}");
+            assert_eq!(rep["gate"]["rejected"], g.rejected, "{name}");
+            assert!(text.contains(&format!(
+                "{name}: innovation gate rejected {} of {}",
+                g.rejected, g.tested
+            )));
+        }
         let ours = rep["mse"].as_f64().unwrap();
         assert_eq!(
             ours.to_bits(),
@@ -155,6 +225,10 @@ fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u3
         }
     }
     let _ = std::fs::remove_dir_all(&dir);
+    reported
+        .iter()
+        .map(|r| r["name"].as_str().unwrap().to_owned())
+        .collect()
 }
 
 /// `latency.csv` has one row per instant, in send order, and is the same data as the

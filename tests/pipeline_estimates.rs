@@ -170,14 +170,13 @@ fn run_and_collect(
 }
 
 /// What an estimator's covariance is (docs/design.md, The estimator API): the bound its paper
-/// propagates for the NN estimator and the Tobit filters, none for the particle filter, else
-/// the error covariance.
+/// propagates for the NN estimator and the Tobit filters, else the error covariance (the
+/// particle filters' weighted sample covariance included).
 fn expected_kind(name: &str) -> ipc_runner::CovarianceKind {
     use ipc_runner::CovarianceKind::*;
     match name {
         "nn" | "fused" => Bound,
         n if n.starts_with("tobit-") => Bound,
-        "pf" => None,
         _ => Estimate,
     }
 }

@@ -295,12 +295,12 @@ impl Forward<'_> {
             }
             Arrival::NewStream => {}
             Arrival::InOrder { lost: 0, .. } => {}
-            Arrival::InOrder { lost, .. } if lost > self.max_gap => {
+            Arrival::InOrder { lost, .. } if u64::from(lost) > self.max_gap => {
                 self.report.refuse("gap_too_large");
             }
             Arrival::InOrder { from, lost } => {
-                for seq in from..from + lost {
-                    self.send(&h, lost_slot(&s, seq))?;
+                for k in from..from + lost {
+                    self.send(&h, lost_slot(&s, k))?;
                     self.report.lost_on_network += 1;
                 }
             }
@@ -334,10 +334,8 @@ impl Forward<'_> {
                 ))
             }
         }
-        // One wake-up per instant (and per marker), as the publisher sends them.
-        if s.kind != SLOT_DATA || s.node + 1 == s.nodes {
-            let _ = self.notifier.notify();
-        }
+        // A wake-up per slot: each node is its own stream, so any slot may complete an instant.
+        let _ = self.notifier.notify();
         Ok(())
     }
 }

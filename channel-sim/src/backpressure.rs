@@ -18,7 +18,7 @@
 //! marker was discarded would leave the runner waiting for its deadline.
 
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
-use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -65,6 +65,10 @@ pub enum Mode {
 pub struct Gate {
     mode: AtomicU8,
     stop: AtomicBool,
+    /// `--parent-pid`: the process whose end stops the publisher (0: none).
+    parent: AtomicU32,
+    /// The parent was found gone (the reason for the stop, beside a signal).
+    orphaned: AtomicBool,
 }
 
 impl Gate {
@@ -87,18 +91,46 @@ impl Gate {
         }
     }
 
-    /// Whether SIGINT/SIGTERM arrived, seen here or by the handler during a blocked send.
-    /// Asks iceoryx2's handler (which consumes the signal) and latches the answer.
+    /// Stops the publisher as SIGTERM would once `pid` is no longer its parent process: a
+    /// parent that died (even by SIGKILL) leaves its child to another process
+    /// (docs/security.md, "Signals").
+    pub fn set_parent(&self, pid: u32) {
+        self.parent.store(pid, Ordering::Relaxed);
+    }
+
+    /// Whether SIGINT/SIGTERM arrived ([`crate::signal`]) or the `--parent-pid` process is
+    /// gone, seen here or by the handler during a blocked send; latched. Nothing else stops
+    /// a run: any other signal only ends a wait early.
     pub fn stop_requested(&self) -> bool {
-        if !self.stop.load(Ordering::Relaxed) && crate::signal::termination_requested() {
-            self.stop.store(true, Ordering::Relaxed);
+        if !self.stop.load(Ordering::Relaxed) {
+            let parent = self.parent.load(Ordering::Relaxed);
+            let orphaned = parent != 0 && std::os::unix::process::parent_id() != parent;
+            if orphaned {
+                self.orphaned.store(true, Ordering::Relaxed);
+            }
+            if orphaned || crate::signal::termination_requested() {
+                self.stop.store(true, Ordering::Relaxed);
+            }
         }
         self.stop.load(Ordering::Relaxed)
     }
 
-    /// Records a termination request seen elsewhere (e.g. by `Node::wait`).
-    pub fn request_stop(&self) {
-        self.stop.store(true, Ordering::Relaxed);
+    /// Why the publisher stopped early, for its last message (`None` if it did not):
+    /// "stopped by signal (SIGTERM)" or "stopped: parent process N is gone".
+    pub fn stop_reason(&self) -> Option<String> {
+        if !self.stop.load(Ordering::Relaxed) {
+            return None;
+        }
+        if self.orphaned.load(Ordering::Relaxed) {
+            return Some(format!(
+                "stopped: parent process {} is gone",
+                self.parent.load(Ordering::Relaxed)
+            ));
+        }
+        Some(match crate::signal::termination_signal() {
+            Some(name) => format!("stopped by signal ({name})"),
+            None => "stopped by signal".to_string(),
+        })
     }
 
     /// iceoryx2's back-pressure handler, called while a subscriber's queue is full.

@@ -13,12 +13,17 @@
 //! [`scenario`] puts a plant, its channel stages and the initial distribution under a name
 //! (presets or TOML); [`scenario::resolve`] is what both processes call to get one. Beneath
 //! everything: [`error`] (the one error type of scenario construction), [`rng`] (the run's
-//! random streams) and [`validate`] (parameter checks naming the field). [`signal`] lets the
-//! publisher and `ipc-runner` ask for Ctrl-C without sleeping.
+//! random streams), [`validate`] (parameter checks naming the field) and [`flags`] (the
+//! command-line values of both binaries, and what counts as bad input). [`signal`] lets the
+//! publisher and `ipc-runner` ask for Ctrl-C without sleeping (and makes every other signal
+//! harmless); [`node`] creates their iceoryx2 node and says what to do when the iceoryx2
+//! directories belong to another user.
 
 pub mod backpressure;
 pub mod channel;
 pub mod error;
+pub mod flags;
+pub mod node;
 pub mod plant;
 pub mod publisher;
 pub mod rng;

@@ -1,6 +1,9 @@
 //! `channel-sim`: simulates a plant, its sensors and the channel, and publishes the slots on
 //! iceoryx2 shared memory (see `channel_sim::publisher`). The same publisher is reachable as
 //! the hidden `ipc-runner channel-sim` subcommand, which is what `ipc-runner demo` starts.
+//!
+//! Exit codes (docs/pipeline.md, "Exit codes"): 0 done (also when stopped by a signal: the
+//! stream ends with its ABORT marker), 2 bad input (flags, scenario), 1 any other failure.
 
 use clap::Parser;
 
@@ -14,12 +17,35 @@ struct Cli {
 
 fn main() {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-    let cli = Cli::parse();
-    match channel_sim::publisher::run(&cli.args) {
-        Ok(_) => {}
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
         Err(e) => {
-            eprintln!("channel-sim: error: {e:#}");
-            std::process::exit(1);
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            eprintln!(
+                "channel-sim: error: {} (see --help)",
+                channel_sim::flags::one_line(&e)
+            );
+            std::process::exit(2);
         }
+    };
+    if let Err(e) = channel_sim::publisher::run(&cli.args) {
+        eprintln!("channel-sim: error: {e:#}");
+        // 2 for bad input and for a refusal (a peer outside the contract, iceoryx2
+        // directories of another user: docs/security.md), as `ipc-runner`; 1 for anything else.
+        let code = if channel_sim::flags::is_bad_input(&e) {
+            2
+        } else {
+            e.downcast_ref::<estpipe_wire::ContractError>()
+                .map_or(1, estpipe_wire::ContractError::exit_code)
+        };
+        std::process::exit(code);
     }
 }

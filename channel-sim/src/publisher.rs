@@ -4,7 +4,14 @@
 //! Life cycle: create the services → wait for a subscriber (the first slots would otherwise
 //! be lost before the connection exists) → publish instants k = 1..=steps, each as truth then
 //! one slot per node, paced at `--rate` Hz, notifying the `slots-ready` event after each
-//! instant → publish an END marker → linger until the subscriber has detached (bounded).
+//! instant → publish every node's END marker → linger until the subscriber has detached
+//! (bounded).
+//!
+//! `--node N` publishes node N's slots only, as one sensor node's own process would (wire
+//! version 3: every node is its own stream, `docs/wire.md`, Stream rules). The simulation
+//! still runs every node with the same seeds, so node N's slots are bit for bit those of the
+//! all-nodes publisher; the process that publishes node 0 also publishes the truth. One
+//! process per node, started in any order, feeds the runner exactly what one publisher does.
 //!
 //! Every slot carries the scenario's [`StreamHeader`] (its shape and model fingerprint) as
 //! its user header, so a runner built for another scenario refuses the stream before it steps
@@ -16,7 +23,11 @@
 //! port behind), every 100 ms and whenever a blocked send gives up after
 //! [`BLOCK_SLICE`]; if the subscriber is gone it pauses and
 //! waits for a new one. SIGINT/SIGTERM end the run cleanly with an ABORT marker, also while a
-//! send is blocked.
+//! send is blocked, and so does the end of the `--parent-pid` process (`ipc-runner demo`
+//! passes its own: a SIGKILLed demo leaves no publisher behind). No other signal stops it
+//! (SIGCONT, SIGSTOP/SIGCONT, SIGUSR1, …): a wait it cuts short is taken up again, so the
+//! stream is the same as an undisturbed one. Every wait is cut into slices of at most
+//! [`STOP_SLICE`], so a stop is seen within one (docs/security.md, "Signals").
 
 use crate::backpressure::{Backpressure, Gate, Mode, BLOCK_SLICE};
 use crate::scenario;
@@ -25,7 +36,6 @@ use crate::wire::{slot_of, stream_header};
 use anyhow::{bail, Context, Result};
 use estpipe_wire::services::SlotService;
 use estpipe_wire::{self as wire, Slot, StreamHeader, Truth, SLOT_ABORT, SLOT_DATA, SLOT_END};
-use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::SendError;
 use iceoryx2::prelude::*;
@@ -50,20 +60,24 @@ pub struct PublisherArgs {
     #[arg(long)]
     pub steps: Option<u32>,
     /// Sampling rate in Hz; 0 publishes as fast as possible.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, value_parser = crate::flags::rate_hz)]
     pub rate: f64,
     /// What a full subscriber queue does: `block` waits (nothing is lost), `discard` drops the
     /// slot (the runner counts the gap); `auto` blocks at `--rate 0` and discards when paced.
     #[arg(long, value_enum, default_value_t = Backpressure::Auto)]
     pub backpressure: Backpressure,
+    /// Publish only this sensor node's slots (0-based; default: every node). The process that
+    /// publishes node 0 also publishes the truth.
+    #[arg(long)]
+    pub node: Option<u8>,
     /// Service-name prefix (use distinct prefixes for parallel runs).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
     /// Seconds to wait for a subscriber (at start and after losing one); 0 = forever.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = crate::flags::seconds)]
     pub connect_timeout: f64,
     /// Seconds to wait after the END marker for the subscriber to drain and detach.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = crate::flags::seconds)]
     pub linger: f64,
     /// Test hook: write this format version into every slot.
     #[arg(long, hide = true)]
@@ -71,6 +85,14 @@ pub struct PublisherArgs {
     /// Test hook: replace the first measurement entry of every N-th delivered slot by NaN.
     #[arg(long, hide = true)]
     pub debug_nan_every: Option<u64>,
+    /// Test hook: publish the truth of instant K with its first component NaN (what a
+    /// foreign publisher's bug would send; the runner must count it, not average it).
+    #[arg(long, hide = true, value_name = "K")]
+    pub debug_nan_truth_at: Option<u32>,
+    /// Stop (as on SIGTERM: ABORT marker, exit 0) as soon as the process PID is no longer
+    /// this publisher's parent, e.g. because it died. `ipc-runner demo` passes its own pid.
+    #[arg(long, value_name = "PID")]
+    pub parent_pid: Option<u32>,
     /// Suppress progress messages on stderr.
     #[arg(long)]
     pub quiet: bool,
@@ -102,13 +124,25 @@ enum Stop {
     Signal,
 }
 
+/// Longest single sleep: a stop (a signal that landed just before the sleep began, or the
+/// parent's end, which sends no signal) is seen within this.
+pub const STOP_SLICE: Duration = Duration::from_millis(50);
+
+/// Sleeps for `d`, or until [`Gate::stop_requested`]. A sleep cut short by any other signal
+/// (SIGCONT, SIGSTOP then SIGCONT, SIGUSR1: iceoryx2 reports every interrupted sleep the
+/// same way) is taken up again for the time that is left, so it changes nothing.
 fn wait(node: &Node<ipc::Service>, gate: &Gate, d: Duration) -> Result<(), Stop> {
-    match node.wait(d) {
-        Ok(()) => Ok(()),
-        Err(NodeWaitFailure::Interrupt | NodeWaitFailure::TerminationRequest) => {
-            gate.request_stop();
-            Err(Stop::Signal)
+    let end = std::time::Instant::now() + d;
+    loop {
+        if gate.stop_requested() {
+            return Err(Stop::Signal);
         }
+        let left = end.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return Ok(());
+        }
+        // An error is an interrupted sleep: the loop looks at the stop flag and sleeps on.
+        let _ = node.wait(left.min(STOP_SLICE));
     }
 }
 
@@ -157,6 +191,7 @@ impl SlotSender<'_> {
     fn send(&mut self, slot: Slot, give_up: Option<std::time::Instant>) -> Result<Sent> {
         let blocking = self.gate.mode() != Mode::Discard;
         let mut last_check = std::time::Instant::now();
+        let mut internal_errors = 0u32;
         loop {
             let mut s = self.publisher.loan_uninit()?;
             *s.user_header_mut() = self.header;
@@ -171,10 +206,14 @@ impl SlotSender<'_> {
                 }
                 Ok(n) if n >= self.subscribers() => return Ok(Sent::Done),
                 Ok(_) => std::thread::sleep(NOT_CONNECTED_PAUSE),
-                // A signal interrupts iceoryx2's wait inside a blocked send, which then
-                // reports an internal error rather than the signal.
-                Err(e @ (SendError::UnableToDeliver | SendError::InternalError)) => {
-                    if e == SendError::InternalError && !self.gate.stop_requested() {
+                // Any signal interrupts iceoryx2's wait inside a blocked send (SIGCONT too),
+                // which then reports an internal error rather than the signal: unless it was
+                // a stop, the slot goes again. A cause that repeats on every try is not a
+                // signal, and fails the run.
+                Err(SendError::UnableToDeliver) => {}
+                Err(e @ SendError::InternalError) => {
+                    internal_errors += 1;
+                    if internal_errors > MAX_INTERRUPTED_SENDS && !self.gate.stop_requested() {
                         return Err(e.into());
                     }
                 }
@@ -201,6 +240,10 @@ impl SlotSender<'_> {
 /// Pause before sending a slot again that a not yet connected subscriber missed.
 const NOT_CONNECTED_PAUSE: Duration = Duration::from_micros(50);
 
+/// Internal errors one blocked send tolerates (each is a wait that a signal interrupted)
+/// before the error counts as real.
+const MAX_INTERRUPTED_SENDS: u32 = 1000;
+
 /// Waits until `count()` > 0, cleaning up dead nodes on the way. `Ok(false)` on timeout.
 fn wait_for_subscriber(
     node: &Node<ipc::Service>,
@@ -225,15 +268,41 @@ fn wait_for_subscriber(
 
 /// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]).
 pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
-    if !(args.rate >= 0.0 && args.rate.is_finite()) {
-        bail!(
-            "--rate must be ≥ 0 (0 = as fast as possible), got {}",
-            args.rate
-        );
+    // The flags' parsers check these on the command line; a caller building the arguments
+    // in code gets the same refusal (issue #20: `Duration::from_secs_f64(inf)` panics).
+    for (flag, value, check) in [
+        (
+            "--rate",
+            args.rate,
+            crate::flags::rate_hz as fn(&str) -> Result<f64, String>,
+        ),
+        (
+            "--connect-timeout",
+            args.connect_timeout,
+            crate::flags::seconds,
+        ),
+        ("--linger", args.linger, crate::flags::seconds),
+    ] {
+        if let Err(e) = check(&value.to_string()) {
+            return Err(crate::flags::BadInput(format!("{flag}: {e}")).into());
+        }
     }
     let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let nodes = u8::try_from(scenario.nodes()).context("too many nodes")?;
+    if let Some(n) = args.node {
+        if n >= nodes {
+            return Err(wire::ContractError::Refused(format!(
+                "--node {n}: scenario {} has {nodes} node(s), 0..={}",
+                scenario.name(),
+                nodes - 1
+            ))
+            .into());
+        }
+    }
+    // The nodes this process publishes, and whether it publishes the truth (node 0's).
+    let mine = |m: u8| args.node.is_none_or(|n| n == m);
+    let with_truth = mine(0);
     let nx = scenario.nx();
     let say = |m: &str| {
         if !args.quiet {
@@ -241,10 +310,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
     };
 
-    let node = NodeBuilder::new()
-        .name(&NodeName::new("channel-sim").map_err(|e| anyhow::anyhow!("{e:?}"))?)
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    // Before anything can wait: SIGINT/SIGTERM set a flag from here on, nothing else stops.
+    crate::signal::install();
+    let node = crate::node::create("channel-sim")?;
     // A SIGKILLed predecessor leaves its ports registered; remove them before we claim ours.
     let _ = node.try_cleanup_dead_nodes();
 
@@ -253,9 +321,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let truth = wire::truth_service(&node, &args.prefix)?;
     let ready = wire::ready_event_service(&node, &args.prefix)?;
     let gate = Gate::new();
-    // Installs iceoryx2's SIGINT/SIGTERM handler now: a run that never waits (a subscriber is
-    // already there, --rate 0) would otherwise die of the signal's default action.
-    let _ = gate.stop_requested();
+    if let Some(pid) = args.parent_pid {
+        gate.set_parent(pid);
+    }
     let data_mode = if args.backpressure.blocks(args.rate) {
         Mode::Block
     } else {
@@ -269,15 +337,29 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         .create()
         .map_err(|e| {
             anyhow::anyhow!(
-                "cannot publish on {}/slots ({e:?}): is another channel-sim running with this \
-             --prefix?",
-                args.prefix
+                "cannot publish on {}/slots ({e:?}): are {} publishers already running with \
+                 this --prefix?",
+                args.prefix,
+                wire::MAX_NODES
             )
         })?;
-    let truth_pub = truth
-        .publisher_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("cannot publish on {}/truth: {e:?}", args.prefix))?;
+    let truth_pub = if with_truth {
+        Some(truth.publisher_builder().create().map_err(|e| {
+            anyhow::anyhow!(
+                "cannot publish on {}/truth ({e:?}): is another publisher of node 0 running \
+                 with this --prefix?",
+                args.prefix
+            )
+        })?)
+    } else {
+        None
+    };
+    let send_truth = |t: Truth| -> Result<()> {
+        if let Some(p) = &truth_pub {
+            p.loan_uninit()?.write_payload(t).send()?;
+        }
+        Ok(())
+    };
     let notifier = ready
         .notifier_builder()
         .default_event_id(wire::READY_EVENT)
@@ -304,11 +386,15 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     };
 
     say(&format!(
-        "scenario {} (seed {}, run {}), {steps} instants × {nodes} nodes at {} on prefix {:?}; \
+        "scenario {} (seed {}, run {}), {steps} instants × {} at {} on prefix {:?}; \
          waiting for a subscriber",
         scenario.name(),
         args.seed,
         args.run,
+        match args.node {
+            Some(n) => format!("node {n} of {nodes}"),
+            None => format!("{nodes} nodes"),
+        },
         if period_ns == 0 {
             "full speed".to_string()
         } else {
@@ -326,28 +412,31 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         ),
         Err(Stop::Signal) => {
             report.interrupted = true;
+            say(&format!(
+                "{} before a subscriber came",
+                gate.stop_reason().unwrap_or_default()
+            ));
             return Ok(report);
         }
     }
 
     let mut sim = scenario.start(args.seed, args.run);
     let x0 = sim.initial_truth();
-    truth_pub
-        .loan_uninit()?
-        .write_payload(Truth::new(0, sid, nx, &x0))
-        .send()?;
+    send_truth(Truth::new(0, sid, nx, &x0))?;
 
     let t0 = wire::monotonic_ns();
     let stream_start_ns = t0;
     let mut last_check = t0;
     let mut delivered_count = 0u64;
-    let mut k_done = 0u32;
+    // Per node, the last instant whose slot was handed to the publisher: its END/ABORT
+    // marker's k and seq (docs/wire.md, Stream rules).
+    let mut sent_k = [0u32; wire::MAX_NODES];
     'instants: for i in 1..=steps {
         if period_ns > 0 {
             let due = t0 + u64::from(i - 1) * period_ns;
             let now = wire::monotonic_ns();
-            let stopped = due > now && wait(&node, &gate, Duration::from_nanos(due - now)).is_err();
-            if stopped || gate.stop_requested() {
+            // Behind schedule (after a stop and continue) the instants due go at once.
+            if wait(&node, &gate, Duration::from_nanos(due.saturating_sub(now))).is_err() {
                 report.interrupted = true;
                 break;
             }
@@ -356,12 +445,13 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             break;
         }
         let inst = sim.next_instant();
-        truth_pub
-            .loan_uninit()?
-            .write_payload(Truth::new(inst.k, sid, nx, &inst.truth))
-            .send()?;
+        let mut x = inst.truth;
+        if args.debug_nan_truth_at == Some(inst.k) {
+            x[0] = f64::NAN;
+        }
+        send_truth(Truth::new(inst.k, sid, nx, &x))?;
         let mut subscriber_gone = false;
-        for obs in &inst.obs {
+        for obs in inst.obs.iter().filter(|o| mine(o.node)) {
             let mut slot = slot_of(
                 obs,
                 nodes,
@@ -392,9 +482,9 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
                     break 'instants;
                 }
             }
+            sent_k[usize::from(obs.node)] = obs.k;
         }
         notifier.notify()?;
-        k_done = inst.k;
         report.instants = i;
         // A dead subscriber stays registered (and keeps its queue) until someone cleans up.
         // After the send: the scan of the node directory (sub-millisecond) runs in the slack
@@ -428,9 +518,15 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // The marker waits for room whatever the mode (bounded by --linger): a discarded END
     // would leave the runner waiting for its deadline.
     gate.set_mode(Mode::Final);
-    let marker = Slot::marker(kind, report.slots, k_done, nodes, sid, 0);
     let give_up = std::time::Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));
-    sender.send(marker, Some(give_up))?;
+    for m in (0..nodes).filter(|&m| mine(m)) {
+        let marker = Slot {
+            period_ns,
+            stream_start_ns,
+            ..Slot::marker(kind, sent_k[usize::from(m)], m, nodes, sid, 0)
+        };
+        sender.send(marker, Some(give_up))?;
+    }
     notifier.notify()?;
     report.discarded = sender.discarded;
     report.resent = sender.resent;
@@ -442,10 +538,10 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     }
     say(&format!(
         "{} after {} instants ({} slots)",
-        if report.interrupted {
-            "stopped by signal"
-        } else {
-            "done"
+        match gate.stop_reason() {
+            Some(why) if report.interrupted => why,
+            _ if report.interrupted => "stopped by signal".to_string(),
+            _ => "done".to_string(),
         },
         report.instants,
         report.slots

@@ -42,6 +42,13 @@ pub fn standard_normal(n: usize, rng: &mut SimRng) -> DVector<f64> {
     DVector::from_fn(n, |_, _| StandardNormal.sample(rng))
 }
 
+/// [`standard_normal`] into `out` (the same draws in the same order, without allocating).
+pub fn fill_standard_normal(out: &mut [f64], rng: &mut SimRng) {
+    for v in out {
+        *v = StandardNormal.sample(rng);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

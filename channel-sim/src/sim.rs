@@ -97,8 +97,14 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     fn name(&self) -> &str;
     /// State dimension.
     fn nx(&self) -> usize;
-    /// Measurement dimension per node.
+    /// The largest node's measurement dimension (every node's, unless the sensors differ:
+    /// then [`Scenario::node_ny`]).
     fn ny(&self) -> usize;
+    /// Measurement dimension of node `node`, what its slots carry and the stream header
+    /// announces. Default: [`Scenario::ny`].
+    fn node_ny(&self, _node: usize) -> usize {
+        self.ny()
+    }
     /// Number of sensor nodes.
     fn nodes(&self) -> usize;
     /// The model fingerprint a stream of this scenario announces in its

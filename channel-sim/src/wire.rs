@@ -27,8 +27,9 @@ pub fn slot_of(
     }
 }
 
-/// The observation a data slot carries (validated). Non-finite measurement values are passed
-/// through unchanged: rejecting them is the estimator's job, which keeps its state.
+/// The observation a data slot carries (validated against the slot's own `nodes` and `ny`;
+/// wire version 3 refuses a non-finite measurement entry as a malformed slot, which the
+/// runner counts and hands on as lost).
 pub fn observation_of(slot: &Slot) -> Result<Observation, WireError> {
     slot.validate()?;
     if slot.kind != SLOT_DATA {
@@ -51,7 +52,7 @@ pub fn observation_of(slot: &Slot) -> Result<Observation, WireError> {
 /// The header every slot of a stream of `scenario` carries: its name, nodes, nx, ny per node
 /// and [`Scenario::fingerprint`].
 pub fn stream_header(scenario: &dyn Scenario) -> StreamHeader {
-    let ny = vec![scenario.ny(); scenario.nodes()];
+    let ny: Vec<usize> = (0..scenario.nodes()).map(|m| scenario.node_ny(m)).collect();
     StreamHeader::new(
         scenario.name(),
         scenario.nodes(),
@@ -88,17 +89,17 @@ mod tests {
         for (k, node, delivered) in [(1, 0, true), (7, 2, false), (300, 1, true)] {
             let o = obs(k, node, delivered);
             let s = slot_of(&o, 3, 42, 10, 20, 5);
-            assert_eq!(s.seq, u64::from(k - 1) * 3 + u64::from(node));
+            assert_eq!(s.seq, u64::from(k - 1));
             assert_eq!(observation_of(&s).unwrap(), o);
         }
     }
 
     #[test]
-    fn non_finite_values_pass_through_to_the_estimator() {
+    fn non_finite_values_are_malformed_slots() {
         let mut o = obs(3, 0, true);
         o.y[1] = f64::NAN;
-        let back = observation_of(&slot_of(&o, 1, 1, 0, 0, 0)).unwrap();
-        assert!(back.y[1].is_nan());
+        let e = observation_of(&slot_of(&o, 1, 1, 0, 0, 0)).unwrap_err();
+        assert!(e.to_string().contains("non-finite"), "{e}");
     }
 
     #[test]

@@ -87,6 +87,10 @@ int main(void) {
             printf("%s size %zu align %zu\n", e->type, e->actual_a, e->actual_b);
         }
     }
+    if (estpipe_seq_of(1) != 0 || estpipe_seq_of(300) != 299 || estpipe_seq_of(0) != 0) {
+        fprintf(stderr, "estpipe_seq_of is wrong\n");
+        failed = 1;
+    }
     if (estpipe_packed_index(3, 2, 1) != 4 || estpipe_packed_index(8, 7, 7) != ESTPIPE_COV_LEN - 1) {
         fprintf(stderr, "estpipe_packed_index is wrong\n");
         failed = 1;

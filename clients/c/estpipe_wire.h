@@ -6,6 +6,11 @@
  * To publish or subscribe, use iceoryx2's C binding (iox2) with these structs as payload and
  * user header and the type names ESTPIPE_TYPE_NAME_* (iceoryx2 compares name, size and
  * alignment), with the QoS of docs/wire.md ("Services and QoS").
+ *
+ * Wire version 3: every sensor node is its own stream (docs/wire.md, "Stream rules"): its
+ * own stream_id, seq = k - 1 (estpipe_seq_of), one END/ABORT marker per node with node set
+ * and seq = k = the node's last instant sent; up to ESTPIPE_SLOTS_MAX_PUBLISHERS publishers
+ * (one per node) on <prefix>/slots.
  */
 #ifndef ESTPIPE_WIRE_H
 #define ESTPIPE_WIRE_H
@@ -13,7 +18,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define ESTPIPE_WIRE_VERSION 2u
+#define ESTPIPE_WIRE_VERSION 3u
 
 #define ESTPIPE_MAX_NX 8
 #define ESTPIPE_MAX_NY 4
@@ -40,6 +45,7 @@
 #define ESTPIPE_COV_BOUND 2u
 
 #define ESTPIPE_READY_EVENT 1u
+#define ESTPIPE_SLOTS_MAX_PUBLISHERS ESTPIPE_MAX_NODES
 #define ESTPIPE_MAX_SUBSCRIBER_BUFFER 4096u
 #define ESTPIPE_ESTIMATE_HISTORY 16u
 
@@ -169,6 +175,11 @@ static inline size_t estpipe_packed_index(size_t nx, size_t i, size_t j) {
         j = t;
     }
     return i * nx - (i * (i - 1)) / 2 + (j - i); /* i = 0: 0 · (i − 1) wraps to 0 */
+}
+
+/* A node's sequence number of its slot of instant k (k >= 1): k - 1. */
+static inline uint64_t estpipe_seq_of(uint32_t k) {
+    return k == 0 ? 0 : (uint64_t)k - 1;
 }
 
 #endif /* ESTPIPE_WIRE_H */

@@ -48,6 +48,9 @@
 //!   fire or the bucket withheld: the held measurement ȳ and the trigger's bound enter (30)).
 //!   Lost is treated like dropped. This is provisional: the estimator cannot tell whether the
 //!   trigger fired, and a lost packet that did fire carries no event-trigger information.
+//! * Behind an innovation gate ([`crate::filter::gate`], docs/gate.md), a delivered packet the
+//!   gate rejects is what that estimator makes of a lost one (the Tobit filters: a dropped
+//!   one; the seed 003 baselines: a withheld one).
 //!
 //! [`Error::OutOfOrder`]: crate::Error::OutOfOrder
 

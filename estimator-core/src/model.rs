@@ -1,16 +1,16 @@
 //! Linear state-space models.
 //!
 //! ```text
-//! x_{k+1} = A_k x_k + B_k w_k,   w_k ~ N(0, Q_k)
+//! x_{k+1} = A_k x_k + G_k u_k + B_k w_k,   w_k ~ N(0, Q_k),  u_k known (optional)
 //! y_k     = C_k x_k + D_k v_k,   v_k ~ N(0, R_k)
 //! ```
 //!
-//! Filters only need `A_k`, `C_k` and the *effective* covariances `B_k Q_k B_kᵀ` and
-//! `D_k R_k D_kᵀ`, so they are written against the [`LinearSystem`] trait, whose matrices may
+//! Filters only need `A_k`, `C_k`, the known input term `G_k u_k` (none by default) and the
+//! *effective* covariances `B_k Q_k B_kᵀ` and `D_k R_k D_kᵀ`, so they are written against the [`LinearSystem`] trait, whose matrices may
 //! depend on the time index `k` (the seed 003 and 004 examples are time-varying).
 //! [`LinearModel`] is the time-invariant implementation, validated at construction.
 
-use nalgebra::SMatrix;
+use nalgebra::{SMatrix, SVector};
 
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::{Real, Result};
@@ -29,6 +29,13 @@ pub trait LinearSystem<T: Real, const NX: usize, const NY: usize> {
     fn process_cov(&self, k: usize) -> SMatrix<T, NX, NX>;
     /// Effective measurement-noise covariance `D_k R_k D_kᵀ`.
     fn measurement_cov(&self, k: usize) -> SMatrix<T, NY, NY>;
+    /// The known input term `G_k u_k` of `x_{k+1}` (a control input both the plant and the
+    /// filter know), `None` for a system without one. Every time update adds it to
+    /// `A_k x̂_k`; without one the prediction is exactly `A_k x̂_k`. Default: `None`.
+    #[inline]
+    fn input(&self, _k: usize) -> Option<SVector<T, NX>> {
+        None
+    }
 }
 
 /// A borrowed system is the system (so that an [`OnModel`](crate::OnModel) can borrow its
@@ -51,6 +58,10 @@ impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY> + ?Si
     #[inline]
     fn measurement_cov(&self, k: usize) -> SMatrix<T, NY, NY> {
         (**self).measurement_cov(k)
+    }
+    #[inline]
+    fn input(&self, k: usize) -> Option<SVector<T, NX>> {
+        (**self).input(k)
     }
 }
 

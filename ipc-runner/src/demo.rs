@@ -10,13 +10,20 @@
 //! `ipc-runner` binary for `cargo run -p ipc-runner`, so a separate `channel-sim` executable
 //! might not exist or might be stale, whereas `std::env::current_exe()` always is the binary
 //! that is running. `--channel-sim PATH` uses an external publisher binary instead.
+//!
+//! The child lives and dies with the demo (docs/security.md, "Signals"): it gets the demo's
+//! pid as `--parent-pid` and stops by itself when the demo is gone, even SIGKILLed; SIGINT
+//! and SIGTERM to the demo are passed on to it; and the loop polls it (every
+//! [`run::PEER_CHECK_NS`], also while it waits for the first slot), so a child that exits or
+//! crashes is noticed at once and named with its exit status.
 
 use crate::run::{self, select, Hooks, RunArgs, WaitMode};
 use anyhow::{anyhow, bail, Context, Result};
 use channel_sim::publisher::DEFAULT_STEPS;
 use channel_sim::scenario::resolve;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
 
 /// Default scenario of the demo.
 pub const DEFAULT_SCENARIO: &str = "occlusion";
@@ -39,7 +46,7 @@ pub struct DemoArgs {
     /// occlusion scenario's particle filter when it is asked for (`--particles`, ≈ 19 ms per
     /// step on the loaded 2-core build machine); faster rates queue slots behind it, which
     /// the latency table then shows.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = channel_sim::flags::rate_hz)]
     pub rate: f64,
     /// Experiment seed (same meaning and default as `eval --seed`).
     #[arg(long, default_value_t = 0)]
@@ -51,8 +58,9 @@ pub struct DemoArgs {
     /// `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (occlusion scenarios; far slower per step than
-    /// the other estimators). Default: not run, as in `eval`, unless `--estimators` names it
+    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
+    /// a preset or a TOML file, and `nn-token-bucket`; far slower per step than the other
+    /// estimators). Default: not run, as in `eval`, unless `--estimators` names it
     /// (then 5000).
     #[arg(long)]
     pub particles: Option<usize>,
@@ -60,6 +68,9 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 0.0, value_name = "P",
           value_parser = crate::eval::cli::loss_probability)]
     pub loss_rate: f64,
+    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
     /// How the loop waits for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
@@ -85,16 +96,102 @@ pub struct DemoArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Memory the runner may preallocate, in MiB (as `run --max-memory`): the recording of
+    /// `--steps` instants and the particles.
+    #[arg(long, value_name = "MIB", default_value_t = crate::limits::DEFAULT_MAX_MEMORY_MIB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_memory: u64,
 }
 
-/// Kills the child if the demo bails out early.
+/// The files `demo` writes into `--out`.
+const OUT_FILES: [&str; 6] = [
+    "estimates.csv",
+    "slots.csv",
+    "latency.csv",
+    "report.json",
+    "latency.svg",
+    "latency-trace.svg",
+];
+
+impl DemoArgs {
+    /// Before anything starts: `--out` can be filled (created if missing; every file the
+    /// demo writes there, and the plot, can be written), the plot has a known extension, and
+    /// `particles` particles fit the memory budget (they are allocated when the estimators
+    /// are built).
+    pub fn check_outputs(&self, nx: usize, particles: usize) -> Result<()> {
+        crate::plot::check_extension(&self.plot).map_err(crate::limits::BadInput)?;
+        crate::limits::check_output_dir("--out", &self.out)?;
+        for f in OUT_FILES.iter().map(Path::new).chain([self.plot.as_path()]) {
+            crate::limits::check_output("--out", &self.out.join(f))?;
+        }
+        self.check_memory(nx, 0, 0, particles)
+    }
+
+    /// What the runner preallocates for `steps` instants of `n_est` estimators and `nodes`
+    /// nodes (it records the slots), against `--max-memory` ([`RunArgs::check_memory`]).
+    pub fn check_memory(
+        &self,
+        nx: usize,
+        nodes: usize,
+        n_est: usize,
+        particles: usize,
+    ) -> Result<()> {
+        let mut r = RunArgs::new("", "");
+        r.steps = self.steps.unwrap_or(DEFAULT_STEPS);
+        r.slots_csv = Some(self.out.join("slots.csv"));
+        r.max_memory = self.max_memory;
+        Ok(r.check_memory(nx, nodes, n_est, particles)?)
+    }
+}
+
+/// Ends the child if the demo bails out early.
 struct ChildGuard(Option<Child>);
 
 impl Drop for ChildGuard {
     fn drop(&mut self) {
         if let Some(c) = self.0.as_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
+            let _ = end_child(c, true, CHILD_GRACE);
+        }
+    }
+}
+
+/// How long the child has to exit after SIGTERM before it is killed. It stops within one of
+/// its wait slices (50 ms); the rest is room for a loaded machine.
+const CHILD_GRACE: Duration = Duration::from_millis(900);
+
+/// How long a child that completed its stream has to exit by itself (it leaves as soon as the
+/// demo's subscriber is gone) before it is sent SIGTERM.
+const CHILD_LINGER: Duration = Duration::from_secs(2);
+
+/// Ends `c`: SIGTERM first if `terminate`, else only after `grace` without an exit; then
+/// `grace` again, then SIGKILL. Its exit status.
+fn end_child(c: &mut Child, terminate: bool, grace: Duration) -> std::io::Result<ExitStatus> {
+    if terminate {
+        signal_child(c, libc::SIGTERM);
+    }
+    for term in [!terminate, false] {
+        let start = Instant::now();
+        while start.elapsed() < grace {
+            if let Some(s) = c.try_wait()? {
+                return Ok(s);
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        if term {
+            signal_child(c, libc::SIGTERM);
+        }
+    }
+    let _ = c.kill();
+    c.wait()
+}
+
+/// Sends `sig` to the child (a no-op once it has been waited for).
+fn signal_child(c: &mut Child, sig: libc::c_int) {
+    if matches!(c.try_wait(), Ok(None)) {
+        if let Ok(pid) = libc::pid_t::try_from(c.id()) {
+            // SAFETY: kill(2) on our own child, not yet waited for: the pid is still its.
+            #[allow(unsafe_code)]
+            let _ = unsafe { libc::kill(pid, sig) };
         }
     }
 }
@@ -124,6 +221,8 @@ fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
 
 /// `ipc-runner demo`. Returns the exit code.
 pub fn main(args: &DemoArgs) -> Result<i32> {
+    // SIGINT/SIGTERM set a flag from here on (the loop ends, the child is told).
+    channel_sim::signal::install();
     let (scenario_name, scenario) = match (&args.scenario, &args.config) {
         (Some(n), _) => (n.clone(), resolve(n, None)?),
         (None, Some(c)) => (c.display().to_string(), resolve(DEFAULT_SCENARIO, Some(c))?),
@@ -141,6 +240,8 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     };
     // Without --steps, the default horizon of `channel-sim` and `eval`.
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
+    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    args.check_outputs(scenario.nx(), choice.particles)?;
     let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators_with(
         scenario.clone(),
@@ -150,7 +251,14 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             run: args.run,
             horizon: steps,
         },
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
+        choice,
+    )
+    .map_err(|e| crate::limits::BadInput(format!("{e:#}")))?;
+    args.check_memory(
+        scenario.nx(),
+        scenario.nodes(),
+        make()?.len(),
+        choice.particles,
     )?;
     let prefix = args
         .prefix
@@ -170,18 +278,25 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         .args(["--steps", &steps.to_string()])
         .args(["--rate", &args.rate.to_string()])
         .args(["--prefix", &prefix])
+        .args(["--parent-pid", &std::process::id().to_string()])
         .arg("--quiet")
         .stdin(Stdio::null());
     let child = cmd
         .spawn()
         .with_context(|| format!("cannot start the publisher {cmd:?}"))?;
+    let child_pid = child.id();
     let mut guard = ChildGuard(Some(child));
+    let publisher = match &args.channel_sim {
+        Some(p) => format!("the publisher {}", p.display()),
+        None => "the publisher (ipc-runner channel-sim)".to_string(),
+    };
 
     let mut rargs = RunArgs::new(&scenario_name, &prefix);
     rargs.config = args.config.clone();
     rargs.estimators = args.estimators.clone();
     rargs.particles = args.particles;
     rargs.loss_rate = args.loss_rate;
+    rargs.gate = args.gate;
     rargs.wait = args.wait;
     rargs.cpu = args.cpu;
     rargs.latest_estimates = args.latest_estimates;
@@ -198,7 +313,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
 
     eprintln!(
         "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
-         (prefix {prefix})",
+         (prefix {prefix}, publisher pid {child_pid})",
         if args.rate > 0.0 {
             format!("{} Hz", args.rate)
         } else {
@@ -223,8 +338,15 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             c.delivered, c.dropped_by_channel, c.lost_in_ipc
         ));
     };
+    let mut exited: Option<ExitStatus> = None;
+    let mut peer = || -> Option<String> {
+        let s = guard.0.as_mut()?.try_wait().ok()??;
+        exited = Some(s);
+        Some(format!("{publisher} exited with {s}"))
+    };
     let hooks = Hooks {
         progress: Some(&mut progress),
+        peer: Some(&mut peer),
         ..Hooks::default()
     };
     let result = run::run_loop(
@@ -236,11 +358,33 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         hooks,
     );
     bar.finish_and_clear();
-    let (report, traj) = result?;
-    let status = guard.0.take().map(|mut c| c.wait()).transpose()?;
+    let (report, traj) = match result {
+        Ok(r) => r,
+        // The publisher ended before its first slot: a `--channel-sim` that is no publisher,
+        // or one that refused its arguments or its environment (its own error came first).
+        Err(e) if exited.is_some() => {
+            eprintln!("demo: error: {e:#}");
+            return Ok(2);
+        }
+        Err(e) => return Err(e),
+    };
+    // The loop's subscriber is gone: a child that completed its stream leaves by itself; one
+    // that is still running after a stop or a loss is told (SIGTERM), and killed if it must.
+    let completed = matches!(
+        report.ending,
+        run::Ending::Completed | run::Ending::PublisherStopped
+    );
+    let status = match guard.0.take() {
+        Some(mut c) => Some(end_child(
+            &mut c,
+            !completed,
+            if completed { CHILD_LINGER } else { CHILD_GRACE },
+        )?),
+        None => None,
+    };
     if let Some(s) = status {
         if !s.success() {
-            eprintln!("demo: the publisher exited with {s}");
+            eprintln!("demo: {publisher} exited with {s}");
         }
     }
     run::finish(&rargs, &report, &traj, scenario.ny())?;

@@ -4,10 +4,12 @@
 pub mod estimator;
 
 pub use estimator::{CovarianceKind, Estimator};
+pub mod cli;
 pub mod demo;
 pub mod estimators;
 pub mod eval;
 pub mod latency;
+pub mod limits;
 pub mod plot;
 pub mod replay;
 pub mod run;
@@ -22,8 +24,20 @@ pub mod transport;
 pub use plot::{latency as plot_latency, trace as plot_trace};
 
 /// The exit code of a failed pipeline command: [`estpipe_wire::ContractError::exit_code`]
-/// (2 for a peer outside the wire contract) when that is the cause, else 1.
+/// (2 for a peer outside the wire contract) when that is the cause, 2 for bad input
+/// ([`channel_sim::flags::is_bad_input`]: flags, scenario, file content, outputs, memory
+/// budget), the cause's code for a run that failed after it had written its report
+/// ([`run::ExitWith`]), else 1.
 pub fn exit_code_of(e: &anyhow::Error) -> i32 {
-    e.downcast_ref::<estpipe_wire::ContractError>()
-        .map_or(1, estpipe_wire::ContractError::exit_code)
+    if let Some(c) = e.downcast_ref::<estpipe_wire::ContractError>() {
+        return c.exit_code();
+    }
+    if let Some(run::ExitWith(code, _)) = e.downcast_ref::<run::ExitWith>() {
+        return *code;
+    }
+    if channel_sim::flags::is_bad_input(e) {
+        2
+    } else {
+        1
+    }
 }

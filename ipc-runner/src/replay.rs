@@ -2,11 +2,12 @@
 //! instead of live shared memory — for sensor logs recorded elsewhere, or to re-examine a run
 //! offline.
 
+use crate::limits::{check_output, product, BadInput, Budget};
 use crate::run::select;
-use crate::slot_log::read_slots;
+use crate::slot_log::{read_slots_within, LoggedInstant};
 use crate::Estimator;
 use anyhow::{Context, Result};
-use channel_sim::sim::{MAX_NODES, MAX_NX};
+use channel_sim::sim::MAX_NX;
 use channel_sim::Observation;
 use estpipe_wire::FLAG_IPC_LOST;
 use std::io::Write;
@@ -35,6 +36,9 @@ pub struct ReplayArgs {
     #[arg(long, default_value_t = 0.0, value_name = "P",
           value_parser = crate::eval::cli::loss_probability)]
     pub loss_rate: f64,
+    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
     /// Experiment seed the estimators are built for (as `eval --seed`).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -44,13 +48,19 @@ pub struct ReplayArgs {
     /// Write `k,<est>_0..` rows here (default: print the last estimates only).
     #[arg(long)]
     pub output: Option<PathBuf>,
+    /// Memory the replay may hold, in MiB: every instant from k = 1 to the log's last k (gaps
+    /// filled as lost) and its estimates. A log whose k goes beyond is refused at that row,
+    /// with the numbers.
+    #[arg(long, value_name = "MIB", default_value_t = crate::limits::DEFAULT_MAX_MEMORY_MIB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_memory: u64,
 }
 
 /// Steps `estimators` over `instants`; returns per-instant estimates (`nx` per estimator)
 /// and the rejected counts.
 pub fn run_estimators(
     estimators: &mut [Box<dyn Estimator>],
-    instants: &[(u32, heapless::Vec<Observation, MAX_NODES>)],
+    instants: &[LoggedInstant],
     nx: usize,
 ) -> (Vec<f64>, Vec<u64>) {
     let mut out = Vec::with_capacity(instants.len() * nx * estimators.len());
@@ -68,21 +78,42 @@ pub fn run_estimators(
     (out, rejected)
 }
 
-/// `ipc-runner replay`.
+/// `ipc-runner replay`: checks `--output` and the memory budget, reads the log (bounded),
+/// steps the estimators, prints and writes the estimates. Bad input (flags, scenario, the
+/// log's content, an unwritable output) is an error of [`BadInput`] (exit code 2).
 pub fn main(args: &ReplayArgs) -> Result<i32> {
+    if let Some(p) = &args.output {
+        check_output("--output", p)?;
+    }
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
-    let instants = read_slots(&args.input, nodes, ny)?;
-    let make = select::estimators_with(
-        scenario.into(),
-        &args.estimators,
-        select::Experiment {
-            seed: args.seed,
-            run: args.run,
-            horizon: u32::try_from(instants.len()).unwrap_or(u32::MAX),
-        },
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
-    )?;
+    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let budget = Budget::mib(args.max_memory);
+    let pf = product(&[
+        choice.particles as u64,
+        crate::eval::pf_bytes_per_particle(nx),
+    ]);
+    budget.check(&format!("--particles {}", choice.particles), pf)?;
+    let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
+    let factory = |horizon: u32| {
+        select::estimators_with(
+            scenario.clone(),
+            &args.estimators,
+            select::Experiment {
+                seed: args.seed,
+                run: args.run,
+                horizon,
+            },
+            choice,
+        )
+        .map_err(|e| BadInput(format!("{e:#}")))
+    };
+    // The estimators' count, for the bytes per instant (the log gives the horizon).
+    let n_est = factory(1)?()?.len() as u64;
+    let per_instant = size_of::<LoggedInstant>() as u64 + product(&[8, n_est, nx as u64]);
+    let max_instants = budget.bytes.saturating_sub(pf) / per_instant;
+    let instants = read_slots_within(&args.input, nodes, ny, max_instants)?;
+    let make = factory(u32::try_from(instants.len()).unwrap_or(u32::MAX))?;
     let mut estimators = make()?;
     let (est, rejected) = run_estimators(&mut estimators, &instants, nx);
     let count = |f: &dyn Fn(&Observation) -> bool| -> usize {
@@ -112,6 +143,12 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             rejected[e],
             last.unwrap_or(&[])
         );
+        if let Some((tested, rejected)) = crate::estimators::gate_counts(&**est_e) {
+            println!(
+                "{:<12} innovation gate rejected {rejected} of {tested} measurements",
+                est_e.name()
+            );
+        }
     }
     if let Some(p) = &args.output {
         let mut w = std::io::BufWriter::new(

@@ -18,13 +18,16 @@
 //! packet was lost in transport and carries none (`Packet::Lost`, docs/design.md "A loss is not
 //! a dropout"). A node missing from an instant is lost, and so is a missing instant: the
 //! estimators always see every k from 1 to the last one in the file. Values `nan`/`inf` are
-//! passed to the estimators, which reject them and keep their state (counted).
+//! passed to the estimators, which reject them and keep their state (counted). A `(k, node)`
+//! given twice is an error naming both lines; so is anything unparsable (file, line, field:
+//! exit code 2), a line over 64 KiB, and a k beyond the memory budget (docs/replay.md).
 
+use crate::limits::{BadInput, BoundedLines};
 use anyhow::{bail, Context, Result};
 use channel_sim::sim::{MAX_NODES, MAX_NY};
 use channel_sim::Observation;
 use estpipe_wire::FLAG_IPC_LOST;
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::path::Path;
 
 /// Writes observations as a slot log.
@@ -58,20 +61,52 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
     Ok(())
 }
 
-/// Reads a slot log; returns the instants (every k from 1 to the last, all nodes present).
-pub fn read_slots(
+/// One instant as read from a slot log: k and every node's observation.
+pub type LoggedInstant = (u32, heapless::Vec<Observation, MAX_NODES>);
+
+/// Instants [`read_slots`] accepts: the k span the default memory budget holds.
+pub const DEFAULT_MAX_INSTANTS: u64 =
+    crate::limits::DEFAULT_MAX_MEMORY_MIB * (1 << 20) / size_of::<LoggedInstant>() as u64;
+
+/// Reads a slot log; returns the instants (every k from 1 to the last, all nodes present),
+/// with at most [`DEFAULT_MAX_INSTANTS`] of them.
+pub fn read_slots(path: &Path, nodes: usize, ny: usize) -> Result<Vec<LoggedInstant>> {
+    read_slots_within(path, nodes, ny, DEFAULT_MAX_INSTANTS)
+}
+
+/// [`read_slots`] with a bound on the k span: a row whose k exceeds `max_instants` is refused
+/// before the gap up to it is filled (each instant from 1 to the last k is held). Lines are
+/// bounded too ([`crate::limits::BoundedLines`]: at most 64 KiB each, and `2 · max_instants ·
+/// nodes + 1` of them, blank ones included). Every error is [`BadInput`] naming the file and,
+/// for a row, its line and field; a repeated `(k, node)` names both lines.
+pub fn read_slots_within(
     path: &Path,
     nodes: usize,
     ny: usize,
-) -> Result<Vec<(u32, heapless::Vec<Observation, MAX_NODES>)>> {
-    let f = std::fs::File::open(path).with_context(|| format!("cannot open {path:?}"))?;
-    let mut lines = std::io::BufReader::new(f).lines();
-    let header = lines.next().context("empty slot log")??;
+    max_instants: u64,
+) -> Result<Vec<LoggedInstant>> {
+    if ny > MAX_NY || nodes > MAX_NODES {
+        bail!("scenario dimensions exceed the wire limits");
+    }
+    let bad = |m: String| anyhow::Error::new(BadInput(m));
+    let name = path.display();
+    let f = std::fs::File::open(path).map_err(|e| bad(format!("{name}: cannot open ({e})")))?;
+    let max_lines =
+        crate::limits::product(&[2, max_instants, nodes.max(1) as u64]).saturating_add(1);
+    let mut lines = BoundedLines::new(std::io::BufReader::new(f), path, max_lines);
+    let header = lines
+        .next_line()?
+        .ok_or_else(|| bad(format!("{name}: empty slot log (no header line)")))?
+        .1
+        .to_string();
     let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    let idx = |name: &str| {
-        cols.iter()
-            .position(|c| *c == name)
-            .with_context(|| format!("{path:?}: header lacks column {name:?} (have {cols:?})"))
+    let idx = |c: &str| {
+        cols.iter().position(|h| *h == c).ok_or_else(|| {
+            bad(format!(
+                "{name} line 1: header lacks column {c:?} (have {:?})",
+                cols.iter().take(24).collect::<Vec<_>>()
+            ))
+        })
     };
     let (ck, cn, cd, cf) = (
         idx("k")?,
@@ -82,10 +117,7 @@ pub fn read_slots(
     let cy: Vec<usize> = (0..ny)
         .map(|j| idx(&format!("y_{j}")))
         .collect::<Result<_>>()?;
-    if ny > MAX_NY || nodes > MAX_NODES {
-        bail!("scenario dimensions exceed the wire limits");
-    }
-    let mut out: Vec<(u32, heapless::Vec<Observation, MAX_NODES>)> = Vec::new();
+    let mut out: Vec<LoggedInstant> = Vec::new();
     let blank = |k: u32| {
         let mut v = heapless::Vec::new();
         for n in 0..nodes {
@@ -93,44 +125,73 @@ pub fn read_slots(
         }
         v
     };
-    for (ln, line) in lines.enumerate() {
-        let line = line?;
+    // The line of each node's row in the current instant (0: none yet).
+    let mut seen = [0u64; MAX_NODES];
+    while let Some((ln, line)) = lines.next_line()? {
         if line.trim().is_empty() {
             continue;
         }
-        let at = || format!("{path:?} line {}", ln + 2);
+        let at = |field: &str, why: String| bad(format!("{name} line {ln}: {field}: {why}"));
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
         let get = |c: usize| f.get(c).copied().unwrap_or("");
         let k: u32 = get(ck)
             .parse()
-            .with_context(|| format!("{}: bad k", at()))?;
+            .map_err(|e| at("k", format!("{:?} is not an instant ({e})", get(ck))))?;
         let node: usize = get(cn)
             .parse()
-            .with_context(|| format!("{}: bad node", at()))?;
+            .map_err(|e| at("node", format!("{:?} is not a node ({e})", get(cn))))?;
         let delivered = match get(cd) {
             "1" | "true" => true,
             "0" | "false" => false,
-            v => bail!("{}: delivered must be 0 or 1, got {v:?}", at()),
+            v => return Err(at("delivered", format!("must be 0 or 1, got {v:?}"))),
         };
         let flags: u32 = match cf {
             Some(c) if !get(c).is_empty() => get(c)
                 .parse()
-                .with_context(|| format!("{}: bad flags", at()))?,
+                .map_err(|e| at("flags", format!("{:?} ({e})", get(c))))?,
             _ => 0,
         };
         if k == 0 {
-            bail!("{}: k must be ≥ 1 (k = 0 is the prior)", at());
+            return Err(at("k", "k must be ≥ 1 (k = 0 is the prior)".into()));
         }
         if node >= nodes {
-            bail!("{}: node {node} but the scenario has {nodes} node(s)", at());
+            return Err(at(
+                "node",
+                format!("node {node} but the scenario has {nodes} node(s)"),
+            ));
         }
         let last = out.last().map_or(0, |(lk, _)| *lk);
         if k < last {
-            bail!(
-                "{}: k = {k} after k = {last}; rows must be in increasing k",
-                at()
-            );
+            return Err(at(
+                "k",
+                format!("k = {k} after k = {last}; rows must be in increasing k"),
+            ));
         }
+        if u64::from(k) > max_instants {
+            let per = size_of::<LoggedInstant>() as u64;
+            return Err(at(
+                "k",
+                format!(
+                    "k = {k} means replaying {k} instants (every k from 1, gaps as lost), \
+                     about {} of memory; the budget holds {max_instants} instants \
+                     (--max-memory MIB raises it)",
+                    crate::limits::human_bytes(u64::from(k).saturating_mul(per))
+                ),
+            ));
+        }
+        if k > last {
+            seen = [0; MAX_NODES];
+        }
+        if seen[node] != 0 {
+            return Err(at(
+                "node",
+                format!(
+                    "(k = {k}, node {node}) again; line {} has it already (one row per slot)",
+                    seen[node]
+                ),
+            ));
+        }
+        seen[node] = ln;
         while out.last().map_or(0, |(lk, _)| *lk) < k {
             let next = out.last().map_or(1, |(lk, _)| lk + 1);
             out.push((next, blank(next)));
@@ -140,7 +201,7 @@ pub fn read_slots(
             for (j, &c) in cy.iter().enumerate() {
                 y[j] = get(c)
                     .parse()
-                    .with_context(|| format!("{}: bad y_{j} {:?}", at(), get(c)))?;
+                    .map_err(|e| at(&format!("y_{j}"), format!("{:?} ({e})", get(c))))?;
             }
         }
         let obs = &mut out.last_mut().expect("pushed above").1[node];
@@ -192,6 +253,53 @@ mod tests {
         std::fs::write(&p, "k,node,delivered\n1,5,0\n").unwrap();
         let e = read_slots(&p, 2, 0).unwrap_err().to_string();
         assert!(e.contains("node 5"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Duplicates name both lines, a k beyond the budget is refused before its gap is
+    /// filled, and every refusal is bad input naming file, line and field.
+    #[test]
+    fn hostile_logs_are_refused_with_file_line_and_field() {
+        let dir = std::env::temp_dir().join(format!("replay-hostile-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("s.csv");
+        let refuse = |text: &str, max: u64| {
+            std::fs::write(&p, text).unwrap();
+            let e = read_slots_within(&p, 2, 1, max).unwrap_err();
+            assert!(BadInput::is_in(&e), "{e:#}");
+            format!("{e:#}")
+        };
+        let e = refuse("k,node,delivered,y_0\n1,0,1,0.5\n1,1,0,\n\n1,0,0,\n", 10);
+        assert!(
+            e.ends_with(
+                "line 5: node: (k = 1, node 0) again; line 2 has it already (one row per slot)"
+            ),
+            "{e}"
+        );
+        // The same node at the next k is no duplicate.
+        std::fs::write(&p, "k,node,delivered,y_0\n1,0,1,0.5\n2,0,1,0.25\n").unwrap();
+        assert_eq!(read_slots_within(&p, 2, 1, 10).unwrap().len(), 2);
+        let e = refuse("k,node,delivered,y_0\n1,0,1,0.5\n11,0,0,\n", 10);
+        assert!(
+            e.contains("line 3: k: k = 11 means replaying 11 instants")
+                && e.contains("--max-memory"),
+            "{e}"
+        );
+        let e = refuse("k,node,delivered,y_0\n1,0,1,abc\n", 10);
+        assert!(e.contains("line 2: y_0: \"abc\""), "{e}");
+        let e = refuse("k,node,delivered,y_0\nx,0,1,1\n", 10);
+        assert!(e.contains("line 2: k: \"x\" is not an instant"), "{e}");
+        let e = refuse("k,node,delivered,y_0\n1,0,2,1\n", 10);
+        assert!(e.contains("line 2: delivered: must be 0 or 1"), "{e}");
+        let e = refuse("node,delivered\n", 10);
+        assert!(e.contains("line 1: header lacks column \"k\""), "{e}");
+        let e = refuse("", 10);
+        assert!(e.contains("empty slot log"), "{e}");
+        let e = refuse(&"0".repeat(crate::limits::MAX_LINE_BYTES + 10), 10);
+        assert!(e.contains("line 1: longer than"), "{e}");
+        // Lines: at most 2 · max · nodes + 1 = 5 here, blank ones included.
+        let e = refuse("k,node,delivered,y_0\n\n\n\n\n\n", 1);
+        assert!(e.contains("line 6: more than 5 lines"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

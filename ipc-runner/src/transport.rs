@@ -44,10 +44,7 @@ impl Transport {
                 wire::MAX_SUBSCRIBER_BUFFER
             ));
         }
-        let node = NodeBuilder::new()
-            .name(&NodeName::new("ipc-runner").map_err(|e| anyhow!("{e:?}"))?)
-            .create::<ipc::Service>()
-            .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+        let node = channel_sim::node::create("ipc-runner")?;
         // Remove what SIGKILLed processes left behind (their ports would count as connected).
         let _ = node.try_cleanup_dead_nodes();
         let truth = wire::truth_service(&node, prefix)?;

@@ -52,7 +52,8 @@ pub use services::{
     MAX_SUBSCRIBER_BUFFER, READY_EVENT, SLOTS, SLOTS_READY, TRUTH,
 };
 pub use slot::{
-    Slot, FLAGS_LOST, FLAG_CENSORED, FLAG_IPC_LOST, FLAG_NET_LOST, FLAG_OCCLUDED, FLAG_RANDOM_LOSS,
+    Slot, SlotFault, FLAGS_LOST, FLAG_CENSORED, FLAG_IPC_LOST, FLAG_NET_LOST, FLAG_OCCLUDED,
+    FLAG_RANDOM_LOSS,
     FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, SLOT_ABORT, SLOT_DATA, SLOT_END,
 };
 pub use truth::Truth;
@@ -62,8 +63,10 @@ pub use truth::Truth;
 /// it as its first field and the runner refuses any other.
 ///
 /// Version 2 added the stream header and the estimate's covariance and made the slot service
-/// non-overflowing (back-pressure).
-pub const WIRE_VERSION: u32 = 2;
+/// non-overflowing (back-pressure). Version 3 made every sensor node its own stream (its own
+/// stream id, `seq = k − 1`, its own END/ABORT marker) and lets the slot service admit one
+/// publisher per node ([`MAX_NODES`]).
+pub const WIRE_VERSION: u32 = 3;
 
 /// Largest state dimension (fixed so payloads are fixed-size).
 pub const MAX_NX: usize = 8;

@@ -46,11 +46,12 @@ pub const ESTIMATE_HISTORY: usize = 16;
 /// Event id notified on `<prefix>/slots-ready` after each instant's slots were sent.
 pub const READY_EVENT: EventId = EventId::new(1);
 
-/// `<prefix>/slots`: one publisher (one stream per prefix); no overflow, so a full queue is
-/// the publisher's to handle (it blocks at `--rate 0`, discards and the runner counts the
+/// `<prefix>/slots`: up to one publisher per sensor node ([`MAX_NODES`](crate::MAX_NODES);
+/// each node is its own stream, `docs/wire.md`, Stream rules); no overflow, so a full queue
+/// is the publisher's to handle (it blocks at `--rate 0`, discards and the runner counts the
 /// gap when paced).
 pub const SLOTS_QOS: PubSubQos = PubSubQos {
-    max_publishers: 1,
+    max_publishers: crate::MAX_NODES,
     max_subscribers: 4,
     subscriber_max_buffer_size: MAX_SUBSCRIBER_BUFFER,
     history_size: 0,
@@ -77,7 +78,7 @@ pub const ESTIMATES_QOS: PubSubQos = PubSubQos {
 };
 
 /// Notifiers and listeners `<prefix>/slots-ready` admits.
-pub const READY_MAX_NOTIFIERS: usize = 2;
+pub const READY_MAX_NOTIFIERS: usize = crate::MAX_NODES;
 /// Listeners `<prefix>/slots-ready` admits.
 pub const READY_MAX_LISTENERS: usize = 4;
 /// Readers `<prefix>/estimates-latest` admits.

@@ -12,7 +12,7 @@ pub struct Truth {
     pub version: u32,
     /// Sampling instant k (0 = the initial state x_0).
     pub k: u32,
-    /// Identifies one publisher run (same as in [`Slot`](crate::Slot)).
+    /// The stream of node 0 (its publisher publishes the truth; as in [`Slot`](crate::Slot)).
     pub stream_id: u64,
     /// Valid entries of `x`.
     pub nx: u32,

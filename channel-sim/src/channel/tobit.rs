@@ -25,7 +25,8 @@ pub struct TobitCensoring {
 }
 
 impl TobitCensoring {
-    /// `thresholds[m]` is τ_m (finite, one entry per measurement component, ≤ MAX_NY).
+    /// `thresholds[m]` is τ_m (finite, one entry per measurement component of node m,
+    /// 1 to MAX_NY; nodes may measure different numbers of components).
     pub fn new(thresholds: Vec<Vec<f64>>) -> Result<Self, ScenarioError> {
         if thresholds.is_empty() || thresholds.len() > MAX_NODES {
             return Err(ScenarioError::invalid(
@@ -33,12 +34,11 @@ impl TobitCensoring {
                 "need one threshold vector per node",
             ));
         }
-        let ny = thresholds[0].len();
         for (m, t) in thresholds.iter().enumerate() {
-            if t.len() != ny || ny == 0 || ny > MAX_NY {
+            if t.is_empty() || t.len() > MAX_NY {
                 return Err(ScenarioError::invalid(
                     format!("tobit.thresholds[{m}]"),
-                    format!("every node needs the same 1 ≤ ny ≤ {MAX_NY} thresholds"),
+                    format!("needs 1 to {MAX_NY} thresholds, got {}", t.len()),
                 ));
             }
             if t.iter().any(|v| !v.is_finite()) {

@@ -1,16 +1,18 @@
-//! The linear-Gaussian plant: `x_{k+1} = A_k x_k + B_k w_k`, `w_k ~ N(0, Q)`, and sensors
+//! The linear-Gaussian plant: `x_{k+1} = A_k x_k + B_k w_k`, `w_k ~ N(0, Q)` (plus a known
+//! `B_u u_k` with a [`Control`] input), and sensors
 //! `z_{m,k} = C_{m,k} x_k + D_{m,k} v_{m,k}`, `v_{m,k} ~ N(0, R_m)`, independent across nodes.
 //! The plant of the `linear`, `occlusion` and `tobit-fusion` presets and of every TOML file.
 
 use std::any::Any;
 
 use estpipe_wire::Fnv1a64;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
+use super::control::Control;
 use super::time_matrix::TimeMatrix;
 use super::{fingerprint_matrix, LinearDescription, Plant, PlantRun};
 use crate::error::ScenarioError;
-use crate::rng::{standard_normal, SimRng};
+use crate::rng::{fill_standard_normal, SimRng};
 use crate::sim::{MAX_NODES, MAX_NX, MAX_NY};
 use crate::validate::{check_finite, check_pd, check_shape};
 
@@ -36,6 +38,7 @@ pub struct LinearPlant {
     sensors: Vec<LinearSensor>,
     q_factor: DMatrix<f64>,
     r_factors: Vec<DMatrix<f64>>,
+    control: Option<Control>,
 }
 
 impl LinearPlant {
@@ -68,17 +71,17 @@ impl LinearPlant {
                 ),
             ));
         }
-        let ny = sensors[0].c.shape().0;
         let mut r_factors = Vec::with_capacity(sensors.len());
         for (m, s) in sensors.iter().enumerate() {
             let field = |f: &str| format!("sensors[{m}].{f}");
-            let (rows, cols) = s.c.shape();
-            if rows == 0 || rows > MAX_NY || rows != ny || cols != nx {
+            // Each sensor has its own ny (its rows); the columns are the plant's nx.
+            let (ny, cols) = s.c.shape();
+            if ny == 0 || ny > MAX_NY || cols != nx {
                 return Err(ScenarioError::invalid(
                     field("c"),
                     format!(
-                        "must be {ny}×{nx} (every sensor has the same 1 ≤ ny ≤ {MAX_NY}, \
-                         nx columns), got {rows}×{cols}"
+                        "must have 1 to {MAX_NY} rows (the sensor's ny) and nx = {nx} \
+                         columns, got {ny}×{cols}"
                     ),
                 ));
             }
@@ -96,7 +99,26 @@ impl LinearPlant {
             sensors,
             q_factor,
             r_factors,
+            control: None,
         })
+    }
+
+    /// The same plant driven by a known input as well: `x_{k+1} = A x_k + B_u u_k + B w_k`
+    /// (`control` validated for this plant's nx).
+    pub fn with_control(mut self, control: Control) -> Result<Self, ScenarioError> {
+        if control.b().nrows() != self.a.shape().0 {
+            return Err(ScenarioError::invalid(
+                "control.b",
+                format!("must have nx = {} rows", self.a.shape().0),
+            ));
+        }
+        self.control = Some(control);
+        Ok(self)
+    }
+
+    /// The control input, if any.
+    pub fn control(&self) -> Option<&Control> {
+        self.control.as_ref()
     }
 
     /// The sensors.
@@ -115,15 +137,30 @@ impl Plant for LinearPlant {
         self.a.shape().0
     }
     fn ny(&self) -> usize {
-        self.sensors[0].c.shape().0
+        (0..self.sensors.len())
+            .map(|m| self.node_ny(m))
+            .max()
+            .unwrap_or(0)
+    }
+    fn node_ny(&self, node: usize) -> usize {
+        self.sensors[node].c.shape().0
     }
     fn nodes(&self) -> usize {
         self.sensors.len()
     }
     fn start(&self, x0: &[f64]) -> Box<dyn PlantRun> {
+        let nw = self.q.nrows();
+        let nv = self.sensors.iter().map(|s| s.r.nrows()).max().unwrap_or(0);
+        let nx = x0.len();
         Box::new(LinearRun {
             plant: self.clone(),
-            x: DVector::from_column_slice(x0),
+            x: x0.to_vec(),
+            scratch: Scratch {
+                normal: vec![0.0; nw.max(nv)],
+                noise: vec![0.0; nw.max(nv)],
+                ax: vec![0.0; nx],
+                bw: vec![0.0; nx],
+            },
         })
     }
     fn fingerprint(&self, h: &mut Fnv1a64) {
@@ -136,6 +173,10 @@ impl Plant for LinearPlant {
             s.c.fingerprint(h);
             s.d.fingerprint(h);
             fingerprint_matrix(h, &s.r);
+        }
+        // Only with an input, so that the plants without one keep their fingerprints.
+        if let Some(c) = &self.control {
+            c.fingerprint(h);
         }
     }
     fn linear(&self) -> Option<&dyn LinearDescription> {
@@ -162,9 +203,13 @@ impl LinearDescription for LinearPlant {
         let d = s.d.at(k);
         symmetric(&*d * &s.r * d.transpose())
     }
+    fn input(&self, k: usize) -> Option<DVector<f64>> {
+        self.control.as_ref().map(|c| c.input(k))
+    }
     fn time_invariant(&self) -> bool {
         let constant = |m: &TimeMatrix| matches!(m, TimeMatrix::Constant(_));
-        constant(&self.a)
+        self.control.is_none()
+            && constant(&self.a)
             && constant(&self.b)
             && self
                 .sensors
@@ -176,25 +221,74 @@ impl LinearDescription for LinearPlant {
 #[derive(Debug)]
 struct LinearRun {
     plant: LinearPlant,
-    x: DVector<f64>,
+    x: Vec<f64>,
+    scratch: Scratch,
+}
+
+/// The buffers of one step, allocated once per run (a step allocates nothing).
+#[derive(Debug)]
+struct Scratch {
+    normal: Vec<f64>,
+    noise: Vec<f64>,
+    ax: Vec<f64>,
+    bw: Vec<f64>,
 }
 
 impl PlantRun for LinearRun {
     fn state(&self) -> &[f64] {
-        self.x.as_slice()
+        &self.x
     }
 
     fn advance(&mut self, k: u32, rng: &mut SimRng, z: &mut [[f64; MAX_NY]]) {
         let p = &self.plant;
+        let s = &mut self.scratch;
         let prev = k.saturating_sub(1) as usize;
-        let w = &p.q_factor * standard_normal(p.q.nrows(), rng);
-        self.x = &*p.a.at(prev) * &self.x + &*p.b.at(prev) * w;
-        for (m, s) in p.sensors.iter().enumerate() {
-            let v = &p.r_factors[m] * standard_normal(s.r.nrows(), rng);
-            let zm = &*s.c.at(k as usize) * &self.x + &*s.d.at(k as usize) * v;
-            z[m][..zm.len()].copy_from_slice(zm.as_slice());
+        // w = L_Q n, x = A x + B w, then per node v = L_R n, z = C x + D v: the random draws
+        // in that order, every product summed as nalgebra's `gemv` sums it (`mat_vec`).
+        let nw = p.q.nrows();
+        fill_standard_normal(&mut s.normal[..nw], rng);
+        mat_vec(&p.q_factor, &s.normal[..nw], &mut s.noise[..nw]);
+        mat_vec(&p.a.at(prev), &self.x, &mut s.ax);
+        mat_vec(&p.b.at(prev), &s.noise[..nw], &mut s.bw);
+        for ((x, ax), bw) in self.x.iter_mut().zip(&s.ax).zip(&s.bw) {
+            *x = ax + bw;
+        }
+        if let Some(c) = &p.control {
+            self.x += c.input(prev);
+        }
+        for ((s_m, l_r), z_m) in p.sensors.iter().zip(&p.r_factors).zip(z.iter_mut()) {
+            let nv = s_m.r.nrows();
+            fill_standard_normal(&mut s.normal[..nv], rng);
+            mat_vec(l_r, &s.normal[..nv], &mut s.noise[..nv]);
+            let (c, d) = (s_m.c.at(k as usize), s_m.d.at(k as usize));
+            for i in 0..c.nrows() {
+                z_m[i] = row_dot(&c, i, &self.x) + row_dot(&d, i, &s.noise[..nv]);
+            }
         }
     }
+}
+
+/// `out = m x`, each entry `Σ_j m_ij x_j` summed from `j = 0` up, as nalgebra's `gemv`
+/// (column by column, `y ← m_j x_j + y`; the sum commutes bit for bit) sums it: the same bits
+/// without allocating.
+fn mat_vec(m: &DMatrix<f64>, x: &[f64], out: &mut [f64]) {
+    for (i, o) in out.iter_mut().enumerate().take(m.nrows()) {
+        *o = row_dot(m, i, x);
+    }
+}
+
+/// `Σ_j m_ij x_j`, from `j = 0` up (`m` is stored column by column).
+#[inline]
+fn row_dot(m: &DMatrix<f64>, i: usize, x: &[f64]) -> f64 {
+    let (rows, cols, d) = (m.nrows(), m.ncols().min(x.len()), m.as_slice());
+    if cols == 0 {
+        return 0.0;
+    }
+    let mut acc = d[i] * x[0];
+    for j in 1..cols {
+        acc += d[i + j * rows] * x[j];
+    }
+    acc
 }
 
 /// `(m + mᵀ)/2`.
@@ -213,7 +307,7 @@ mod tests {
     use super::*;
     use crate::rng::{run_rng, Stream};
     use crate::validate::check_psd;
-    use nalgebra::dmatrix;
+    use nalgebra::{dmatrix, DVector};
 
     fn plant() -> LinearPlant {
         LinearPlant::new(

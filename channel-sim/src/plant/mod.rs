@@ -10,6 +10,7 @@
 //! [`time_matrix::TimeMatrix`]) and [`nn::Seed003Plant`] (seed 003's nonlinear plant). Their
 //! noise comes from the run's plant stream ([`crate::rng`]).
 
+pub mod control;
 pub mod linear;
 pub mod nn;
 pub mod time_matrix;
@@ -27,8 +28,12 @@ use crate::sim::MAX_NY;
 pub trait Plant: Send + Sync + Debug {
     /// State dimension.
     fn nx(&self) -> usize;
-    /// Measurement dimension of every node.
+    /// The largest node's measurement dimension (every node's, unless the sensors differ).
     fn ny(&self) -> usize;
+    /// Measurement dimension of node `node` (`node < nodes()`). Default: [`Plant::ny`].
+    fn node_ny(&self, _node: usize) -> usize {
+        self.ny()
+    }
     /// Number of sensor nodes.
     fn nodes(&self) -> usize;
     /// Starts one run from the true initial state `x0`.
@@ -68,7 +73,7 @@ pub fn fingerprint_matrix(h: &mut Fnv1a64, m: &DMatrix<f64>) {
 }
 
 /// The linear-Gaussian part of a plant as a filter sees it:
-/// `x_{k+1} = A_k x_k + B_k w_k`, `z_{m,k} = C_{m,k} x_k + D_{m,k} v_{m,k}`, nodes' noises
+/// `x_{k+1} = A_k x_k + B_u u_k + B_k w_k` (the input term only with a control input), `z_{m,k} = C_{m,k} x_k + D_{m,k} v_{m,k}`, nodes' noises
 /// independent of each other.
 pub trait LinearDescription: Send + Sync + Debug {
     /// A_k.
@@ -79,8 +84,13 @@ pub trait LinearDescription: Send + Sync + Debug {
     fn c(&self, node: usize, k: usize) -> DMatrix<f64>;
     /// Effective measurement-noise covariance D_{m,k} R_m D_{m,k}ᵀ of node `node`.
     fn measurement_cov(&self, node: usize, k: usize) -> DMatrix<f64>;
-    /// `true` when no matrix depends on k, so a filter may convert them once and never
-    /// allocate per step.
+    /// The known input term `B_u u_k` of `x_{k+1}` (a control input known to the plant and
+    /// the estimators alike), `None` without one. Default: none.
+    fn input(&self, _k: usize) -> Option<nalgebra::DVector<f64>> {
+        None
+    }
+    /// `true` when neither a matrix nor the input depends on k, so a filter may convert the
+    /// model once and never allocate per step.
     fn time_invariant(&self) -> bool {
         false
     }

@@ -127,7 +127,13 @@ impl ComposedScenario {
             truth0,
             raw: Vec::with_capacity(nodes),
             z: vec![[0.0; MAX_NY]; nodes],
-            ny: self.plant.ny() as u8,
+            ny: core::array::from_fn(|m| {
+                if m < nodes {
+                    self.plant.node_ny(m) as u8
+                } else {
+                    0
+                }
+            }),
             k: 0,
             obs0: None,
         };
@@ -153,6 +159,9 @@ impl Scenario for ComposedScenario {
     fn ny(&self) -> usize {
         self.plant.ny()
     }
+    fn node_ny(&self, node: usize) -> usize {
+        self.plant.node_ny(node)
+    }
     fn nodes(&self) -> usize {
         self.plant.nodes()
     }
@@ -161,8 +170,8 @@ impl Scenario for ComposedScenario {
         h.str(FINGERPRINT_TAG)
             .u64(self.nodes() as u64)
             .u64(self.nx() as u64);
-        for _ in 0..self.nodes() {
-            h.u64(self.ny() as u64);
+        for m in 0..self.nodes() {
+            h.u64(self.node_ny(m) as u64);
         }
         self.plant.fingerprint(&mut h);
         self.initial.fingerprint(&mut h);
@@ -190,7 +199,8 @@ pub struct ComposedSimulation {
     truth0: [f64; MAX_NX],
     raw: Vec<Observation>,
     z: Vec<[f64; MAX_NY]>,
-    ny: u8,
+    /// Every node's measurement dimension.
+    ny: [u8; crate::sim::MAX_NODES],
     k: u32,
     /// The observations of instant 0 (plants that measure at k = 0 only).
     obs0: Option<heapless::Vec<Observation, { crate::sim::MAX_NODES }>>,
@@ -204,13 +214,14 @@ impl ComposedSimulation {
         // What the sensors hand to the channel: everything delivered, unflagged.
         self.raw.clear();
         for (m, z) in self.z.iter().enumerate() {
+            let ny = self.ny[m];
             let mut y = [0.0; MAX_NY];
-            y[..self.ny as usize].copy_from_slice(&z[..self.ny as usize]);
+            y[..ny as usize].copy_from_slice(&z[..ny as usize]);
             self.raw.push(Observation {
                 k,
                 node: m as u8,
                 delivered: true,
-                ny: self.ny,
+                ny,
                 y,
                 flags: 0,
             });

@@ -17,8 +17,21 @@
 //! p_loss = 0.2
 //! ```
 //!
-//! Stage kinds: `bernoulli`, `gilbert-elliott`, `token-bucket` (seed 003), `tobit` and
-//! `event-trigger` (seed 004; triggers sharing one token bucket), see [`StageConfig`].
+//! A known control input, `x_{k+1} = A x_k + B_u u_k + B w_k` (u_k known to the plant and to
+//! every estimator's time update):
+//!
+//! ```toml
+//! [control]
+//! b = [[0.0], [1.0]]                   # B_u (nx × nu)
+//! u = { kind = "sinusoid", amplitude = [2.0], period = 50.0 }   # phase, offset optional
+//! # or u = { kind = "constant", value = [1.0] }
+//! # or u = { kind = "list", values = [[1.0], [0.0], [-1.0]] }  # repeated cyclically
+//! ```
+//!
+//! Stage kinds: `bernoulli`, `gilbert-elliott`, `occlusion` (seed 001's state-dependent
+//! dropouts), `token-bucket` (seed 003), `tobit` and `event-trigger` (seed 004; triggers
+//! sharing one token bucket), see [`StageConfig`]. `scenarios/occlusion.toml` is the
+//! `occlusion` preset as a file.
 //!
 //! Matrices are arrays of rows. A stage kind is one variant of [`StageConfig`]: adding a kind
 //! is one variant (its spec type deriving `Deserialize`, `#[serde(deny_unknown_fields)]`) and
@@ -37,10 +50,12 @@ use super::composed::ComposedScenario;
 use super::initial::InitialDistribution;
 use crate::channel::event_trigger::{TriggerParams, TriggeredTokenBucket};
 use crate::channel::loss::{BernoulliLoss, GilbertElliottLoss};
+use crate::channel::occlusion::OcclusionSpec;
 use crate::channel::tobit::TobitCensoring;
 use crate::channel::token_bucket::TokenBucketStage;
 use crate::channel::StageSpec;
 use crate::error::ScenarioError;
+use crate::plant::control::{Control, Schedule};
 use crate::plant::linear::{LinearPlant, LinearSensor};
 use crate::validate::check_finite;
 
@@ -62,6 +77,67 @@ pub struct ScenarioFile {
     /// Channel stages in application order (none: a perfect channel).
     #[serde(default)]
     pub stages: Vec<StageConfig>,
+    /// A known control input (none: the plant is driven by noise only).
+    pub control: Option<ControlConfig>,
+}
+
+/// `[control]`: `x_{k+1} = A x_k + B_u u_k + B w_k`, `u_k` known to the plant and to every
+/// estimator's time update.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControlConfig {
+    /// B_u (nx × nu).
+    pub b: Rows,
+    /// The schedule of u_k.
+    pub u: ScheduleConfig,
+}
+
+/// `[control.u]`, selected by `kind`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ScheduleConfig {
+    /// `kind = "constant"`: `u_k = value`.
+    Constant {
+        /// u (nu entries).
+        value: Vec<f64>,
+    },
+    /// `kind = "sinusoid"`: `u_k = offset + amplitude · sin(2π k / period + phase)`.
+    Sinusoid {
+        /// Amplitude per entry.
+        amplitude: Vec<f64>,
+        /// Period in instants.
+        period: f64,
+        /// Phase in radians (default 0).
+        #[serde(default)]
+        phase: f64,
+        /// Mean per entry (default 0).
+        offset: Option<Vec<f64>>,
+    },
+    /// `kind = "list"`: `u_k = values[k mod len]`.
+    List {
+        /// The vectors, repeated cyclically.
+        values: Vec<Vec<f64>>,
+    },
+}
+
+impl ScheduleConfig {
+    fn schedule(self) -> Schedule {
+        match self {
+            ScheduleConfig::Constant { value } => Schedule::Constant(value),
+            ScheduleConfig::Sinusoid {
+                amplitude,
+                period,
+                phase,
+                offset,
+            } => Schedule::Sinusoid {
+                offset: offset.unwrap_or_else(|| vec![0.0; amplitude.len()]),
+                amplitude,
+                period,
+                phase,
+            },
+            ScheduleConfig::List { values } => Schedule::List(values),
+        }
+    }
 }
 
 /// `[model]`.
@@ -118,6 +194,42 @@ pub enum StageConfig {
     /// `kind = "event-trigger"`: dynamic event triggers sharing one token bucket, seed 004
     /// eqs. (11)-(20). λχ ≤ 1 is refused unless `allow_paper_violation = true` (then warned).
     EventTrigger(EventTriggerToml),
+    /// `kind = "occlusion"`: state-dependent dropouts, seed 001 eqs. (2)-(3) — every packet of
+    /// instant k is lost iff `u_k = e·x_k + n_k`, `n_k ~ N(0, psi)`, lies in one of the
+    /// intervals `[centres[i] − radii[i], centres[i] + radii[i]]` (1 to
+    /// [`MAX_OCCLUSION_REGIONS`], disjoint). The `occlusion` preset's stage is
+    /// `e = [1, 0, 0]`, `psi = 0.1`, `centres = [20, 40, 60, 80]`, `radii = [5, 5, 5, 5]`.
+    Occlusion(OcclusionToml),
+}
+
+/// The most occlusion regions a TOML stage may declare (the estimators are built per count).
+pub const MAX_OCCLUSION_REGIONS: usize = 4;
+
+/// `kind = "occlusion"`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OcclusionToml {
+    /// The row E of `u = E x + n` (n_x entries).
+    pub e: Vec<f64>,
+    /// Ψ, the variance of n (positive).
+    pub psi: f64,
+    /// ζ_i, the regions' centres.
+    pub centres: Vec<f64>,
+    /// r_i, the regions' half-widths (positive, one per centre).
+    pub radii: Vec<f64>,
+}
+
+impl OcclusionToml {
+    fn spec<const S: usize>(&self, nx: usize) -> Result<Arc<dyn StageSpec>, ScenarioError> {
+        let arr = |v: &[f64]| -> [f64; S] { core::array::from_fn(|i| v[i]) };
+        Ok(Arc::new(OcclusionSpec::<S>::new(
+            self.e.clone(),
+            self.psi,
+            arr(&self.centres),
+            arr(&self.radii),
+            nx,
+        )?))
+    }
 }
 
 /// `kind = "tobit"`.
@@ -163,6 +275,54 @@ pub struct TriggerNodeToml {
     pub cost: u32,
 }
 
+/// The plant's dimensions, which every stage is checked against.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlantDims {
+    /// n_x.
+    pub nx: usize,
+    /// n_y of every node, in node order.
+    pub ny: Vec<usize>,
+}
+
+impl PlantDims {
+    /// The dimensions of `plant`.
+    pub fn of(plant: &dyn crate::plant::Plant) -> Self {
+        Self {
+            nx: plant.nx(),
+            ny: (0..plant.nodes()).map(|m| plant.node_ny(m)).collect(),
+        }
+    }
+
+    /// The number of sensor nodes.
+    pub fn nodes(&self) -> usize {
+        self.ny.len()
+    }
+
+    /// Errors unless `{field}.{list}` has one entry per sensor node.
+    fn per_node(&self, field: &str, list: &str, got: usize) -> Result<(), ScenarioError> {
+        let nodes = self.nodes();
+        if got == nodes {
+            return Ok(());
+        }
+        Err(ScenarioError::invalid(
+            format!("{field}.{list}"),
+            format!("must have one entry per sensor node ({nodes} `[[sensors]]`), got {got}"),
+        ))
+    }
+
+    /// Errors unless the vector `field` of node `m` has that node's ny entries.
+    fn node_vector(&self, field: &str, m: usize, got: usize) -> Result<(), ScenarioError> {
+        let ny = self.ny[m];
+        if got == ny {
+            return Ok(());
+        }
+        Err(ScenarioError::invalid(
+            field,
+            format!("must have ny = {ny} entries (the rows of sensors[{m}].c), got {got}"),
+        ))
+    }
+}
+
 /// Re-roots an error of a stage constructor (`invalid `trigger.nodes[0]`: why`) at the
 /// stage's TOML path (`invalid `stages[2].nodes[0]`: why`).
 fn at(field: &str, e: ScenarioError) -> ScenarioError {
@@ -173,7 +333,8 @@ fn at(field: &str, e: ScenarioError) -> ScenarioError {
         } => {
             let inner = inner
                 .trim_start_matches("tobit")
-                .trim_start_matches("trigger");
+                .trim_start_matches("trigger")
+                .trim_start_matches("occlusion");
             ScenarioError::invalid(format!("{field}{inner}"), reason)
         }
         other => ScenarioError::invalid(field, other.to_string()),
@@ -181,9 +342,40 @@ fn at(field: &str, e: ScenarioError) -> ScenarioError {
 }
 
 impl StageConfig {
-    /// Validates the stage (fields named under `field`) and returns its spec.
-    pub fn into_spec(self, field: &str) -> Result<Arc<dyn StageSpec>, ScenarioError> {
+    /// Validates the stage (fields named under `field`) against the plant's dimensions and
+    /// returns its spec.
+    pub fn into_spec(
+        self,
+        field: &str,
+        dims: &PlantDims,
+    ) -> Result<Arc<dyn StageSpec>, ScenarioError> {
         Ok(match self {
+            StageConfig::Occlusion(o) => {
+                let n = o.centres.len();
+                if n == 0 || n > MAX_OCCLUSION_REGIONS {
+                    return Err(ScenarioError::invalid(
+                        format!("{field}.centres"),
+                        format!("must have 1 to {MAX_OCCLUSION_REGIONS} entries, got {n}"),
+                    ));
+                }
+                if o.radii.len() != n {
+                    return Err(ScenarioError::invalid(
+                        format!("{field}.radii"),
+                        format!(
+                            "must have one entry per centre ({n}), got {}",
+                            o.radii.len()
+                        ),
+                    ));
+                }
+                let nx = dims.nx;
+                match n {
+                    1 => o.spec::<1>(nx),
+                    2 => o.spec::<2>(nx),
+                    3 => o.spec::<3>(nx),
+                    _ => o.spec::<4>(nx),
+                }
+                .map_err(|e| at(field, e))?
+            }
             StageConfig::Bernoulli(s) => {
                 s.validate(field)?;
                 Arc::new(s)
@@ -197,9 +389,21 @@ impl StageConfig {
                 Arc::new(s)
             }
             StageConfig::Tobit(t) => {
+                dims.per_node(field, "thresholds", t.thresholds.len())?;
+                for (m, tau) in t.thresholds.iter().enumerate() {
+                    dims.node_vector(&format!("{field}.thresholds[{m}]"), m, tau.len())?;
+                }
                 Arc::new(TobitCensoring::new(t.thresholds).map_err(|e| at(field, e))?)
             }
             StageConfig::EventTrigger(t) => {
+                dims.per_node(field, "nodes", t.nodes.len())?;
+                for (m, n) in t.nodes.iter().enumerate() {
+                    dims.node_vector(
+                        &format!("{field}.nodes[{m}].reference"),
+                        m,
+                        n.reference.len(),
+                    )?;
+                }
                 let params: Vec<TriggerParams> = t
                     .nodes
                     .iter()
@@ -252,7 +456,14 @@ pub fn parse(
         path: origin.to_owned(),
         reason: one_line(text, &e),
     })?;
-    build(file, default_name)
+    // Every error of a file names the file, then the field.
+    build(file, default_name).map_err(|e| match e {
+        e @ ScenarioError::File { .. } => e,
+        e => ScenarioError::File {
+            path: origin.to_owned(),
+            reason: e.to_string(),
+        },
+    })
 }
 
 /// Builds the scenario from a parsed file.
@@ -278,7 +489,11 @@ pub fn build(file: ScenarioFile, default_name: &str) -> Result<ComposedScenario,
             r,
         });
     }
-    let plant = LinearPlant::new(a.into(), b.into(), q, sensors)?;
+    let mut plant = LinearPlant::new(a.into(), b.into(), q, sensors)?;
+    if let Some(c) = &file.control {
+        let bu = matrix(&c.b, "control.b")?;
+        plant = plant.with_control(Control::new(bu, c.u.clone().schedule(), nx)?)?;
+    }
 
     let init = &file.initial;
     let mean = DVector::from_vec(init.mean.clone());
@@ -299,15 +514,133 @@ pub fn build(file: ScenarioFile, default_name: &str) -> Result<ComposedScenario,
         None => cov.clone(),
     };
     let initial = InitialDistribution::new(mean, cov, est_mean, est_cov)?;
+    check_overflow(&plant, &initial, &file)?;
 
+    let dims = PlantDims::of(&plant);
     let stages = file
         .stages
         .into_iter()
         .enumerate()
-        .map(|(i, s)| s.into_spec(&format!("stages[{i}]")))
+        .map(|(i, s)| s.into_spec(&format!("stages[{i}]"), &dims))
         .collect::<Result<Vec<_>, _>>()?;
     let name = file.name.unwrap_or_else(|| default_name.to_owned());
     ComposedScenario::new(name, Arc::new(plant), initial, stages)
+}
+
+/// Instants over which the overflow check of [`build`] follows the model's moments.
+pub const OVERFLOW_CHECK_STEPS: usize = 20;
+
+/// The largest magnitude a moment may reach in the overflow check of [`build`]: f64's range
+/// less a margin of 10⁸ for the estimators' own sums and products of those moments (an MSE
+/// sums squared errors over runs; a Joseph update adds congruences).
+pub const MOMENT_LIMIT: f64 = 1e300;
+
+/// Refuses a model whose numbers are finite but whose products are not: from both priors
+/// (the truth's `initial.cov` and the estimators' `initial.estimator_cov`) the mean and
+/// covariance of x_k, `E‖x_k‖²`, and every node's `C x_k` and `C Σ_k Cᵀ + D R Dᵀ` must stay
+/// within [`MOMENT_LIMIT`] for k = 0..[`OVERFLOW_CHECK_STEPS`]; otherwise every run would end
+/// in NaN ("diverged") or a later error. The field named is the input with the largest entry
+/// among those the failing product used (1e308 in `model.a` names `model.a`).
+fn check_overflow(
+    plant: &LinearPlant,
+    initial: &InitialDistribution,
+    file: &ScenarioFile,
+) -> Result<(), ScenarioError> {
+    use crate::plant::{LinearDescription, Plant};
+    let amax = |rows: &[Vec<f64>]| rows.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let vmax = |v: &[f64]| v.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let mut model_fields: Vec<(String, f64)> = vec![
+        ("model.a".into(), amax(&file.model.a)),
+        ("model.q".into(), amax(&file.model.q)),
+    ];
+    if let Some(b) = &file.model.b {
+        model_fields.push(("model.b".into(), amax(b)));
+    }
+    if let Some(c) = &file.control {
+        model_fields.push(("control.b".into(), amax(&c.b)));
+        let u = match &c.u {
+            ScheduleConfig::Constant { value } => vmax(value),
+            ScheduleConfig::Sinusoid {
+                amplitude, offset, ..
+            } => vmax(amplitude) + offset.as_deref().map_or(0.0, vmax),
+            ScheduleConfig::List { values } => values.iter().map(|v| vmax(v)).fold(0.0, f64::max),
+        };
+        model_fields.push(("control.u".into(), u));
+    }
+    for (m, s) in file.sensors.iter().enumerate() {
+        model_fields.push((format!("sensors[{m}].c"), amax(&s.c)));
+        model_fields.push((format!("sensors[{m}].r"), amax(&s.r)));
+        if let Some(d) = &s.d {
+            model_fields.push((format!("sensors[{m}].d"), amax(d)));
+        }
+    }
+    let ok = |m: &[f64]| m.iter().all(|v| v.is_finite() && v.abs() <= MOMENT_LIMIT);
+    let priors = [
+        (
+            &initial.mean,
+            &initial.cov,
+            "initial.mean",
+            "initial.cov",
+            file.initial.cov.as_slice(),
+        ),
+        (
+            &initial.estimator_mean,
+            &initial.estimator_cov,
+            "initial.estimator_mean",
+            "initial.estimator_cov",
+            file.initial
+                .estimator_cov
+                .as_deref()
+                .unwrap_or(file.initial.cov.as_slice()),
+        ),
+    ];
+    for (mean, cov, mean_field, cov_field, cov_rows) in priors {
+        let mut blame = model_fields.clone();
+        blame.push((mean_field.into(), vmax(mean.as_slice())));
+        blame.push((cov_field.into(), amax(cov_rows)));
+        let fail = |k: usize, what: &str| {
+            let (field, v) = blame
+                .iter()
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .cloned()
+                .unwrap_or_default();
+            ScenarioError::invalid(
+                field,
+                format!(
+                    "entries up to {v:e} make {what} overflow f64 by k = {k} (beyond \
+                     {MOMENT_LIMIT:e}); scale the model down"
+                ),
+            )
+        };
+        let (mut m, mut s) = (mean.clone(), cov.clone());
+        for k in 0..=OVERFLOW_CHECK_STEPS {
+            let second = s.trace() + m.norm_squared();
+            if !(ok(m.as_slice())
+                && ok(s.as_slice())
+                && second.is_finite()
+                && second <= MOMENT_LIMIT)
+            {
+                return Err(fail(k, "the state's mean or covariance"));
+            }
+            for node in 0..plant.nodes() {
+                let c = plant.c(node, k);
+                let sy = &c * &s * c.transpose() + plant.measurement_cov(node, k);
+                if !(ok((&c * &m).as_slice()) && ok(sy.as_slice())) {
+                    return Err(fail(k, "the measurement's mean or covariance"));
+                }
+            }
+            let (a, q) = (plant.a(k), plant.process_cov(k));
+            if !ok(q.as_slice()) {
+                return Err(fail(k, "B Q Bᵀ"));
+            }
+            m = &a * m;
+            if let Some(bu) = plant.input(k) {
+                m += bu;
+            }
+            s = &a * s * a.transpose() + q;
+        }
+    }
+    Ok(())
 }
 
 /// A dense matrix from rows; errors unless non-empty, rectangular and finite.
@@ -330,15 +663,40 @@ pub fn matrix(rows: &Rows, field: &str) -> Result<DMatrix<f64>, ScenarioError> {
     Ok(m)
 }
 
-/// A TOML error as one line: `line L: message`.
+/// A TOML error as one line: `line L (`key`): message`, with the key assigned on that line.
+/// The parser's message names the value's problem, not always the field, and inside a
+/// `[[stages]]` table (a tagged enum) it points at the table: then the line is the first one
+/// from there whose value holds the literal the message quotes (`-3` in "invalid value:
+/// integer `-3`, expected u32").
 fn one_line(text: &str, e: &toml::de::Error) -> String {
     let msg = e.message().trim().replace('\n', " ");
-    match e.span() {
-        Some(span) => {
-            let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
-            format!("line {line}: {msg}")
+    let Some(span) = e.span() else {
+        return msg;
+    };
+    let start = span.start.min(text.len());
+    let mut line = text[..start].matches('\n').count() + 1;
+    fn key_of(source: &str) -> Option<(&str, &str)> {
+        source
+            .split_once('=')
+            .map(|(k, v)| (k.trim(), v))
+            .filter(|(k, _)| {
+                !k.is_empty()
+                    && k.len() <= 40
+                    && k.chars()
+                        .all(|c| c.is_alphanumeric() || "_-.\"".contains(c))
+            })
+    }
+    let quoted = msg.split('`').nth(1).filter(|q| !q.is_empty());
+    if let Some(q) = quoted {
+        if let Some((i, _)) = text.lines().enumerate().skip(line - 1).find(|(_, l)| {
+            key_of(l).is_some_and(|(_, v)| v.split('#').next().unwrap_or("").contains(q))
+        }) {
+            line = i + 1;
         }
-        None => msg,
+    }
+    match text.lines().nth(line - 1).and_then(key_of) {
+        Some((key, _)) => format!("line {line} (`{key}`): {msg}"),
+        None => format!("line {line}: {msg}"),
     }
 }
 

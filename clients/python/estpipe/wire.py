@@ -10,7 +10,7 @@ import time
 
 import iceoryx2 as iox2
 
-WIRE_VERSION = 2
+WIRE_VERSION = 3
 
 MAX_NX = 8
 MAX_NY = 4
@@ -165,9 +165,10 @@ def packed_index(nx: int, i: int, j: int) -> int:
     return i * nx - i * (i - 1) // 2 + (j - i)
 
 
-def seq_of(k: int, node: int, nodes: int) -> int:
-    """The dense sequence number of slot (k, node): (k - 1)·nodes + node."""
-    return (k - 1) * nodes + node
+def seq_of(k: int) -> int:
+    """A node's sequence number of its slot of instant k: k - 1 (every node is its own
+    stream, wire version 3)."""
+    return max(k - 1, 0)
 
 
 def monotonic_ns() -> int:
@@ -186,7 +187,7 @@ def slot_service(node, prefix: str):
         node.service_builder(service_name(prefix, "slots"))
         .publish_subscribe(Slot)
         .user_header(StreamHeader)
-        .max_publishers(1)
+        .max_publishers(MAX_NODES)
         .max_subscribers(4)
         .subscriber_max_buffer_size(MAX_SUBSCRIBER_BUFFER)
         .history_size(0)
@@ -200,7 +201,7 @@ def ready_event_service(node, prefix: str):
     return (
         node.service_builder(service_name(prefix, "slots-ready"))
         .event()
-        .max_notifiers(2)
+        .max_notifiers(MAX_NODES)
         .max_listeners(4)
         .open_or_create()
     )

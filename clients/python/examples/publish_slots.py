@@ -69,7 +69,8 @@ def main() -> int:
     stream_id = (os.getpid() << 32) ^ estpipe.monotonic_ns()
     period_ns = round(1e9 / args.rate) if args.rate > 0 else 0
     t0 = estpipe.monotonic_ns()
-    sent = 0
+    # Per node, the last instant sent: its END/ABORT marker's k and seq (wire version 3).
+    last_sent = [0] * nodes
     try:
         for i, (k, obs) in enumerate(instants):
             if period_ns:
@@ -82,7 +83,7 @@ def main() -> int:
                     version=estpipe.WIRE_VERSION,
                     kind=estpipe.SLOT_DATA,
                     stream_id=stream_id,
-                    seq=estpipe.seq_of(k, m, nodes),
+                    seq=estpipe.seq_of(k),
                     k=k,
                     node=m,
                     nodes=nodes,
@@ -95,22 +96,26 @@ def main() -> int:
                 slot.y[:] = y
                 slot.send_ns = estpipe.monotonic_ns()
                 send(publisher, header, slot)
-                sent += 1
+                last_sent[m] = k
             notifier.notify_with_custom_event_id(ready)
         kind = estpipe.SLOT_END
     except iox2.NodeWaitFailure:
         kind = estpipe.SLOT_ABORT
-    last_k = instants[-1][0] if instants and kind == estpipe.SLOT_END else 0
-    end = estpipe.Slot(
-        version=estpipe.WIRE_VERSION,
-        kind=kind,
-        stream_id=stream_id,
-        seq=sent,
-        k=last_k,
-        nodes=nodes,
-        send_ns=estpipe.monotonic_ns(),
-    )
-    send(publisher, header, end)
+    # Every node's stream ends with its own marker (seq = k = its last instant sent).
+    for m in range(nodes):
+        end = estpipe.Slot(
+            version=estpipe.WIRE_VERSION,
+            kind=kind,
+            stream_id=stream_id,
+            seq=last_sent[m],
+            k=last_sent[m],
+            node=m,
+            nodes=nodes,
+            period_ns=period_ns,
+            stream_start_ns=t0,
+            send_ns=estpipe.monotonic_ns(),
+        )
+        send(publisher, header, end)
     notifier.notify_with_custom_event_id(ready)
     # The runner reads the tail from our data segment: stay until it has detached.
     start = estpipe.monotonic_ns()

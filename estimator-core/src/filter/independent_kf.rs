@@ -46,6 +46,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
 use crate::packet::Packet;
@@ -166,6 +167,34 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> IndependentNois
         self.y = y_next.copied();
         Ok(())
     }
+
+    /// Tests the held measurement `y_{k+1}` (stored by the last step) against the
+    /// prediction `x̂_{k+1|k}`, `P_{k+1|k}` the filter now holds: `ν = y − C x̂`,
+    /// `S = C P Cᵀ + D W Dᵀ` of instant `k + 1`, the innovation the next step's update uses. A
+    /// rejected one is dropped (the next step predicts only, as for a withheld packet).
+    /// Returns whether it is kept (`false` when none is held). A singular `S` (noise-free,
+    /// certain directions; the update uses its pseudo-inverse) cannot be tested and is kept.
+    pub fn gate_held<S: CoupledNoiseSystem<T, NX, NW, NY>>(
+        &mut self,
+        sys: &S,
+        gate: &InnovationGate<T>,
+    ) -> bool {
+        let Some(y) = self.y else {
+            return false;
+        };
+        if gate.is_off() {
+            return true;
+        }
+        let k = self.k;
+        let (c, d) = (sys.c(k), sys.d(k));
+        let (x, p) = (self.est.state(), self.est.covariance());
+        let s = symmetrize(&(c * p * c.transpose() + d * self.w * d.transpose()));
+        let keep = gate.admits(&(y - c * x), &s).unwrap_or(true);
+        if !keep {
+            self.y = None;
+        }
+        keep
+    }
 }
 
 /// The model is the system and the nonlinearity `(sys, f)`. Delivered: the update with the
@@ -194,6 +223,28 @@ where
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate (docs/gate.md): a delivered `y_k` is tested against `x̂_{k|k−1}` once the
+/// step has formed it; a rejected one is not used by the next step (as if withheld).
+impl<T: Real, const NX: usize, const NW: usize, const NY: usize, S, F> GatedStep<T, NX>
+    for OnModel<(S, F), IndependentNoiseKf<T, NX, NW, NY>, NY>
+where
+    S: CoupledNoiseSystem<T, NX, NW, NY>,
+    F: DifferentiableMap<T, NX>,
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        self.step(k, y)?;
+        if y.delivered().is_none() {
+            return Ok(GateCounts::NONE);
+        }
+        Ok(GateCounts::one(self.filter.gate_held(&self.model.0, gate)))
     }
 }
 

@@ -6,6 +6,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::kalman::KalmanFilter;
 use crate::model::LinearSystem;
 use crate::packet::Packet;
@@ -61,6 +62,30 @@ impl<T: Real, const NX: usize> IntermittentKalmanFilter<T, NX> {
         }
         Ok(())
     }
+
+    /// [`IntermittentKalmanFilter::step`] behind an innovation gate (docs/gate.md): a
+    /// delivered `y` the gate rejects is treated as no measurement (prediction only, counted
+    /// as an instant without one). Returns whether `y` was used (`false` without one). On
+    /// error nothing changes.
+    pub fn step_gated<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: Option<&SVector<T, NY>>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        let Some(y) = y else {
+            self.step::<NY, M>(model, k, None)?;
+            return Ok(false);
+        };
+        let used = self.kf.step_gated(model, k, y, gate)?;
+        if used {
+            self.arrivals = self.arrivals.saturating_add(1);
+        } else {
+            self.dropouts = self.dropouts.saturating_add(1);
+        }
+        Ok(used)
+    }
 }
 
 /// The Kalman filter's estimate and covariance form, with no instants counted yet.
@@ -88,6 +113,25 @@ impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Esti
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// A delivered packet passes the gate first; a rejected one is a prediction, like a lost one.
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> GatedStep<T, NX>
+    for OnModel<M, IntermittentKalmanFilter<T, NX>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let delivered = y.delivered();
+        let used = self.filter.step_gated(&self.model, k, delivered, gate)?;
+        Ok(match delivered {
+            Some(_) => GateCounts::one(used),
+            None => GateCounts::NONE,
+        })
     }
 }
 

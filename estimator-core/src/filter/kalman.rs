@@ -5,6 +5,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{kalman_innovation, GateCounts, GatedStep, InnovationGate};
 use crate::filter::time_update::{check_predicted, predict_raw};
 use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{all_finite, check_finite, symmetrize};
@@ -60,13 +61,31 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         Ok(())
     }
 
-    /// Time update from instant `k` to `k + 1`: `x ← A_k x`, `P ← A_k P A_kᵀ + B_k Q_k B_kᵀ`.
+    /// Time update from instant `k` to `k + 1`: `x ← A_k x (+ G_k u_k)`,
+    /// `P ← A_k P A_kᵀ + B_k Q_k B_kᵀ`.
     pub fn predict<const NY: usize, M: LinearSystem<T, NX, NY>>(
         &mut self,
         model: &M,
         k: usize,
     ) -> Result<()> {
-        self.predict_with(&model.a(k), &model.process_cov(k))
+        match model.input(k) {
+            None => self.predict_with(&model.a(k), &model.process_cov(k)),
+            Some(gu) => self.predict_with_input(&model.a(k), &model.process_cov(k), &gu),
+        }
+    }
+
+    /// [`KalmanFilter::predict_with`] plus a known input term: `x ← A x + gu`.
+    pub fn predict_with_input(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        q: &SMatrix<T, NX, NX>,
+        gu: &SVector<T, NX>,
+    ) -> Result<()> {
+        let (x, p) = predict_raw(self.est.state(), self.est.covariance(), a, &symmetrize(q));
+        let x = x + gu;
+        check_predicted(&x, &p)?;
+        self.est = Estimate::trusted(x, p);
+        Ok(())
     }
 
     /// Time update with explicit matrices `A` and effective process covariance `Q`.
@@ -125,6 +144,14 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         // prediction always makes the update fail (NaN and ∞ reach S or x⁺ through every
         // product, 0·∞ included), and the error is then the one `predict` would have given.
         let j = k.saturating_sub(1);
+        // A known input: the scalar path, which adds it to the prediction (the lanes fuse
+        // the prediction into the update).
+        if let Some(gu) = model.input(j) {
+            let (x, p, nis) = self.step_scalar(model, j, k, y, Some(&gu))?;
+            self.est = Estimate::trusted(x, p);
+            self.nis = nis;
+            return Ok(());
+        }
         // With `simd`, predict and update on lanes (the same bits as the scalar path); a
         // refusal there takes the scalar path, which names the error.
         #[cfg(simd_lanes)]
@@ -142,11 +169,67 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         let lanes = None;
         let (x, p, nis) = match lanes {
             Some(out) => out,
-            None => self.step_scalar(model, j, k, y)?,
+            None => self.step_scalar(model, j, k, y, None)?,
         };
         self.est = Estimate::trusted(x, p);
         self.nis = nis;
         Ok(())
+    }
+
+    /// [`KalmanFilter::step`] behind an innovation gate (docs/gate.md): a `y_k` whose NIS
+    /// against the prediction `gate` does not admit is not used (the step is the prediction
+    /// only). Returns whether `y_k` was used. An admitted step is [`KalmanFilter::step`], bit
+    /// for bit; so is every step with [`InnovationGate::off`]. On error nothing changes.
+    pub fn step_gated<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if !gate.is_off() {
+            check_finite(y, "measurement")?;
+            let j = k.saturating_sub(1);
+            let (x, p) = (self.est.state(), self.est.covariance());
+            let (xp, pp) = predict_raw(x, p, &model.a(j), &model.process_cov(j));
+            if !(all_finite(&xp) && all_finite(&pp)) {
+                check_predicted(&xp, &pp)?;
+            }
+            let (nu, s) = kalman_innovation(&xp, &pp, &model.c(k), &model.measurement_cov(k), y);
+            if !gate.admits(&nu, &s)? {
+                self.est = Estimate::trusted(xp, pp);
+                return Ok(false);
+            }
+        }
+        self.step(model, k, y)?;
+        Ok(true)
+    }
+
+    /// [`KalmanFilter::update_with`] behind an innovation gate: a `y` whose NIS against the
+    /// current estimate `gate` does not admit leaves the filter as it is. Returns whether `y`
+    /// was used. On error nothing changes.
+    pub fn update_gated_with<const NY: usize>(
+        &mut self,
+        c: &SMatrix<T, NY, NX>,
+        r: &SMatrix<T, NY, NY>,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if !gate.is_off() {
+            check_finite(y, "measurement")?;
+            let (nu, s) = kalman_innovation(
+                self.est.state(),
+                self.est.covariance(),
+                c,
+                &symmetrize(r),
+                y,
+            );
+            if !gate.admits(&nu, &s)? {
+                return Ok(false);
+            }
+        }
+        self.update_with(c, r, y)?;
+        Ok(true)
     }
 
     /// `step`'s scalar path: every target without `simd`, and the exact error after the
@@ -160,9 +243,13 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         j: usize,
         k: usize,
         y: &SVector<T, NY>,
+        gu: Option<&SVector<T, NX>>,
     ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
         let (x, p) = (self.est.state(), self.est.covariance());
-        let (x_pred, p_pred) = predict_raw(x, p, &model.a(j), &model.process_cov(j));
+        let (mut x_pred, p_pred) = predict_raw(x, p, &model.a(j), &model.process_cov(j));
+        if let Some(gu) = gu {
+            x_pred += gu;
+        }
         kalman_update_scalar(
             &x_pred,
             &p_pred,
@@ -189,6 +276,21 @@ impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Esti
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// The gated step: `y_k` is used iff the gate admits it.
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> GatedStep<T, NX>
+    for OnModel<M, KalmanFilter<T, NX>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let used = self.filter.step_gated(&self.model, k, y, gate)?;
+        Ok(GateCounts::one(used))
     }
 }
 

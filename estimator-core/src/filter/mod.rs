@@ -1,6 +1,8 @@
 //! The estimators, one per file, grouped by the paper whose problem they solve. Each keeps its
 //! state private and changes it only when a step succeeds.
 //!
+//! * [`gate`]: the innovation gate every estimator with an innovation can run behind
+//!   (docs/gate.md).
 //! * Linear-Gaussian: [`kalman`] (the Kalman filter), [`intermittent`] (update only on
 //!   arrival), [`time_update`] (the prediction they all share).
 //! * [`occlusion`] (seed 001): state-dependent dropouts — the cross-coupled estimator, an
@@ -12,6 +14,7 @@
 //! * [`tobit`] (seed 004): local Tobit filters of censored measurements and their fusion.
 
 pub mod coupled_kf;
+pub mod gate;
 pub mod independent_kf;
 pub mod intermittent;
 pub mod kalman;
@@ -22,6 +25,7 @@ pub mod tobit;
 
 pub use crate::CovarianceUpdate;
 pub use coupled_kf::CoupledNoiseKf;
+pub use gate::{GateCounts, Gated, GatedStep, InnovationGate};
 pub use independent_kf::IndependentNoiseKf;
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::KalmanFilter;

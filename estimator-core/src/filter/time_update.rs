@@ -1,5 +1,7 @@
 //! The time update of every linear-Gaussian estimator here (KF, IKF, CCE, ADF, KF-IO):
-//! `x⁻ = A_{k−1} x̂_{k−1}`, `P⁻ = A_{k−1} P_{k−1} A_{k−1}ᵀ + B Q Bᵀ` (seed 001 eq. 11).
+//! `x⁻ = A_{k−1} x̂_{k−1}`, `P⁻ = A_{k−1} P_{k−1} A_{k−1}ᵀ + B Q Bᵀ` (seed 001 eq. 11), plus
+//! the known input term `G u_{k−1}` in `x⁻` for a system with one
+//! ([`LinearSystem::input`]; a known input shifts the mean and leaves `P⁻` unchanged).
 
 use nalgebra::{SMatrix, SVector};
 
@@ -24,9 +26,11 @@ pub fn predict_raw<T: Real, const NX: usize>(
     (small::mul_vec(a, x), small::congruence_add(a, p, q))
 }
 
-/// The prediction to instant `k` from the model's `A_{k−1}` and `B Q Bᵀ` of `k − 1`, refused
-/// when not finite ("predicted state" / "predicted covariance").
-#[inline]
+/// The prediction to instant `k` from the model's `A_{k−1}`, `B Q Bᵀ` and input term of
+/// `k − 1`, refused when not finite ("predicted state" / "predicted covariance"). Always
+/// inlined: it is the first half of every step, and as a call it returns `(x⁻, P⁻)` through
+/// memory.
+#[inline(always)]
 pub fn predict<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>>(
     model: &M,
     k: usize,
@@ -34,7 +38,10 @@ pub fn predict<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX,
     p: &SMatrix<T, NX, NX>,
 ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>)> {
     let km1 = k.saturating_sub(1);
-    let (xp, pp) = predict_raw(x, p, &model.a(km1), &model.process_cov(km1));
+    let (mut xp, pp) = predict_raw(x, p, &model.a(km1), &model.process_cov(km1));
+    if let Some(gu) = model.input(km1) {
+        xp += gu;
+    }
     if !(all_finite(&xp) && all_finite(&pp)) {
         check_predicted(&xp, &pp)?;
     }

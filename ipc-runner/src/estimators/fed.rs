@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::Observation;
+use estimator_core::filter::GateCounts;
 use estimator_core::{Error, Estimator};
 
 use super::slots::FromSlots;
@@ -50,19 +51,45 @@ impl<E> Fed<E> {
         E: Estimator<f64, NX> + Clone,
         E::Measurement: FromSlots,
     {
+        self.step_by::<NX>(k, obs, |e, k, y| e.step(k, y).map(|()| GateCounts::NONE))
+            .map(|_| ())
+    }
+
+    /// [`Fed::step`] with `step` stepping instant `k` itself (the gated step,
+    /// [`GatedStep::step_gated`](estimator_core::filter::GatedStep::step_gated)): the gap
+    /// instants carry no measurement and take the plain step. Returns what the gate counted
+    /// at `k`.
+    pub(crate) fn step_by<const NX: usize>(
+        &mut self,
+        k: u32,
+        obs: &[Observation],
+        step: impl Fn(&mut E, usize, &E::Measurement) -> Result<GateCounts, Error>,
+    ) -> Result<GateCounts, Error>
+    where
+        E: Estimator<f64, NX> + Clone,
+        E::Measurement: FromSlots,
+    {
         if let Some((plant, remodel)) = &self.varying {
             remodel(&mut self.est, super::linear_of(&**plant)?, k as usize);
         }
         let y = E::Measurement::from_slots(obs);
-        match self.est.step(k as usize, &y) {
+        match step(&mut self.est, k as usize, &y) {
             Err(Error::OutOfOrder { expected, got }) if got > expected => {
                 let (mut est, gap) = (self.est.clone(), E::Measurement::from_slots(&[]));
                 for j in expected..got {
+                    // Each gap instant on its own model (a time-varying plant, a control
+                    // input's u_{j−1}).
+                    if let Some((plant, remodel)) = &self.varying {
+                        remodel(&mut est, super::linear_of(&**plant)?, j);
+                    }
                     est.step(j, &gap)?;
                 }
-                est.step(got, &y)?;
+                if let Some((plant, remodel)) = &self.varying {
+                    remodel(&mut est, super::linear_of(&**plant)?, got);
+                }
+                let counts = step(&mut est, got, &y)?;
                 self.est = est;
-                Ok(())
+                Ok(counts)
             }
             done => done,
         }

@@ -17,9 +17,11 @@ use crate::Estimator;
 /// Builds `ikf` for a composed scenario with a linear description.
 pub fn build(
     scenario: &dyn Scenario,
-    _options: &EvalOptions,
+    options: &EvalOptions,
     _seed: u64,
     _run: u64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(scenario, "ikf", false)?.into_iter().collect())
+    Ok(linear_kf(scenario, "ikf", false, options.gate)?
+        .into_iter()
+        .collect())
 }

@@ -10,7 +10,9 @@
 //! a dropped packet as y = 0 is deliberately not offered: it is neither optimal nor a bound.
 //!
 //! Applies to every scenario whose plant offers a [`LinearDescription`]. Multi-node scenarios
-//! update node by node (sequential updates are exact because nodes' noises are independent).
+//! update node by node (sequential updates are exact because nodes' noises are independent),
+//! nodes of different ny included (each padded to the largest, see `snapshot`). A known
+//! control input enters the prediction (`B_u u_{k−1}`).
 //! Diagnostics: `trace_p`, the trace of the filter's covariance P_k.
 
 use std::sync::Arc;
@@ -19,7 +21,8 @@ use channel_sim::plant::{LinearDescription, Plant};
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::sim::MAX_NODES;
 use channel_sim::Scenario;
-use estimator_core::filter::KalmanFilter;
+use estimator_core::filter::{GateCounts, GatedStep, InnovationGate, KalmanFilter};
+use estimator_core::linalg::symmetrize;
 use estimator_core::{Error, Estimate, Packet};
 use nalgebra::{DMatrix, SVector};
 
@@ -32,19 +35,23 @@ use crate::Estimator;
 /// Builds `kf` for a composed scenario with a linear description.
 pub fn build(
     scenario: &dyn Scenario,
-    _options: &EvalOptions,
+    options: &EvalOptions,
     _seed: u64,
     _run: u64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(scenario, "kf", true)?.into_iter().collect())
+    Ok(linear_kf(scenario, "kf", true, options.gate)?
+        .into_iter()
+        .collect())
 }
 
 /// A Kalman filter on `scenario`'s linear description named `name`, or `None` when the
-/// scenario has none. `full_information` selects the oracle (`kf`) or the channel-fed filter.
+/// scenario has none. `full_information` selects the oracle (`kf`) or the channel-fed filter;
+/// `gate`, the innovation gate's probability (`--gate`, docs/gate.md).
 pub fn linear_kf(
     scenario: &dyn Scenario,
     name: &'static str,
     full_information: bool,
+    gate: Option<f64>,
 ) -> anyhow::Result<Option<Box<dyn Estimator>>> {
     let Some(composed) = scenario.as_any().downcast_ref::<ComposedScenario>() else {
         return Ok(None);
@@ -57,6 +64,7 @@ pub fn linear_kf(
     let spec = Spec {
         name,
         full_information,
+        gate,
         plant,
         x0: init.estimator_mean.as_slice(),
         p0: &init.estimator_cov,
@@ -90,6 +98,7 @@ pub fn linear_kf(
 struct Spec<'a> {
     name: &'static str,
     full_information: bool,
+    gate: Option<f64>,
     plant: Arc<dyn Plant>,
     x0: &'a [f64],
     p0: &'a DMatrix<f64>,
@@ -104,15 +113,37 @@ struct NodeByNode<const NX: usize, const NY: usize> {
     model: [Snapshot<NX, NY>; MAX_NODES],
     nodes: usize,
     kf: KalmanFilter<f64, NX>,
+    /// Node 0's `B Q Bᵀ` and `D R Dᵀ` are their own symmetric parts, bit for bit (what
+    /// `predict_with` and `update_with` would symmetrise): a one-node instant may then take
+    /// the core's fused step, which computes the same bits ([`fused_ok`]).
+    fused: bool,
+}
+
+/// Whether node 0's covariances are unchanged by `predict_with`'s and `update_with`'s
+/// symmetrisation, so that `KalmanFilter::step` on them gives the same bits as the two calls.
+fn fused_ok<const NX: usize, const NY: usize>(m: &Snapshot<NX, NY>) -> bool {
+    symmetrize(&m.q) == m.q && symmetrize(&m.r) == m.r
 }
 
 impl<const NX: usize, const NY: usize> estimator_core::Estimator<f64, NX> for NodeByNode<NX, NY> {
     type Measurement = [Packet<f64, NY>; MAX_NODES];
 
-    fn step(&mut self, _k: usize, y: &Self::Measurement) -> Result<(), Error> {
+    fn step(&mut self, k: usize, y: &Self::Measurement) -> Result<(), Error> {
+        // One node delivering a finite measurement: the fused predict + update of the core
+        // (the same arithmetic, one pass; on error it leaves the filter untouched). A
+        // non-finite y takes the path below, which reports the prediction's error first.
+        if self.fused && self.nodes == 1 && y[1..].iter().all(|p| p.delivered().is_none()) {
+            if let Some(y0) = y[0].delivered().filter(|v| v.iter().all(|e| e.is_finite())) {
+                return self.kf.step(&self.model[0], k, y0);
+            }
+        }
         // Work on a copy and commit at the end: an error leaves the filter untouched.
         let mut kf = self.kf;
-        kf.predict_with(&self.model[0].a, &self.model[0].q)?;
+        let m0 = &self.model[0];
+        match &m0.u {
+            None => kf.predict_with(&m0.a, &m0.q)?,
+            Some(u) => kf.predict_with_input(&m0.a, &m0.q, u)?,
+        }
         for (node, y) in y.iter().enumerate() {
             if let Some(y) = y.delivered() {
                 if node >= self.nodes {
@@ -134,6 +165,37 @@ impl<const NX: usize, const NY: usize> estimator_core::Estimator<f64, NX> for No
     }
 }
 
+/// Behind a gate: each delivered measurement is tested against the estimate it would update
+/// (after the prediction and the earlier nodes' updates); a rejected one is skipped.
+impl<const NX: usize, const NY: usize> GatedStep<f64, NX> for NodeByNode<NX, NY> {
+    fn step_gated(
+        &mut self,
+        _k: usize,
+        y: &Self::Measurement,
+        gate: &InnovationGate<f64>,
+    ) -> Result<GateCounts, Error> {
+        let mut kf = self.kf;
+        kf.predict_with(&self.model[0].a, &self.model[0].q)?;
+        let mut counts = GateCounts::NONE;
+        for (node, y) in y.iter().enumerate() {
+            if let Some(y) = y.delivered() {
+                if node >= self.nodes {
+                    return Err(Error::InvalidConfig {
+                        field: "node",
+                        reason: "observation from a node the model does not have",
+                    });
+                }
+                let m = &self.model[node];
+                counts.add(GateCounts::one(
+                    kf.update_gated_with::<NY>(&m.c, &m.r, y, gate)?,
+                ));
+            }
+        }
+        self.kf = kf;
+        Ok(counts)
+    }
+}
+
 /// `NodeByNode`'s model at instant `k`.
 fn remodel<const NX: usize, const NY: usize>(
     e: &mut NodeByNode<NX, NY>,
@@ -141,6 +203,7 @@ fn remodel<const NX: usize, const NY: usize>(
     k: usize,
 ) {
     e.model = Snapshot::nodes(model, e.nodes, k);
+    e.fused = fused_ok(&e.model[0]);
 }
 
 /// The filter of `spec` at `NX`, `NY`.
@@ -149,13 +212,16 @@ fn boxed<const NX: usize, const NY: usize>(spec: Spec<'_>) -> anyhow::Result<Box
         .map_err(|e| anyhow::anyhow!("{}: initial.estimator_cov: {e}", spec.name))?;
     let nodes = spec.plant.nodes();
     let model = super::linear_of(&*spec.plant)?;
+    let model = Snapshot::nodes(model, nodes, 1);
     let est = NodeByNode::<NX, NY> {
-        model: Snapshot::nodes(model, nodes, 1),
+        fused: fused_ok(&model[0]),
+        model,
         nodes,
         kf,
     };
     Ok(Box::new(
         Adapted::<_, NX>::new(spec.name, Fed::on_plant(est, spec.plant, remodel))
-            .with_full_information(spec.full_information),
+            .with_full_information(spec.full_information)
+            .with_gate(spec.gate)?,
     ))
 }

@@ -80,6 +80,11 @@ pub struct EvalOptions {
     /// `eval` only: the transport losses look like channel dropouts (`--transport-loss-unmarked`:
     /// the receiver sees only "no packet") instead of being marked lost.
     pub transport_loss_unmarked: bool,
+    /// Probability `P` of the innovation gate (`--gate P`, docs/gate.md): every estimator
+    /// with an innovation runs behind the χ² gate of `P` and is named `<name>+gate`; its
+    /// diagnostics `gate_tested`, `gate_rejected` count the measurements so far. `None`: no
+    /// gate, the estimators of today, bit for bit.
+    pub gate: Option<f64>,
 }
 
 impl Default for EvalOptions {
@@ -93,8 +98,37 @@ impl Default for EvalOptions {
             loss_rate: 0.0,
             transport_loss: 0.0,
             transport_loss_unmarked: false,
+            gate: None,
         }
     }
+}
+
+/// The `--gate P` flag's value: a probability in `(0, 1)` (docs/gate.md).
+pub fn gate_probability(s: &str) -> Result<f64, String> {
+    let p: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if p.is_finite() && p > 0.0 && p < 1.0 {
+        Ok(p)
+    } else {
+        Err(format!("{s} is not a probability in (0, 1)"))
+    }
+}
+
+/// `name` is what `--estimators` asked for by `wanted`: the same name, or `wanted` gated
+/// (`cce` selects `cce+gate` under `--gate P`).
+pub fn names_match(name: &str, wanted: &str) -> bool {
+    name == wanted || name.strip_suffix("+gate") == Some(wanted)
+}
+
+/// `(tested, rejected)` of an estimator's innovation gate so far (its diagnostics
+/// `gate_tested`, `gate_rejected`), or `None` for an ungated estimator.
+pub fn gate_counts(est: &dyn Estimator) -> Option<(u64, u64)> {
+    let (mut tested, mut rejected) = (None, None);
+    est.diagnostics(&mut |name, v| match name {
+        "gate_tested" => tested = Some(v as u64),
+        "gate_rejected" => rejected = Some(v as u64),
+        _ => {}
+    });
+    Some((tested?, rejected?))
 }
 
 /// Builds a family's estimators for run `run` of `scenario` (empty when the family does not
@@ -130,7 +164,8 @@ pub fn build_all(
         all.extend(f(scenario, options, seed, run)?);
     }
     if !options.estimators.is_empty() {
-        all.retain(|e| options.estimators.iter().any(|n| n == e.name()));
+        // `--estimators cce --gate P` selects `cce+gate`.
+        all.retain(|e| options.estimators.iter().any(|n| names_match(e.name(), n)));
     }
     Ok(all)
 }

@@ -138,38 +138,53 @@ pub fn build(
                 .with_diagnostics(nn_diagnostics)
                 .with_covariance_bound(),
         ),
-        Box::new(Adapted::<_, 3>::new(
-            "kf",
-            Fed::fixed(OnModel::new((Seed003Example, NoNonlinearity), kf)),
-        )),
-        Box::new(Adapted::<_, 3>::new(
-            "ekf",
-            Fed::fixed(OnModel::new(
-                (Seed003Example, Seed003Example),
-                base("ekf", Linearisation::PaperJacobian)?,
-            )),
-        )),
-        Box::new(Adapted::<_, 3>::new(
-            "ekf-std",
-            Fed::fixed(OnModel::new(
-                (Seed003Example, Seed003Example),
-                base("ekf-std", Linearisation::Ekf)?,
-            )),
-        )),
-        Box::new(Adapted::<_, 3>::new(
-            "kf-indep",
-            Fed::fixed(OnModel::new(
-                (Seed003Example, NoNonlinearity),
-                indep("kf-indep", IndependentMode::Kf)?,
-            )),
-        )),
-        Box::new(Adapted::<_, 3>::new(
-            "ekf-indep",
-            Fed::fixed(OnModel::new(
-                (Seed003Example, Seed003Example),
-                indep("ekf-indep", IndependentMode::Ekf)?,
-            )),
-        )),
+        Box::new(
+            Adapted::<_, 3>::new(
+                "kf",
+                Fed::fixed(OnModel::new((Seed003Example, NoNonlinearity), kf)),
+            )
+            .with_gate(options.gate)?,
+        ),
+        Box::new(
+            Adapted::<_, 3>::new(
+                "ekf",
+                Fed::fixed(OnModel::new(
+                    (Seed003Example, Seed003Example),
+                    base("ekf", Linearisation::PaperJacobian)?,
+                )),
+            )
+            .with_gate(options.gate)?,
+        ),
+        Box::new(
+            Adapted::<_, 3>::new(
+                "ekf-std",
+                Fed::fixed(OnModel::new(
+                    (Seed003Example, Seed003Example),
+                    base("ekf-std", Linearisation::Ekf)?,
+                )),
+            )
+            .with_gate(options.gate)?,
+        ),
+        Box::new(
+            Adapted::<_, 3>::new(
+                "kf-indep",
+                Fed::fixed(OnModel::new(
+                    (Seed003Example, NoNonlinearity),
+                    indep("kf-indep", IndependentMode::Kf)?,
+                )),
+            )
+            .with_gate(options.gate)?,
+        ),
+        Box::new(
+            Adapted::<_, 3>::new(
+                "ekf-indep",
+                Fed::fixed(OnModel::new(
+                    (Seed003Example, Seed003Example),
+                    indep("ekf-indep", IndependentMode::Ekf)?,
+                )),
+            )
+            .with_gate(options.gate)?,
+        ),
     ];
     if options.particles > 0 {
         all.push(Box::new(pf_coupled::CoupledPf::new(

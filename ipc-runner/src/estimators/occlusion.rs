@@ -53,7 +53,7 @@ pub fn build(
     macro_rules! by_s {
         ($s:literal) => {
             if let Some(spec) = composed.stage::<OcclusionSpec<$s>>() {
-                return by_dims::<$s>(composed, spec, options.loss_rate);
+                return by_dims::<$s>(composed, spec, options.loss_rate, options.gate);
             }
         };
     }
@@ -68,11 +68,12 @@ fn by_dims<const S: usize>(
     composed: &ComposedScenario,
     spec: &OcclusionSpec<S>,
     loss_rate: f64,
+    gate: Option<f64>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let (nx, ny) = (composed.plant().nx(), composed.plant().ny());
     macro_rules! go {
         ($nx:literal, $ny:literal) => {
-            family::<$nx, $ny, S>(composed, spec, loss_rate)
+            family::<$nx, $ny, S>(composed, spec, loss_rate, gate)
         };
     }
     match (nx, ny) {
@@ -92,6 +93,7 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
     composed: &ComposedScenario,
     spec: &OcclusionSpec<S>,
     loss_rate: f64,
+    gate: Option<f64>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let occ: Occlusion<f64, NX, 1, S> = spec
         .occlusion::<NX>()
@@ -107,9 +109,9 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
     let adf = AssumedDensityFilter::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("adf: {e}"))?;
     let model = Snapshot::<NX, NY>::at(super::linear_of(&*plant)?, 1);
     let mut out = vec![
-        adapted("cce", &plant, OnModel::new(model, cce)),
-        adapted("kf-io", &plant, OnModel::new(model, kfio)),
-        adapted("adf", &plant, OnModel::new(model, adf)),
+        adapted("cce", &plant, OnModel::new(model, cce), gate)?,
+        adapted("kf-io", &plant, OnModel::new(model, kfio), gate)?,
+        adapted("adf", &plant, OnModel::new(model, adf), gate)?,
     ];
     if loss_rate > 0.0 {
         let bad = |name: &str, e: estimator_core::Error| anyhow::anyhow!("{name}: {e}");
@@ -123,9 +125,9 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
             .with_loss_rate(loss_rate)
             .map_err(|e| bad("adf-mix", e))?;
         out.extend([
-            adapted("cce-mix", &plant, OnModel::new(model, cce)),
-            adapted("kf-io-mix", &plant, OnModel::new(model, kfio)),
-            adapted("adf-mix", &plant, OnModel::new(model, adf)),
+            adapted("cce-mix", &plant, OnModel::new(model, cce), gate)?,
+            adapted("kf-io-mix", &plant, OnModel::new(model, kfio), gate)?,
+            adapted("adf-mix", &plant, OnModel::new(model, adf), gate)?,
         ]);
     }
     Ok(out)
@@ -136,15 +138,21 @@ fn adapted<const NX: usize, const NY: usize, F>(
     name: &'static str,
     plant: &Arc<dyn Plant>,
     on: OnModel<Snapshot<NX, NY>, F, NY>,
-) -> Box<dyn Estimator>
+    gate: Option<f64>,
+) -> anyhow::Result<Box<dyn Estimator>>
 where
-    OnModel<Snapshot<NX, NY>, F, NY>:
-        estimator_core::Estimator<f64, NX, Measurement = Packet<f64, NY>> + Clone + Send + 'static,
+    OnModel<Snapshot<NX, NY>, F, NY>: estimator_core::filter::GatedStep<f64, NX, Measurement = Packet<f64, NY>>
+        + Clone
+        + Send
+        + 'static,
 {
     let fed = Fed::on_plant(on, Arc::clone(plant), |on, model, k| {
         on.model = Snapshot::at(model, k);
     });
-    Box::new(Adapted::<_, NX>::new(name, fed))
+    let a = Adapted::<_, NX>::new(name, fed)
+        .with_gate(gate)
+        .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    Ok(Box::new(a))
 }
 
 #[cfg(test)]

@@ -28,10 +28,18 @@ pub(crate) trait FromSlots {
     fn from_slots(obs: &[Observation]) -> Self;
 }
 
-/// One node's observation as a packet.
+/// One node's observation as a packet. A node that measures fewer than `NY` components
+/// (sensors of different ny, the estimator sized for the largest) is padded with zeros,
+/// which its padded model (`snapshot`) never reads as information; a longer one cannot
+/// reach here (the assembler and the simulation give each node its own ny) and is cut.
 pub(crate) fn packet<const NY: usize>(o: &Observation) -> Packet<f64, NY> {
     match o.measurement() {
-        Some(y) => Packet::Delivered(SVector::from_column_slice(y)),
+        Some(y) => {
+            let mut v = SVector::<f64, NY>::zeros();
+            let n = y.len().min(NY);
+            v.as_mut_slice()[..n].copy_from_slice(&y[..n]);
+            Packet::Delivered(v)
+        }
         None if o.flags & FLAGS_LOST != 0 => Packet::Lost,
         None => Packet::Dropped,
     }

@@ -7,10 +7,14 @@
 
 use channel_sim::plant::LinearDescription;
 use estimator_core::model::LinearSystem;
-use nalgebra::{DMatrix, SMatrix};
+use nalgebra::{DMatrix, SMatrix, SVector};
 
-/// One node's view of the plant at instant `k` as a core [`LinearSystem`]: `A` and `B Q Bᵀ` of
-/// `k − 1`, the node's `C` and `D R Dᵀ` of `k`. The filters call it with the `k` it was taken
+/// One node's view of the plant at instant `k` as a core [`LinearSystem`]: `A`, `B Q Bᵀ` and
+/// the known input term `B_u u` (a control input, if the plant has one) of `k − 1`, the node's
+/// `C` and `D R Dᵀ` of `k`. A node that measures fewer components than `NY` (sensors of
+/// different ny) is padded: zero rows of `C`, unit variances in `D R Dᵀ`, and zeros in its
+/// measurement (`slots`), so the padded components have zero innovation and no gain — the
+/// update is the node's own, exactly. The filters call it with the `k` it was taken
 /// at, so the instant arguments of the [`LinearSystem`] methods are not needed.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Snapshot<const NX: usize, const NY: usize> {
@@ -18,6 +22,7 @@ pub(crate) struct Snapshot<const NX: usize, const NY: usize> {
     pub(crate) q: SMatrix<f64, NX, NX>,
     pub(crate) c: SMatrix<f64, NY, NX>,
     pub(crate) r: SMatrix<f64, NY, NY>,
+    pub(crate) u: Option<SVector<f64, NX>>,
 }
 
 impl<const NX: usize, const NY: usize> Snapshot<NX, NY> {
@@ -36,13 +41,19 @@ impl<const NX: usize, const NY: usize> Snapshot<NX, NY> {
     ) -> [Self; L] {
         let prev = k.saturating_sub(1);
         let (a, q) = (fixed(&model.a(prev)), fixed(&model.process_cov(prev)));
+        let u = model
+            .input(prev)
+            .map(|u| SVector::<f64, NX>::from_fn(|i, _| u[i]));
         core::array::from_fn(|m| {
             let (c, r) = if m < nodes {
-                (fixed(&model.c(m, k)), fixed(&model.measurement_cov(m, k)))
+                (
+                    padded(&model.c(m, k), 0.0),
+                    padded(&model.measurement_cov(m, k), 1.0),
+                )
             } else {
                 (SMatrix::zeros(), SMatrix::identity())
             };
-            Self { a, q, c, r }
+            Self { a, q, c, r, u }
         })
     }
 }
@@ -64,6 +75,27 @@ impl<const NX: usize, const NY: usize> LinearSystem<f64, NX, NY> for Snapshot<NX
     fn measurement_cov(&self, _k: usize) -> SMatrix<f64, NY, NY> {
         self.r
     }
+    #[inline]
+    fn input(&self, _k: usize) -> Option<SVector<f64, NX>> {
+        self.u
+    }
+}
+
+/// `m` in the top-left corner of an `R × C` matrix, `diagonal` on the rest of the diagonal
+/// and zeros elsewhere (`m` itself when it is `R × C`).
+pub(crate) fn padded<const R: usize, const C: usize>(
+    m: &DMatrix<f64>,
+    diagonal: f64,
+) -> SMatrix<f64, R, C> {
+    SMatrix::from_fn(|i, j| {
+        if i < m.nrows() && j < m.ncols() {
+            m[(i, j)]
+        } else if i == j {
+            diagonal
+        } else {
+            0.0
+        }
+    })
 }
 
 /// A dynamic matrix at fixed size (the caller knows the dimensions match).

@@ -26,12 +26,13 @@ use channel_sim::channel::tobit::TobitCensoring;
 use channel_sim::plant::Plant;
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::{Observation, Scenario};
+use estimator_core::filter::gate::GateState;
 use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
-use estimator_core::filter::TobitFusion;
+use estimator_core::filter::{GatedStep as _, InnovationGate, TobitFusion};
 use estimator_core::{Error, Estimator as _, OnModel};
 use nalgebra::{DMatrix, SVector};
 
-use super::adapter::write_row_major;
+use super::adapter::{gated_name, write_row_major};
 use super::fed::Fed;
 use super::snapshot::{fixed, Snapshot};
 use super::EvalOptions;
@@ -57,7 +58,7 @@ pub const XI_E: f64 = 2.0;
 /// Builds the views for a scenario with the seed 004 channel (empty otherwise).
 pub fn build(
     scenario: &dyn Scenario,
-    _options: &EvalOptions,
+    options: &EvalOptions,
     _seed: u64,
     _run: u64,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
@@ -65,13 +66,20 @@ pub fn build(
         return Ok(Vec::new());
     };
     let (nx, ny, l) = (scenario.nx(), scenario.ny(), scenario.nodes());
+    if let Some(m) = (0..l).find(|&m| scenario.node_ny(m) != ny) {
+        anyhow::bail!(
+            "tobit: the Tobit fusion filters need the same n_y at every node, but node {m} \
+             measures {} and another {ny} components",
+            scenario.node_ny(m)
+        );
+    }
     macro_rules! by_l {
         ($n:literal) => {
             match l {
-                1 => views::<$n, $n, 1>(&parts),
-                2 => views::<$n, $n, 2>(&parts),
-                3 => views::<$n, $n, 3>(&parts),
-                4 => views::<$n, $n, 4>(&parts),
+                1 => views::<$n, $n, 1>(&parts, options.gate),
+                2 => views::<$n, $n, 2>(&parts, options.gate),
+                3 => views::<$n, $n, 3>(&parts, options.gate),
+                4 => views::<$n, $n, 4>(&parts, options.gate),
                 _ => anyhow::bail!("tobit: {l} nodes not supported (1..=4 are compiled in)"),
             }
         };
@@ -180,6 +188,8 @@ struct Shared<const NX: usize, const NY: usize, const L: usize> {
     fed: Fed<OnNodes<NX, NY, L>>,
     done_k: u32,
     last: Result<(), Error>,
+    /// `--gate`: the gate and the measurements it tested and rejected so far (all nodes).
+    gate: Option<(InnovationGate<f64>, GateState)>,
 }
 
 impl<const NX: usize, const NY: usize, const L: usize> Shared<NX, NY, L> {
@@ -197,22 +207,33 @@ struct View<const NX: usize, const NY: usize, const L: usize> {
 
 fn views<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
+    gate: Option<f64>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
+    let gate = match gate {
+        Some(p) => Some((
+            InnovationGate::chi2(p).map_err(|e| anyhow::anyhow!("tobit: {e}"))?,
+            GateState::default(),
+        )),
+        None => None,
+    };
+    // Gated views are named `<name>+gate` (docs/gate.md).
+    let named = |n: &'static str| if gate.is_some() { gated_name(n) } else { n };
     let shared = Arc::new(Mutex::new(Shared {
         fed: fed_fusion::<NX, NY, L>(parts)?,
         done_k: 0,
         last: Ok(()),
+        gate,
     }));
     let mut out: Vec<Box<dyn Estimator>> = Vec::with_capacity(L + 1);
     for m in 0..L {
         out.push(Box::new(View {
-            name: LOCAL_NAMES[m],
+            name: named(LOCAL_NAMES[m]),
             node: Some(m),
             shared: Arc::clone(&shared),
         }));
     }
     out.push(Box::new(View {
-        name: FUSED_NAME,
+        name: named(FUSED_NAME),
         node: None,
         shared,
     }));
@@ -227,7 +248,16 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
         let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         if s.done_k != k {
-            s.last = s.fed.step::<NX>(k, obs);
+            let s = &mut *s;
+            s.last = match &mut s.gate {
+                None => s.fed.step::<NX>(k, obs),
+                Some((gate, state)) => {
+                    let gate = state.gate_for_next(gate);
+                    s.fed
+                        .step_by::<NX>(k, obs, |e, k, y| e.step_gated(k, y, &gate))
+                        .map(|c| state.record(c, &gate))
+                }
+            };
             s.done_k = k;
         }
         s.last
@@ -283,6 +313,12 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
 
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        // The views share one filter: every view reports its counts over all nodes.
+        if let Some((_, g)) = &s.gate {
+            sink("gate_tested", f64::from(g.counts.tested));
+            sink("gate_rejected", f64::from(g.counts.rejected));
+            sink("gate_forced", f64::from(g.forced));
+        }
         match self.node {
             Some(m) => {
                 if let Some(p) = s.fusion().local_estimate(m).map(|e| e.covariance()) {

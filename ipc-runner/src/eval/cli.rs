@@ -4,8 +4,9 @@ use std::path::{Path, PathBuf};
 
 use channel_sim::scenario;
 
-use super::{evaluate, RunConfig};
+use super::{evaluate_with, Control, EvalEnding, RunConfig};
 use crate::estimators::{EvalOptions, FACTORIES};
+use crate::limits::{check_output, Budget};
 
 /// Arguments of `ipc-runner eval`.
 #[derive(Debug, clap::Args)]
@@ -35,12 +36,24 @@ pub struct EvalArgs {
     #[arg(long, value_name = "FILE.svg|FILE.png")]
     pub plot: Option<PathBuf>,
     /// Worker threads (default: one per core).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=MAX_THREADS))]
     pub threads: Option<u64>,
-    /// No progress bar.
+    /// No progress (by default a bar on a terminal, else a line every few seconds on stderr
+    /// with done/total and ETA).
     #[arg(long)]
     pub quiet: bool,
-    /// Particles of the `pf` reference filter on occlusion scenarios. Off by default in
+    /// Memory the evaluation may hold, in MiB: the per-k sums over the horizon, the per-run
+    /// averages, the particles. Flags that need more are refused before any work, with the
+    /// numbers.
+    #[arg(long, value_name = "MIB", default_value_t = crate::limits::DEFAULT_MAX_MEMORY_MIB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_memory: u64,
+    /// Test hook: seconds between the progress lines written when stderr is not a terminal.
+    #[arg(long, hide = true, default_value_t = crate::limits::PROGRESS_LINE_EVERY.as_secs_f64(),
+          value_parser = channel_sim::flags::seconds)]
+    pub progress_every: f64,
+    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
+    /// a preset or a TOML file, and `nn-token-bucket`). Off by default in
     /// `eval` (unless `--estimators` names `pf` or `pf-mix`: then 5000): at 5000 particles it
     /// costs ~3 CPU-ms per step, 100× the other estimators together, so a 2000-run
     /// evaluation would take minutes instead of seconds. Typical: `--particles 5000 --runs 200`.
@@ -62,16 +75,19 @@ pub struct EvalArgs {
     /// The transport losses look like channel dropouts (the receiver sees only "no packet").
     #[arg(long, requires = "transport_loss")]
     pub transport_loss_unmarked: bool,
+    /// Innovation gate of probability P (docs/gate.md): every estimator with an innovation
+    /// ignores a measurement whose NIS exceeds the χ² quantile of P, and is named
+    /// `<name>+gate`; the summary and JSON count the rejections. Default: off.
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
 }
+
+/// Most worker threads `--threads` accepts (each holds a run's records).
+pub const MAX_THREADS: u64 = 1024;
 
 /// A probability in `[0, 1)` (a loss rate).
 pub fn loss_probability(s: &str) -> Result<f64, String> {
-    let p: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if p.is_finite() && (0.0..1.0).contains(&p) {
-        Ok(p)
-    } else {
-        Err(format!("{p} is not in [0, 1)"))
-    }
+    channel_sim::flags::probability_below_one(s)
 }
 
 /// The particle count of `pf`: `--particles` when given, else 0 unless `names` asks for `pf`
@@ -112,10 +128,24 @@ impl CommandError {
     }
 }
 
-/// Runs `ipc-runner eval`.
+/// Runs `ipc-runner eval`. Every output is checked before the first run; once runs are
+/// done, the summary, JSON and CSV are written whatever ends the evaluation (a signal: exit
+/// code 130; a failed run: 1), with the ending in both.
 pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     if args.scenario.is_none() && args.config.is_none() {
         return Err(CommandError::usage("give --scenario NAME or --config FILE"));
+    }
+    if let Some(plot) = &args.plot {
+        crate::plot::check_extension(plot).map_err(CommandError::usage)?;
+    }
+    for (flag, path) in [
+        ("--json", &args.json),
+        ("--csv", &args.csv),
+        ("--plot", &args.plot),
+    ] {
+        if let Some(p) = path {
+            check_output(flag, p).map_err(CommandError::usage)?;
+        }
     }
     // clap lets through one of the two, never both.
     let scenario = scenario::resolve(
@@ -123,20 +153,36 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         args.config.as_deref(),
     )
     .map_err(CommandError::usage)?;
-    if let Some(plot) = &args.plot {
-        crate::plot::check_extension(plot).map_err(CommandError::usage)?;
-    }
+    let budget = Budget::mib(args.max_memory);
+    // rayon's default (RAYON_NUM_THREADS, else one per core) when --threads is not given.
+    let threads = args
+        .threads
+        .map_or_else(rayon::current_num_threads, |t| t as usize);
+    let particles = particles(args.particles, &args.estimators);
+    // Before any estimator is built (the name check below builds them): a particle filter
+    // allocates its particles at once.
+    budget
+        .check(
+            &format!("--particles {particles} on {threads} thread(s)"),
+            crate::limits::product(&[
+                particles as u64,
+                super::pf_bytes_per_particle(scenario.nx()),
+                threads as u64 + 1,
+            ]),
+        )
+        .map_err(CommandError::usage)?;
     // Estimator families add fields (with their flags) to EvalOptions; the rest default.
     #[allow(clippy::needless_update)]
     let options = EvalOptions {
         runs: args.runs,
         horizon: args.horizon,
         seed: args.seed,
-        particles: particles(args.particles, &args.estimators),
+        particles,
         estimators: args.estimators.clone(),
         loss_rate: args.loss_rate,
         transport_loss: args.transport_loss,
         transport_loss_unmarked: args.transport_loss_unmarked,
+        gate: args.gate,
     };
     if !options.estimators.is_empty() {
         let all = EvalOptions {
@@ -150,7 +196,10 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
                 .map(|e| e.name())
                 .collect();
         for n in &options.estimators {
-            if !available.contains(&n.as_str()) {
+            if !available
+                .iter()
+                .any(|a| crate::estimators::names_match(a, n))
+            {
                 let hint = if n.ends_with("-mix") && options.loss_rate == 0.0 {
                     " (the -mix estimators need --loss-rate P)"
                 } else {
@@ -168,43 +217,92 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         threads: args.threads.map(|t| t as usize),
         progress: !args.quiet,
     };
-    let mut result = evaluate(&*scenario, &options, FACTORIES, &run_config)
-        .map_err(|e| CommandError::failure(format!("{e:#}")))?;
-    super::nn_bound::after_eval(&mut result, &*scenario, args.plot.as_deref())
-        .map_err(|e| CommandError::failure(format!("{e:#}")))?;
+    // The first call installs the handler (iceoryx2's, as `run` uses): from here on SIGINT
+    // and SIGTERM stop the evaluation after the runs in progress instead of killing it.
+    let _ = channel_sim::signal::termination_requested();
+    let stop = channel_sim::signal::termination_requested;
+    let control = Control {
+        budget,
+        progress_every: std::time::Duration::from_secs_f64(args.progress_every),
+        stop: Some(&stop),
+    };
+    let mut result = evaluate_with(&*scenario, &options, FACTORIES, &run_config, &control)
+        .map_err(|e| {
+            if channel_sim::flags::is_bad_input(&e) {
+                CommandError::usage(format!("{e:#}"))
+            } else {
+                CommandError::failure(format!("{e:#}"))
+            }
+        })?;
     if let Some(c) = scenario
         .as_any()
         .downcast_ref::<scenario::ComposedScenario>()
     {
         result.warnings = c.warnings();
     }
+    // What the runs computed goes out first, each output on its own: one that fails does
+    // not keep the others from being written.
+    let mut failures = Vec::new();
+    let bound = super::nn_bound::after_eval(&mut result, &*scenario, args.plot.as_deref());
+    if let Err(e) = bound {
+        failures.push(format!("{e:#}"));
+    }
     print!("{}", result.summary());
+    let mut wrote = Vec::new();
     if let Some(path) = &args.json {
-        write(path, &result.to_json())?;
-    }
-    if let Some(path) = &args.csv {
-        write(path, &result.to_csv())?;
-    }
-    if let Some(path) = &args.plot {
-        crate::plot::plot(&result, path)
-            .map_err(|e| CommandError::failure(format!("{}: {e:#}", path.display())))?;
-    }
-    for path in [&args.json, &args.csv, &args.plot].into_iter().flatten() {
-        println!("wrote {}", path.display());
-    }
-    // Scenarios with a shared token bucket (seed 004): Fig. 2 beside the plot.
-    if let Some(path) = &args.plot {
-        let written =
-            crate::plot::tokens::plot_for(&*scenario, options.seed, options.horizon, path)
-                .map_err(|e| CommandError::failure(format!("token plot: {e:#}")))?;
-        if let Some(p) = written {
-            println!("wrote {}", p.display());
+        match write(path, &result.to_json()) {
+            Ok(()) => wrote.push(path.clone()),
+            Err(e) => failures.push(e),
         }
     }
-    Ok(())
+    if let Some(path) = &args.csv {
+        match write(path, &result.to_csv()) {
+            Ok(()) => wrote.push(path.clone()),
+            Err(e) => failures.push(e),
+        }
+    }
+    if let Some(path) = &args.plot {
+        match crate::plot::plot(&result, path) {
+            Ok(()) => wrote.push(path.clone()),
+            Err(e) => failures.push(format!("{}: {e:#}", path.display())),
+        }
+        // Scenarios with a shared token bucket (seed 004): Fig. 2 beside the plot.
+        match crate::plot::tokens::plot_for(&*scenario, options.seed, options.horizon, path) {
+            Ok(Some(p)) => wrote.push(p),
+            Ok(None) => {}
+            Err(e) => failures.push(format!("token plot: {e:#}")),
+        }
+    }
+    for path in &wrote {
+        println!("wrote {}", path.display());
+    }
+    match result.ending {
+        EvalEnding::Interrupted => {
+            return Err(CommandError {
+                code: 130,
+                message: format!(
+                    "interrupted after {} of {} runs (their results were written)",
+                    result.runs, options.runs
+                ),
+            });
+        }
+        EvalEnding::Failed => failures.insert(
+            0,
+            format!(
+                "run {} failed: {}",
+                result.runs,
+                result.error.as_deref().unwrap_or("?")
+            ),
+        ),
+        EvalEnding::Completed => {}
+    }
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        Err(CommandError::failure(failures.join("; ")))
+    }
 }
 
-fn write(path: &Path, text: &str) -> Result<(), CommandError> {
-    std::fs::write(path, text)
-        .map_err(|e| CommandError::failure(format!("{}: {e}", path.display())))
+fn write(path: &Path, text: &str) -> Result<(), String> {
+    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
 }

@@ -10,6 +10,16 @@
 //! an error (the estimator then no longer tracks instant k). Such runs are counted and left
 //! out of that estimator's means; the evaluation never stops for them.
 //!
+//! A (run, k) whose *truth* is not finite is no sample: counted (`truth_nonfinite`) and left
+//! out of every MSE, never turning the report into NaN.
+//!
+//! **Bounds and endings** ([`evaluate_with`], [`Control`]): what the evaluation holds
+//! ([`memory_need`]) is checked against a budget before the first run, and the chunk of
+//! finished runs shrinks to fit it (results unchanged); a stop request (SIGINT/SIGTERM in
+//! `ipc-runner eval`) or a run that fails ends the evaluation with the runs done before the
+//! first one not done ([`EvalEnding`]), whose results are exactly those of an evaluation of
+//! that many runs (docs/pipeline.md, "Exit codes and limits").
+//!
 //! What a scenario adds to its evaluation lives here too, not in its estimators:
 //! [`nn_bound`] (seed 003's assumption check, bound check and bound plot).
 //!
@@ -50,26 +60,132 @@ use estpipe_wire::FLAG_IPC_LOST;
 use rayon::prelude::*;
 
 use crate::estimators::{build_all, EvalOptions, Factory};
+use crate::limits::{product, Budget, Progress};
 pub use report::{ChannelSummary, EstimatorResult, EvalResult, NodeCounts, Trajectory};
+use std::time::Duration;
 
 /// How to run an evaluation (beyond what estimators see in [`EvalOptions`]).
 #[derive(Clone, Debug, Default)]
 pub struct RunConfig {
     /// Worker threads (`None`: rayon's default, one per core).
     pub threads: Option<usize>,
-    /// Show a progress bar on stderr.
+    /// Show progress on stderr (a bar on a terminal, else a line every few seconds).
     pub progress: bool,
 }
 
-/// Runs the Monte Carlo of `scenario` with the estimators of `factories`.
+/// The bounds and the stop request of an evaluation ([`evaluate_with`]).
+pub struct Control<'a> {
+    /// What the evaluation may hold in memory ([`memory_need`]).
+    pub budget: Budget,
+    /// Interval of the progress lines when stderr is not a terminal.
+    pub progress_every: Duration,
+    /// Polled by the workers before each run: `true` stops the evaluation, which then
+    /// reports the runs done before the first one not done.
+    pub stop: Option<&'a (dyn Fn() -> bool + Sync)>,
+}
+
+impl Default for Control<'_> {
+    fn default() -> Self {
+        Self {
+            budget: Budget::mib(crate::limits::DEFAULT_MAX_MEMORY_MIB),
+            progress_every: crate::limits::PROGRESS_LINE_EVERY,
+            stop: None,
+        }
+    }
+}
+
+impl std::fmt::Debug for Control<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Control")
+            .field("budget", &self.budget)
+            .field("progress_every", &self.progress_every)
+            .field("stop", &self.stop.is_some())
+            .finish()
+    }
+}
+
+/// Diagnostics an estimator may report per k, assumed by [`memory_need`] (the most any
+/// estimator of this product reports is 6: `p11`, `p12`, `p22`, `trace_p`, `nees`,
+/// `inside_95`).
+pub const DIAGNOSTICS_ALLOWANCE: u64 = 8;
+
+/// Most runs finished but not yet reduced: the results of a chunk are reduced in run order.
+const CHUNK: u64 = 256;
+
+/// Bytes a particle filter holds per particle on a scenario with `nx` states (particles,
+/// their copy while resampling, two log-weights), for both `pf` and `pf-mix`.
+pub fn pf_bytes_per_particle(nx: usize) -> u64 {
+    2 * 8 * (2 * nx as u64 + 2)
+}
+
+/// What an evaluation holds in memory, in bytes: `(fixed, per_run)`. `fixed` are the
+/// reductions (per-k sums and counts of every estimator, the per-run averages the median
+/// needs, run 0's trajectories), `per_run` one run's record (squared errors and
+/// diagnostics per k) while it waits in a chunk, or is being computed.
+pub fn memory_need(nx: usize, n_est: usize, horizon: u32, runs: u64) -> (u64, u64) {
+    let (nx, n_est, k) = (nx as u64, n_est as u64, u64::from(horizon) + 1);
+    let per_run = product(&[8, k, n_est, nx + DIAGNOSTICS_ALLOWANCE]);
+    let reductions = product(&[8, k, n_est, nx + 2 * DIAGNOSTICS_ALLOWANCE + 1]);
+    let run_avgs = product(&[8, runs, n_est]);
+    let trajectories = product(&[2 * 8, k, nx, n_est + 1]);
+    (
+        reductions
+            .saturating_add(run_avgs)
+            .saturating_add(trajectories),
+        per_run,
+    )
+}
+
+/// How an evaluation ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EvalEnding {
+    /// Every requested run was done.
+    Completed,
+    /// Stopped by SIGINT/SIGTERM ([`Control::stop`]); the runs done before are reported.
+    Interrupted,
+    /// A run failed (its estimators could not be built); the runs before it are reported.
+    Failed,
+}
+
+/// Runs the Monte Carlo of `scenario` with the estimators of `factories`; a run that fails
+/// is an error (what [`evaluate_with`] reports as [`EvalEnding::Failed`]).
 pub fn evaluate(
     scenario: &dyn Scenario,
     options: &EvalOptions,
     factories: &[Factory],
     config: &RunConfig,
 ) -> anyhow::Result<EvalResult> {
+    let r = evaluate_with(scenario, options, factories, config, &Control::default())?;
+    match (&r.ending, &r.error) {
+        (EvalEnding::Failed, Some(e)) => anyhow::bail!("{e}"),
+        _ => Ok(r),
+    }
+}
+
+/// [`evaluate`] within `control`'s bounds. `Err` only before the first run (bad options,
+/// memory budget, worker threads); afterwards the result always comes back, with what ended
+/// it in [`EvalResult::ending`] and the runs done before that in [`EvalResult::runs`].
+pub fn evaluate_with(
+    scenario: &dyn Scenario,
+    options: &EvalOptions,
+    factories: &[Factory],
+    config: &RunConfig,
+    control: &Control<'_>,
+) -> anyhow::Result<EvalResult> {
     anyhow::ensure!(options.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(options.horizon >= 1, "--horizon must be at least 1");
+    let threads = config.threads.unwrap_or_else(rayon::current_num_threads);
+    // Before anything is built: the particle filters allocate their particles at once.
+    let pf = product(&[
+        options.particles as u64,
+        pf_bytes_per_particle(scenario.nx()),
+        threads as u64 + 1,
+    ]);
+    control.budget.check(
+        &format!("--particles {} on {threads} thread(s)", options.particles),
+        pf,
+    )?;
     let names: Vec<&'static str> = build_all(factories, scenario, options, options.seed, 0)?
         .iter()
         .map(|e| e.name())
@@ -79,19 +195,31 @@ pub fn evaluate(
         "no estimator applies to scenario '{}'",
         scenario.name()
     );
+    let (fixed, per_run) = memory_need(scenario.nx(), names.len(), options.horizon, options.runs);
+    let held = fixed.saturating_add(pf);
+    // Each thread computes one run, and a chunk holds at least one run per thread.
+    let minimum = held.saturating_add(product(&[2, threads as u64, per_run]));
+    control.budget.check(
+        &format!(
+            "--runs {} --horizon {} ({} estimators × {} states, {threads} thread(s))",
+            options.runs,
+            options.horizon,
+            names.len(),
+            scenario.nx()
+        ),
+        minimum,
+    )?;
+    let chunk = ((control.budget.bytes - held) / per_run.max(1))
+        .saturating_sub(threads as u64)
+        .clamp(threads as u64, CHUNK);
 
-    let progress = if config.progress {
-        indicatif::ProgressBar::new(options.runs).with_style(
-            indicatif::ProgressStyle::with_template(
-                "{msg} [{bar:40}] {pos}/{len} runs, {elapsed} (eta {eta})",
-            )
-            .expect("static template")
-            .progress_chars("=> "),
-        )
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    progress.set_message(format!("eval {}", scenario.name()));
+    let progress = Progress::new(
+        format!("eval {}", scenario.name()),
+        "runs",
+        options.runs,
+        !config.progress,
+        control.progress_every,
+    );
 
     let mut acc = report::Accumulator::new(scenario, options, &names);
     let mut pool = rayon::ThreadPoolBuilder::new();
@@ -99,29 +227,57 @@ pub fn evaluate(
         pool = pool.num_threads(t);
     }
     let pool = pool.build().context("cannot start the worker threads")?;
+    let stopped = std::sync::atomic::AtomicBool::new(false);
+    let stop_now = || {
+        use std::sync::atomic::Ordering::Relaxed;
+        stopped.load(Relaxed)
+            || control.stop.is_some_and(|f| f()) && {
+                stopped.store(true, Relaxed);
+                true
+            }
+    };
     // Chunks bound the memory held by finished runs; within a chunk, results are collected in
-    // run order and reduced in that order.
-    const CHUNK: u64 = 256;
+    // run order and reduced in that order. A run not done (stop) or failed ends the
+    // reduction: what is reported are always the runs 0..n, as if only n had been asked.
+    let mut ending = EvalEnding::Completed;
+    let mut error = None;
     let mut start = 0;
-    while start < options.runs {
-        let end = (start + CHUNK).min(options.runs);
-        let outputs: Vec<anyhow::Result<RunOutput>> = pool.install(|| {
+    'chunks: while start < options.runs {
+        let end = (start + chunk).min(options.runs);
+        let outputs: Vec<Option<anyhow::Result<RunOutput>>> = pool.install(|| {
             (start..end)
                 .into_par_iter()
                 .map(|run| {
+                    if stop_now() {
+                        return None;
+                    }
                     let out = run_one(scenario, options, factories, run, &names);
                     progress.inc(1);
-                    out
+                    Some(out)
                 })
                 .collect()
         });
         for out in outputs {
-            acc.add(out?);
+            match out {
+                Some(Ok(out)) => acc.add(out),
+                Some(Err(e)) => {
+                    ending = EvalEnding::Failed;
+                    error = Some(format!("{e:#}"));
+                    break 'chunks;
+                }
+                None => {
+                    ending = EvalEnding::Interrupted;
+                    break 'chunks;
+                }
+            }
         }
         start = end;
     }
-    progress.finish_and_clear();
-    Ok(acc.finish())
+    progress.finish();
+    let mut result = acc.finish();
+    result.ending = ending;
+    result.error = error;
+    Ok(result)
 }
 
 /// What one run produced.
@@ -135,12 +291,16 @@ pub struct RunOutput {
     pub channel: Vec<NodeCounts>,
     /// Truth and estimates over k = 0..=T (kept for run 0 only, for plots).
     pub trajectory: Option<Trajectory>,
+    /// Instants k = 0..=T whose truth had a non-finite component: left out of every
+    /// estimator's squared errors.
+    pub truth_nonfinite: u64,
 }
 
 /// One estimator's record of one run.
 #[derive(Debug, Default)]
 pub struct RunEstimator {
-    /// Squared error per k and state, `sq_err[k * nx + i]`; `None` when the run diverged.
+    /// Squared error per k and state, `sq_err[k * nx + i]` (NaN at an instant whose truth is
+    /// not finite: not a sample); `None` when the run diverged.
     pub sq_err: Option<Vec<f64>>,
     /// The step error that ended the run, if any.
     pub error: Option<String>,
@@ -157,14 +317,22 @@ impl RunEstimator {
         truth: &[f64],
     ) {
         let diags = &mut self.diagnostics;
-        let mut sink = |name, value| {
-            let slot = match diags.iter().position(|(n, _)| *n == name) {
-                Some(i) => i,
-                None => {
-                    diags.push((name, vec![f64::NAN; len]));
-                    diags.len() - 1
-                }
+        // An estimator reports the same names in the same order at every k: the n-th name of
+        // this call is looked up at index n first (the same `&'static str` compares by
+        // address), and searched for only when it is not there.
+        let mut next = 0;
+        let mut sink = |name: &'static str, value| {
+            let slot = match diags.get(next) {
+                Some((n, _)) if core::ptr::eq(*n, name) || *n == name => next,
+                _ => match diags.iter().position(|(n, _)| *n == name) {
+                    Some(i) => i,
+                    None => {
+                        diags.push((name, vec![f64::NAN; len]));
+                        diags.len() - 1
+                    }
+                },
             };
+            next = slot + 1;
             diags[slot].1[k] = value;
         };
         e.diagnostics(&mut sink);
@@ -202,6 +370,7 @@ pub fn run_one(
 
     // k = 0: the prior against x_0.
     let truth0 = sim.initial_truth();
+    let mut truth_nonfinite = u64::from(truth0[..nx].iter().any(|v| !v.is_finite()));
     for ((e, rec), j) in estimators.iter().zip(&mut records).zip(0..) {
         record_estimate(&**e, rec, 0, &truth0[..nx], &mut xhat, &mut trajectory, j);
     }
@@ -214,6 +383,7 @@ pub fn run_one(
     for k in 1..=options.horizon {
         let instant = sim.next_instant();
         let truth = &instant.truth[..nx];
+        truth_nonfinite += u64::from(truth.iter().any(|v| !v.is_finite()));
         for (o, counts) in instant.obs.iter().zip(&mut channel) {
             counts.count(o);
         }
@@ -274,6 +444,7 @@ pub fn run_one(
         estimators: records,
         channel,
         trajectory,
+        truth_nonfinite,
     })
 }
 
@@ -290,7 +461,9 @@ pub fn transport_lost(seed: u64, run: u64, seq: u64, p: f64) -> bool {
 }
 
 /// Reads the estimate at `k`, records its squared error (or marks the run diverged when it is
-/// not finite), its diagnostics and, for the plotted run, the trajectory.
+/// not finite), its diagnostics and, for the plotted run, the trajectory. A non-finite truth
+/// is no sample of the error: NaN is recorded there, which the reduction leaves out (one
+/// such instant would otherwise make every MSE of the report NaN, issue #20).
 fn record_estimate(
     e: &dyn crate::Estimator,
     rec: &mut RunEstimator,
@@ -314,8 +487,13 @@ fn record_estimate(
     }
     if let Some(sq) = &mut rec.sq_err {
         let len = sq.len() / nx;
+        let scored = truth.iter().all(|v| v.is_finite());
         for i in 0..nx {
-            sq[k * nx + i] = (truth[i] - xhat[i]).powi(2);
+            sq[k * nx + i] = if scored {
+                (truth[i] - xhat[i]).powi(2)
+            } else {
+                f64::NAN
+            };
         }
         rec.record_diagnostics(e, k, len, truth);
     }

@@ -3,11 +3,13 @@
 //!
 //! JSON shape (fields beyond the issue's are additions):
 //! ```text
-//! { "scenario", "runs", "horizon", "seed",
-//!   ["transport_loss", "transport_loss_unmarked", "loss_rate",]   (only when set)
+//! { "scenario", "runs", ["runs_requested",] "horizon", "seed", "ending", ["error",]
+//!   "truth_nonfinite",
+//!   ["transport_loss", "transport_loss_unmarked", "loss_rate", "gate",]   (only when set)
 //!   "estimators": { NAME: { "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
 //!                           "median_run_avg", "diverged_runs", "valid_runs",
 //!                           "first_error", "mse_per_state": [[MSE_i(k)]…],
+//!                           ["gate": { "tested", "rejected", "rejection_rate" },]  (`+gate`)
 //!                           <diagnostic name>: [mean over runs per k]… } },
 //!   "channel": { "delivery_rate", "nodes": [ { "node", "instants", "delivered", "dropped",
 //!                "sent", "triggered", "blocked", "censored", "random_loss", "occluded",
@@ -17,6 +19,13 @@
 //! k = 1..=T (equivalently the mean of the valid runs' averages), `avg_mse_se` its Monte-Carlo
 //! standard error (sample standard deviation of the run averages / √valid_runs),
 //! `median_run_avg` the median of the run averages. Non-finite values are written as `null`.
+//!
+//! `ending` is `completed`, `interrupted` (SIGINT/SIGTERM) or `failed` (with `error`): then
+//! `runs` are the runs done before the first one not done, of `runs_requested`, and every
+//! number is over those. `truth_nonfinite` counts the (run, k) instants whose truth had a
+//! non-finite component; they are left out of every MSE (MSE(k) is then the mean over the
+//! runs whose truth at k was finite, and `avg_mse` the mean of MSE(k) over the k that have
+//! any), so one such sample cannot turn the report into `null`s.
 
 use std::fmt::Write as _;
 
@@ -32,12 +41,23 @@ use crate::estimators::EvalOptions;
 pub struct EvalResult {
     /// Scenario name.
     pub scenario: String,
-    /// Number of runs.
+    /// Runs done and in the means (fewer than asked when the evaluation was interrupted or
+    /// failed).
     pub runs: u64,
+    /// Runs asked for (`--runs`; written only when not all were done).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub runs_requested: Option<u64>,
     /// Horizon T.
     pub horizon: u32,
     /// Experiment seed.
     pub seed: u64,
+    /// How the evaluation ended.
+    pub ending: super::EvalEnding,
+    /// Why it failed ([`super::EvalEnding::Failed`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// (run, k) instants whose truth was not finite, left out of every MSE.
+    pub truth_nonfinite: u64,
     /// `--transport-loss` (not written when 0).
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub transport_loss: f64,
@@ -47,6 +67,9 @@ pub struct EvalResult {
     /// `--loss-rate` of the `-mix` estimators (not written when 0).
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub loss_rate: f64,
+    /// `--gate P`, the innovation gate's probability (not written when off; docs/gate.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gate: Option<f64>,
     /// Per estimator, in registry order.
     #[serde(serialize_with = "ordered_map")]
     pub estimators: Vec<(String, EstimatorResult)>,
@@ -79,9 +102,42 @@ pub struct EstimatorResult {
     pub first_error: Option<String>,
     /// Per-state MSE: `mse_per_state[i][k]`.
     pub mse_per_state: Vec<Vec<f64>>,
+    /// The innovation gate's totals over the valid runs (gated estimators only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gate: Option<GateTotals>,
     /// Named diagnostics, mean over valid runs per k.
     #[serde(flatten, serialize_with = "ordered_map")]
     pub diagnostics: Vec<(String, Vec<f64>)>,
+}
+
+/// What a gated estimator's innovation gate did over the valid runs (docs/gate.md).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct GateTotals {
+    /// Delivered measurements tested.
+    pub tested: u64,
+    /// Of those, rejected (not used).
+    pub rejected: u64,
+    /// `rejected / tested`.
+    pub rejection_rate: f64,
+}
+
+impl GateTotals {
+    /// From the diagnostics `gate_tested`, `gate_rejected` (mean over the valid runs per k of
+    /// the counts so far): their value at `k = T` times the valid runs.
+    fn of(diagnostics: &[(String, Vec<f64>)], valid_runs: u64) -> Option<Self> {
+        let last = |n: &str| {
+            let v = &diagnostics.iter().find(|(d, _)| d == n)?.1;
+            let m = *v.last()?;
+            m.is_finite()
+                .then(|| (m * valid_runs as f64).round() as u64)
+        };
+        let (tested, rejected) = (last("gate_tested")?, last("gate_rejected")?);
+        Some(Self {
+            tested,
+            rejected,
+            rejection_rate: rejected as f64 / tested.max(1) as f64,
+        })
+    }
 }
 
 /// Channel statistics.
@@ -178,11 +234,15 @@ pub(super) struct Accumulator {
     channel: Vec<NodeCounts>,
     trajectory: Option<Trajectory>,
     next_run: u64,
+    truth_nonfinite: u64,
 }
 
 #[derive(Default)]
 struct EstimatorAcc {
     sum_sq: Vec<f64>,
+    /// Runs in `sum_sq` per k (those whose truth at k was finite).
+    n_k: Vec<u64>,
+    valid: u64,
     run_avgs: Vec<f64>,
     diverged: u64,
     first_error: Option<String>,
@@ -206,6 +266,7 @@ impl Accumulator {
                 .iter()
                 .map(|_| EstimatorAcc {
                     sum_sq: vec![0.0; len],
+                    n_k: vec![0; options.horizon as usize + 1],
                     ..Default::default()
                 })
                 .collect(),
@@ -217,12 +278,14 @@ impl Accumulator {
                 .collect(),
             trajectory: None,
             next_run: 0,
+            truth_nonfinite: 0,
         }
     }
 
     pub(super) fn add(&mut self, out: RunOutput) {
         assert_eq!(out.run, self.next_run, "runs must be reduced in order");
         self.next_run += 1;
+        self.truth_nonfinite += out.truth_nonfinite;
         let (nx, t) = (self.nx, self.options.horizon as usize);
         for (acc, rec) in self.estimators.iter_mut().zip(out.estimators) {
             let Some(sq) = rec.sq_err else {
@@ -236,10 +299,29 @@ impl Accumulator {
                 }
                 continue;
             };
-            for (s, v) in acc.sum_sq.iter_mut().zip(&sq) {
-                *s += v;
+            acc.valid += 1;
+            // NaN marks an instant without a sample (non-finite truth, `record_estimate`).
+            let (mut run_sum, mut run_n) = (0.0, 0u64);
+            for k in 0..=t {
+                let sq_k = &sq[k * nx..][..nx];
+                if sq_k[0].is_nan() {
+                    continue;
+                }
+                for (s, v) in acc.sum_sq[k * nx..][..nx].iter_mut().zip(sq_k) {
+                    *s += v;
+                }
+                acc.n_k[k] += 1;
+                if k > 0 {
+                    // Element by element: the same sum, bit for bit, as over the whole run.
+                    for v in sq_k {
+                        run_sum += v;
+                    }
+                    run_n += 1;
+                }
             }
-            acc.run_avgs.push(sq[nx..].iter().sum::<f64>() / t as f64);
+            if run_n > 0 {
+                acc.run_avgs.push(run_sum / run_n as f64);
+            }
             for (name, values) in rec.diagnostics {
                 let slot = match acc.diag.iter().position(|(n, _, _)| *n == name) {
                     Some(i) => i,
@@ -282,13 +364,24 @@ impl Accumulator {
             .zip(self.estimators)
             .map(|(name, acc)| {
                 let n = acc.run_avgs.len() as f64;
+                let mean_k = |k: usize, v: f64| {
+                    if acc.n_k[k] == 0 {
+                        f64::NAN
+                    } else {
+                        v / acc.n_k[k] as f64
+                    }
+                };
                 let per_state: Vec<Vec<f64>> = (0..nx)
-                    .map(|i| (0..=t).map(|k| acc.sum_sq[k * nx + i] / n).collect())
+                    .map(|i| (0..=t).map(|k| mean_k(k, acc.sum_sq[k * nx + i])).collect())
                     .collect();
                 let mse: Vec<f64> = (0..=t)
-                    .map(|k| acc.sum_sq[k * nx..][..nx].iter().sum::<f64>() / n)
+                    .map(|k| mean_k(k, acc.sum_sq[k * nx..][..nx].iter().sum::<f64>()))
                     .collect();
-                let avg_mse = mse[1..].iter().sum::<f64>() / t as f64;
+                let sampled: Vec<f64> = (1..=t)
+                    .filter(|&k| acc.n_k[k] > 0)
+                    .map(|k| mse[k])
+                    .collect();
+                let avg_mse = sampled.iter().sum::<f64>() / sampled.len() as f64;
                 let mean_run = acc.run_avgs.iter().sum::<f64>() / n;
                 let var = acc
                     .run_avgs
@@ -296,7 +389,7 @@ impl Accumulator {
                     .map(|r| (r - mean_run).powi(2))
                     .sum::<f64>()
                     / (n - 1.0);
-                let diagnostics = acc
+                let diagnostics: Vec<(String, Vec<f64>)> = acc
                     .diag
                     .into_iter()
                     .map(|(name, sums, counts)| {
@@ -308,15 +401,17 @@ impl Accumulator {
                         (name.to_owned(), mean)
                     })
                     .collect();
+                let gate = GateTotals::of(&diagnostics, n as u64);
                 let result = EstimatorResult {
                     mse,
                     avg_mse,
                     avg_mse_se: (var / n).sqrt(),
                     median_run_avg: median(acc.run_avgs),
                     diverged_runs: acc.diverged,
-                    valid_runs: n as u64,
+                    valid_runs: acc.valid,
                     first_error: acc.first_error,
                     mse_per_state: per_state,
+                    gate,
                     diagnostics,
                 };
                 ((*name).to_owned(), result)
@@ -331,12 +426,17 @@ impl Accumulator {
             .fold((0, 0), |(d, i), c| (d + c.delivered, i + c.instants));
         EvalResult {
             scenario: self.scenario,
-            runs: self.options.runs,
+            runs: self.next_run,
+            runs_requested: (self.next_run != self.options.runs).then_some(self.options.runs),
             horizon: self.options.horizon,
             seed: self.options.seed,
+            ending: super::EvalEnding::Completed,
+            error: None,
+            truth_nonfinite: self.truth_nonfinite,
             transport_loss: self.options.transport_loss,
             transport_loss_unmarked: self.options.transport_loss_unmarked,
             loss_rate: self.options.loss_rate,
+            gate: self.options.gate,
             estimators,
             channel: ChannelSummary {
                 delivery_rate: delivered as f64 / instants.max(1) as f64,
@@ -389,11 +489,35 @@ impl EvalResult {
     /// The human-readable summary table.
     pub fn summary(&self) -> String {
         let mut s = String::new();
+        let runs = match self.runs_requested {
+            Some(asked) => format!("{} of {asked} runs", self.runs),
+            None => format!("{} runs", self.runs),
+        };
         let _ = writeln!(
             s,
-            "scenario {}: {} runs, horizon {}, seed {}",
-            self.scenario, self.runs, self.horizon, self.seed
+            "scenario {}: {runs}, horizon {}, seed {}",
+            self.scenario, self.horizon, self.seed
         );
+        match (self.ending, &self.error) {
+            (super::EvalEnding::Completed, _) => {}
+            (super::EvalEnding::Interrupted, _) => {
+                let _ = writeln!(s, "ended: interrupted (the runs done before the signal)");
+            }
+            (super::EvalEnding::Failed, e) => {
+                let _ = writeln!(
+                    s,
+                    "ended: failed ({}); the runs before it",
+                    e.as_deref().unwrap_or("?")
+                );
+            }
+        }
+        if self.truth_nonfinite > 0 {
+            let _ = writeln!(
+                s,
+                "truth not finite at {} (run, k) instant(s): left out of every MSE",
+                self.truth_nonfinite
+            );
+        }
         let _ = writeln!(
             s,
             "{:<12} {:>12} {:>10} {:>14} {:>9}",
@@ -423,6 +547,19 @@ impl EvalResult {
                     100.0 * worst,
                     r.avg_mse,
                     avg(tr)
+                );
+            }
+        }
+        for (name, r) in &self.estimators {
+            if let (Some(g), Some(p)) = (r.gate, self.gate) {
+                let _ = writeln!(
+                    s,
+                    "{name}: innovation gate P = {p} rejected {} of {} measurements ({:.3} %; \
+                     1 − P = {:.3} %)",
+                    g.rejected,
+                    g.tested,
+                    100.0 * g.rejection_rate,
+                    100.0 * (1.0 - p)
                 );
             }
         }

@@ -305,3 +305,202 @@ fn transport_losses_come_after_the_channel() {
         }
     }
 }
+
+/// `inner` with the truth of instant `k` NaN in the even runs (what an overflowing plant or
+/// a bad TOML plant would give); the estimators see the same observations.
+#[derive(Debug)]
+struct NanTruthAt {
+    inner: Box<dyn Scenario>,
+    k: u32,
+}
+
+struct NanTruthSim {
+    inner: Box<dyn channel_sim::Simulation>,
+    k: Option<u32>,
+}
+
+impl channel_sim::Simulation for NanTruthSim {
+    fn initial_truth(&self) -> [f64; MAX_NX] {
+        self.inner.initial_truth()
+    }
+    fn initial_observations(&self) -> Option<&[Observation]> {
+        self.inner.initial_observations()
+    }
+    fn next_instant(&mut self) -> channel_sim::sim::Instant {
+        let mut i = self.inner.next_instant();
+        if Some(i.k) == self.k {
+            i.truth[1] = f64::NAN;
+        }
+        i
+    }
+    fn raw_observations(&self) -> Option<&[Observation]> {
+        self.inner.raw_observations()
+    }
+}
+
+impl Scenario for NanTruthAt {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+    fn nx(&self) -> usize {
+        self.inner.nx()
+    }
+    fn ny(&self) -> usize {
+        self.inner.ny()
+    }
+    fn nodes(&self) -> usize {
+        self.inner.nodes()
+    }
+    fn fingerprint(&self) -> u64 {
+        self.inner.fingerprint()
+    }
+    fn start(&self, seed: u64, run: u64) -> Box<dyn channel_sim::Simulation> {
+        Box::new(NanTruthSim {
+            inner: self.inner.start(seed, run),
+            k: run.is_multiple_of(2).then_some(self.k),
+        })
+    }
+    fn as_any(&self) -> &dyn std::any::Any {
+        // The factories read the inner scenario's parameters.
+        self.inner.as_any()
+    }
+}
+
+/// Issue #20: a non-finite truth sample is counted and left out of the MSE at its k, never
+/// a `null` in the report; every other number is the plain evaluation's, bit for bit, and
+/// MSE(k) at that k is the mean over the runs with a finite truth there (computed here from
+/// the runs' own records, not by the reduction).
+#[test]
+fn non_finite_truth_is_counted_and_left_out_of_every_mse() {
+    let plain = preset("linear").unwrap();
+    let nan = NanTruthAt {
+        inner: preset("linear").unwrap(),
+        k: 3,
+    };
+    let o = options(40, 8, 3);
+    let a = eval_with(&*plain, &o, FACTORIES, 2);
+    let b = eval_with(&nan, &o, FACTORIES, 2);
+    assert_eq!(a.truth_nonfinite, 0);
+    assert_eq!(b.truth_nonfinite, 20);
+    let json: serde_json::Value = serde_json::from_str(&b.to_json()).unwrap();
+    for (name, e) in json["estimators"].as_object().unwrap() {
+        for field in ["mse", "avg_mse", "avg_mse_se", "median_run_avg"] {
+            let v = &e[field];
+            let numbers = match v.as_array() {
+                Some(a) => a.iter().all(serde_json::Value::is_f64),
+                None => v.is_f64(),
+            };
+            assert!(numbers, "{name}.{field}: {v}");
+        }
+    }
+    assert!(b
+        .summary()
+        .contains("truth not finite at 20 (run, k) instant(s)"));
+    let names: Vec<&'static str> = a
+        .estimators
+        .iter()
+        .map(|(n, _)| {
+            build_all(FACTORIES, &*plain, &o, 3, 0)
+                .unwrap()
+                .iter()
+                .map(|e| e.name())
+                .find(|m| m == n)
+                .unwrap()
+        })
+        .collect();
+    for (j, ((name, ra), (_, rb))) in a.estimators.iter().zip(&b.estimators).enumerate() {
+        assert_eq!(ra.valid_runs, rb.valid_runs, "{name}");
+        for k in (0..=8).filter(|&k| k != 3) {
+            assert_eq!(ra.mse[k].to_bits(), rb.mse[k].to_bits(), "{name} k = {k}");
+        }
+        // The odd runs' squared errors at k = 3, from run_one.
+        let nx = plain.nx();
+        let (mut sum, mut n) = (0.0, 0u32);
+        for run in (1..40).step_by(2) {
+            let out = run_one(&*plain, &o, FACTORIES, run, &names).unwrap();
+            if let Some(sq) = &out.estimators[j].sq_err {
+                sum += sq[3 * nx..][..nx].iter().sum::<f64>();
+                n += 1;
+            }
+        }
+        let expect = sum / f64::from(n);
+        assert!(
+            (rb.mse[3] - expect).abs() <= 1e-12 * expect,
+            "{name}: {} vs {expect}",
+            rb.mse[3]
+        );
+        assert!(
+            rb.avg_mse.is_finite() && rb.median_run_avg.is_finite(),
+            "{name}"
+        );
+    }
+}
+
+/// A stop request keeps the runs done before it: the result is that of an evaluation of
+/// just those runs (same numbers, bit for bit), marked interrupted with the runs asked for.
+#[test]
+fn a_stopped_evaluation_is_the_evaluation_of_the_runs_done() {
+    let s = preset("linear").unwrap();
+    let polls = std::sync::atomic::AtomicU64::new(0);
+    // One thread: the workers poll once per run, in run order; the 14th poll stops.
+    let stop = || polls.fetch_add(1, std::sync::atomic::Ordering::SeqCst) >= 13;
+    let control = Control {
+        stop: Some(&stop),
+        ..Control::default()
+    };
+    let config = RunConfig {
+        threads: Some(1),
+        progress: false,
+    };
+    let r = evaluate_with(&*s, &options(300, 12, 9), FACTORIES, &config, &control).unwrap();
+    assert_eq!(r.ending, EvalEnding::Interrupted);
+    assert_eq!((r.runs, r.runs_requested), (13, Some(300)));
+    let done = eval_with(&*s, &options(13, 12, 9), FACTORIES, 1);
+    assert_eq!(done.ending, EvalEnding::Completed);
+    let (mut a, b): (serde_json::Value, serde_json::Value) = (
+        serde_json::from_str(&r.to_json()).unwrap(),
+        serde_json::from_str(&done.to_json()).unwrap(),
+    );
+    assert_eq!(a["ending"], "interrupted");
+    a["ending"] = "completed".into();
+    a.as_object_mut().unwrap().remove("runs_requested");
+    assert_eq!(a, b);
+}
+
+/// The budget refuses before any run, naming the flags; within it, a smaller budget only
+/// shrinks the chunks (the numbers stay the same).
+#[test]
+fn the_memory_budget_refuses_or_shrinks_chunks_never_changes_results() {
+    let s = preset("linear").unwrap();
+    let config = RunConfig {
+        threads: Some(2),
+        progress: false,
+    };
+    let tight = Control {
+        budget: Budget::mib(1),
+        ..Control::default()
+    };
+    let huge = EvalOptions {
+        particles: 0,
+        ..options(300, 100_000, 1)
+    };
+    let e = evaluate_with(&*s, &huge, FACTORIES, &config, &tight)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("--runs 300 --horizon 100000 (") && e.contains("budget is 1.0 MiB"),
+        "{e}"
+    );
+    // 300 runs of T = 300 in 1 MiB: chunks of a few dozen runs instead of 256.
+    let o = EvalOptions {
+        particles: 0,
+        ..options(300, 300, 4)
+    };
+    let (fixed, per_run) = memory_need(s.nx(), 1, 300, 300);
+    assert!(
+        fixed + 256 * per_run > tight.budget.bytes,
+        "the budget must bind the chunks"
+    );
+    let small = evaluate_with(&*s, &o, FACTORIES, &config, &tight).unwrap();
+    assert_eq!(small.to_json(), eval_with(&*s, &o, FACTORIES, 2).to_json());
+}

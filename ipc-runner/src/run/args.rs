@@ -1,8 +1,12 @@
 //! The options of `ipc-runner run` (shared with `demo`).
 
+use crate::limits::{check_output, product, BadInput, Budget};
 use estpipe_wire as wire;
 use serde::Serialize;
 use std::path::PathBuf;
+
+/// Longest slot queue `--buffer` accepts (iceoryx2 preallocates it in shared memory).
+pub const MAX_BUFFER: usize = 1 << 16;
 
 /// How the loop waits for the next slot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -43,8 +47,9 @@ pub struct RunArgs {
     /// scenario; `pf` only with `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (occlusion scenarios; far slower per step than
-    /// the other estimators). Default: `pf` is not run unless `--estimators` names it (then
+    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
+    /// a preset or a TOML file, and `nn-token-bucket`; far slower per step than the other
+    /// estimators). Default: `pf` is not run unless `--estimators` names it (then
     /// 5000).
     #[arg(long)]
     pub particles: Option<usize>,
@@ -54,23 +59,43 @@ pub struct RunArgs {
     #[arg(long, default_value_t = 0.0, value_name = "P",
           value_parser = crate::eval::cli::loss_probability)]
     pub loss_rate: f64,
+    /// Innovation gate of probability P (docs/gate.md): every estimator with an innovation
+    /// ignores a measurement whose NIS exceeds the χ² quantile of P, and is named
+    /// `<name>+gate`; the summary counts the rejections. Default: off.
+    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
+    pub gate: Option<f64>,
     /// Service-name prefix (must match channel-sim's).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
     /// How to wait for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
-    /// Data deadline: the publisher counts as lost this many ms after the expected slot.
-    #[arg(long, default_value_t = 100.0)]
+    /// Data deadline: this many ms after the expected slot the publisher is looked at: stalled
+    /// if its iceoryx2 node is alive (waited for, see `--stall-limit`), else lost.
+    #[arg(long, default_value_t = 100.0, value_parser = channel_sim::flags::positive_millis)]
     pub deadline_ms: f64,
+    /// Instants a node's k (or its END/ABORT's) may advance past its last instant; the gap is
+    /// filled with lost slots, a larger jump is a counted stream error (docs/wire.md).
+    #[arg(long, default_value_t = super::assemble::DEFAULT_MAX_GAP)]
+    pub max_gap: u32,
+    /// Paced streams: how long an instant waits for its other nodes' slots after its first
+    /// one arrived before it is handed on without them (counted as lost by the deadline);
+    /// 0 = for ever. Blocking streams (`--rate 0`) never lose a slot by this deadline.
+    #[arg(long, default_value_t = super::assemble::DEFAULT_INSTANT_DEADLINE_MS)]
+    pub instant_deadline_ms: f64,
     /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = channel_sim::flags::seconds)]
     pub connect_timeout: f64,
+    /// A publisher whose iceoryx2 node is alive but that sent nothing past the deadline is
+    /// *stalled* (waited for, reported); it counts as lost after this many seconds of silence
+    /// (0 = never). A dead node is lost at the deadline (docs/pipeline.md, "Stalled or lost").
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = channel_sim::flags::seconds)]
+    pub stall_limit: f64,
     /// After losing the publisher, wait for channel-sim to come back instead of failing.
     #[arg(long)]
     pub wait_for_restart: bool,
     /// Slot queue length of the subscriber (older slots are overwritten when it is full).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, value_parser = buffer_len)]
     pub buffer: usize,
     /// Pin the loop to this CPU (best effort).
     #[arg(long)]
@@ -118,6 +143,20 @@ pub struct RunArgs {
     /// Suppress progress messages.
     #[arg(long)]
     pub quiet: bool,
+    /// Memory the run may preallocate, in MiB: the recording of `--steps` instants (truth,
+    /// estimates, timing, slots) and the particles. Flags that need more are refused before
+    /// the loop starts, with the numbers.
+    #[arg(long, value_name = "MIB", default_value_t = crate::limits::DEFAULT_MAX_MEMORY_MIB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_memory: u64,
+}
+
+fn buffer_len(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if (1..=MAX_BUFFER).contains(&n) => Ok(n),
+        Ok(n) => Err(format!("{n} is not in 1..={MAX_BUFFER}")),
+        Err(e) => Err(format!("{s:?}: {e}")),
+    }
 }
 
 impl RunArgs {
@@ -129,10 +168,14 @@ impl RunArgs {
             estimators: Vec::new(),
             particles: None,
             loss_rate: 0.0,
+            gate: None,
             prefix: prefix.to_string(),
             wait: WaitMode::Spin,
             deadline_ms: 100.0,
             connect_timeout: 30.0,
+            stall_limit: 10.0,
+            max_gap: super::assemble::DEFAULT_MAX_GAP,
+            instant_deadline_ms: super::assemble::DEFAULT_INSTANT_DEADLINE_MS,
             wait_for_restart: false,
             buffer: 256,
             cpu: None,
@@ -148,6 +191,74 @@ impl RunArgs {
             latest_estimates: false,
             debug_slow_us: None,
             quiet: false,
+            max_memory: crate::limits::DEFAULT_MAX_MEMORY_MIB,
         }
     }
+
+    /// Checks, before the loop starts, that every output file can be written (a file that
+    /// cannot would otherwise fail after the whole stream, losing it).
+    pub fn check_outputs(&self) -> Result<(), BadInput> {
+        for (flag, path) in [
+            ("--estimates-csv", &self.estimates_csv),
+            ("--slots-csv", &self.slots_csv),
+            ("--latency-csv", &self.latency_csv),
+            ("--json", &self.json),
+        ] {
+            if let Some(p) = path {
+                check_output(flag, p)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks what the loop preallocates for `n_est` estimators on a scenario of `nx` states
+    /// and `nodes` nodes (`run/trajectories.rs`: per instant its key, timing, truth and
+    /// estimates, and with `--slots-csv` every node's slot) and what `particles` particles
+    /// hold, against `--max-memory`.
+    pub fn check_memory(
+        &self,
+        nx: usize,
+        nodes: usize,
+        n_est: usize,
+        particles: usize,
+    ) -> Result<(), BadInput> {
+        let (nx, nodes, n_est) = (nx as u64, nodes as u64, n_est as u64);
+        let per_instant = 8 + 24 + 8 * nx * (1 + n_est);
+        let slots = if self.slots_csv.is_some() {
+            product(&[u64::from(self.steps), nodes, observation_bytes()])
+        } else {
+            0
+        };
+        let recording = product(&[u64::from(self.steps), per_instant]).saturating_add(slots);
+        let pf = product(&[
+            particles as u64,
+            crate::eval::pf_bytes_per_particle(nx as usize),
+        ]);
+        Budget::mib(self.max_memory).check(
+            &format!(
+                "--steps {} ({}{nx} states{}{})",
+                self.steps,
+                if n_est > 0 {
+                    format!("{n_est} estimators × ")
+                } else {
+                    String::new()
+                },
+                if self.slots_csv.is_some() {
+                    format!(", --slots-csv of {nodes} node(s)")
+                } else {
+                    String::new()
+                },
+                if particles > 0 {
+                    format!(", --particles {particles}")
+                } else {
+                    String::new()
+                }
+            ),
+            recording.saturating_add(pf),
+        )
+    }
+}
+
+fn observation_bytes() -> u64 {
+    size_of::<channel_sim::Observation>() as u64
 }

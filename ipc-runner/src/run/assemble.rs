@@ -1,82 +1,422 @@
-//! Turns the slot stream back into sampling instants.
+//! Turns the slot streams back into sampling instants, trusting nothing in a slot.
 //!
-//! Sequence numbers are dense (`seq = (k − 1)·nodes + node`, see [`Slot::seq_of`]), so every
-//! missing slot is known exactly: a gap is a slot lost inside the IPC (the subscriber queue
-//! overflowed and the oldest sample was overwritten). It becomes an observation without a
-//! measurement marked [`FLAG_IPC_LOST`] — the estimator sees the instant, as a loss (no
-//! information, `Packet::Lost`), not as a packet the channel dropped — and is counted
-//! separately. An instant is handed on when its last node's slot (received or
-//! lost) has been seen. A runner that joins a stream in the middle (restarted after a crash)
-//! steps through the instants it missed as lost ones, counted as *missed before join*.
+//! Wire version 3 (`docs/wire.md`, Stream rules): every sensor node is its own stream, with
+//! its own `stream_id` and its own dense sequence (`seq = k − 1`), so its slots may come from
+//! its own process and the nodes' slots of an instant may arrive in any order. The
+//! [`Assembler`] keeps a window of [`WINDOW`] pending instants (allocated once, nothing per
+//! slot) and hands instant k on, strictly in order, when every node's slot k is *known*:
+//!
+//! * it arrived;
+//! * it is known lost: a gap in that node's sequence (lost inside the IPC) or after that
+//!   node's END/ABORT marker; a malformed slot that still names its instant and node
+//!   reliably (only its content is bad) is such a loss too;
+//! * in paced mode (a stream with `period_ns > 0`), the instant's deadline passed
+//!   ([`Limits::instant_deadline_ns`] after its first slot arrived): the node's slot is
+//!   *lost* by the deadline, counted apart from channel drops and IPC gaps;
+//! * a slot of an instant [`WINDOW`] instants later arrived: the node is that far behind,
+//!   its slot counted as lost by overrun (the only way blocking mode loses a slot).
+//!
+//! A lost slot becomes an observation without a measurement marked [`FLAG_IPC_LOST`]: the
+//! estimators see the instant, as a loss (no information, `Packet::Lost`), not as a packet
+//! the channel dropped. A slot that arrives after its instant was handed on is counted as
+//! late and skipped.
+//!
+//! Hostile input (issue #20): every slot is counted exactly once — accepted (delivered or
+//! dropped by the channel), a marker, a duplicate, late, or skipped for one [`Skipped`]
+//! reason — and no slot can make the assembler do more than a bounded amount of work: a
+//! node's `k` may advance at most [`Limits::max_gap`] past its last instant (a larger jump is
+//! a counted stream error, never a fill of fake instants), and so may an END/ABORT marker.
+//! A restart is a new stream id on a node starting again at its first slot (k = 1); any other
+//! slot with another stream id is counted and skipped, so a stream id flipping on every other
+//! slot never resets the estimators.
 
-use channel_sim::sim::MAX_NODES;
+use channel_sim::sim::{MAX_NODES, MAX_NY};
 use channel_sim::Observation;
-use estpipe_wire::{Slot, WireError, FLAG_IPC_LOST, SLOT_ABORT, SLOT_DATA, SLOT_END};
+use estpipe_wire::{
+    Slot, SlotFault, StreamHeader, FLAG_IPC_LOST, FLAG_NET_LOST, SLOT_ABORT, SLOT_DATA,
+};
 use serde::Serialize;
 
-/// Slot accounting of one runner.
+/// Pending instants the assembler holds: how far one node may run ahead of the slowest
+/// before the slowest node's slot of the oldest instant is given up (counted as
+/// [`Counts::lost_overrun`]). As many as a subscriber queue can hold.
+pub const WINDOW: usize = 4096;
+
+/// Default of `--max-gap`: instants a node's `k` may advance past its last one.
+pub const DEFAULT_MAX_GAP: u32 = 1000;
+
+/// Default of `--instant-deadline-ms`.
+pub const DEFAULT_INSTANT_DEADLINE_MS: f64 = 20.0;
+
+/// The longest sampling period a slot may announce (10 s); a longer one is ignored for loss
+/// detection and counted ([`Anomalies::period_ns`]): `period_ns = 2⁶²` would otherwise
+/// switch the data deadline off.
+pub const MAX_PERIOD_NS: u64 = 10_000_000_000;
+
+/// How far the assembler follows a stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Instants a node's `k` (or its END/ABORT's) may advance past its last instant; the
+    /// gap is filled with lost slots. A larger jump is counted ([`Skipped::gap`],
+    /// [`Skipped::marker`]) and the slot skipped.
+    pub max_gap: u32,
+    /// In paced mode, how long after its first slot arrived an instant waits for the other
+    /// nodes' slots (0: for ever). Blocking mode (`period_ns = 0`) never loses a slot by a
+    /// deadline.
+    pub instant_deadline_ns: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_gap: DEFAULT_MAX_GAP,
+            instant_deadline_ns: (DEFAULT_INSTANT_DEADLINE_MS * 1e6) as u64,
+        }
+    }
+}
+
+/// Slots skipped, by reason (each also counted nowhere else).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Skipped {
+    /// Another wire version.
+    pub version: u64,
+    /// The stream header differs from the stream's (after the stream was accepted).
+    pub header: u64,
+    /// `kind` not 0, 1 or 2.
+    pub kind: u64,
+    /// `nodes` differs from the header's.
+    pub nodes: u64,
+    /// `node` ≥ `nodes`.
+    pub node: u64,
+    /// A data slot with `k = 0`.
+    pub k_zero: u64,
+    /// A data slot with `seq ≠ k − 1`.
+    pub seq: u64,
+    /// An END/ABORT with `seq ≠ k`.
+    pub marker_seq: u64,
+    /// `delivered` not 0/1 (the node's slot of that instant is handed on as lost).
+    pub delivered: u64,
+    /// `ny` not the header's for the node (handed on as lost).
+    pub ny: u64,
+    /// `delivered = 1` with `ny = 0` (handed on as lost).
+    pub ny_zero: u64,
+    /// A non-finite measurement entry (handed on as lost).
+    pub non_finite: u64,
+    /// Another stream id than the node's current stream, not at its first slot (not a
+    /// restart).
+    pub stream: u64,
+    /// The stream id of a stream a restart replaced.
+    pub stale_stream: u64,
+    /// `k` more than `--max-gap` past the node's last instant.
+    pub gap: u64,
+    /// An END/ABORT before the node's last instant or more than `--max-gap` past it.
+    pub marker: u64,
+    /// A slot of a node after its END/ABORT in the same stream.
+    pub after_marker: u64,
+}
+
+impl Skipped {
+    /// All skipped slots.
+    pub fn total(&self) -> u64 {
+        self.version
+            + self.header
+            + self.kind
+            + self.nodes
+            + self.node
+            + self.k_zero
+            + self.seq
+            + self.marker_seq
+            + self.delivered
+            + self.ny
+            + self.ny_zero
+            + self.non_finite
+            + self.stream
+            + self.stale_stream
+            + self.gap
+            + self.marker
+            + self.after_marker
+    }
+
+    /// `name n, …` of the non-zero reasons (the summary line).
+    pub fn describe(&self) -> String {
+        let all = [
+            ("version", self.version),
+            ("header", self.header),
+            ("kind", self.kind),
+            ("nodes", self.nodes),
+            ("node", self.node),
+            ("k_zero", self.k_zero),
+            ("seq", self.seq),
+            ("marker_seq", self.marker_seq),
+            ("delivered", self.delivered),
+            ("ny", self.ny),
+            ("ny_zero", self.ny_zero),
+            ("non_finite", self.non_finite),
+            ("stream", self.stream),
+            ("stale_stream", self.stale_stream),
+            ("gap", self.gap),
+            ("marker", self.marker),
+            ("after_marker", self.after_marker),
+        ];
+        all.iter()
+            .filter(|(_, n)| *n > 0)
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    fn fault(&mut self, f: SlotFault) -> &mut u64 {
+        match f {
+            SlotFault::Version => &mut self.version,
+            SlotFault::Kind => &mut self.kind,
+            SlotFault::Nodes => &mut self.nodes,
+            SlotFault::Node => &mut self.node,
+            SlotFault::KZero => &mut self.k_zero,
+            SlotFault::Seq => &mut self.seq,
+            SlotFault::MarkerSeq => &mut self.marker_seq,
+            SlotFault::Delivered => &mut self.delivered,
+            SlotFault::Ny => &mut self.ny,
+            SlotFault::NyZero => &mut self.ny_zero,
+            SlotFault::NonFinite => &mut self.non_finite,
+        }
+    }
+}
+
+/// Fields of accepted slots that were not used.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Anomalies {
+    /// `period_ns` above [`MAX_PERIOD_NS`]: ignored for loss detection.
+    pub period_ns: u64,
+    /// `send_ns` of 0 or later than the slot's receipt: not used for latency.
+    pub send_ns: u64,
+}
+
+/// Slot accounting of one runner (over all its sessions).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct Counts {
-    /// Data slots received.
+    /// Data slots accepted.
     pub received: u64,
-    /// Received slots carrying a measurement.
+    /// Accepted slots carrying a measurement.
     pub delivered: u64,
-    /// Received slots whose packet the channel dropped (occlusion, token bucket, loss, …).
+    /// Accepted slots whose packet the channel dropped (occlusion, token bucket, loss, …).
     pub dropped_by_channel: u64,
-    /// Slots lost inside the IPC (sequence gaps), handed on as lost.
+    /// Slots lost inside the IPC (gaps in a node's sequence, or before its END/ABORT),
+    /// handed on as lost.
     pub lost_in_ipc: u64,
     /// Slots a bridge wrote for what the network lost (`FLAG_NET_LOST`, docs/bridge.md):
     /// received, but without information.
     pub lost_on_network: u64,
     /// Slots before the first one this runner saw of a stream (joined mid-stream).
     pub missed_before_join: u64,
-    /// Slots that arrived out of order or duplicated (ignored; never expected).
+    /// Slots of a node not there when their instant's deadline passed (paced mode), handed
+    /// on as lost.
+    pub lost_deadline: u64,
+    /// Slots of a node more than [`WINDOW`] instants behind another, handed on as lost.
+    pub lost_overrun: u64,
+    /// Slots of instants after a node's END/ABORT, handed on as lost.
+    pub lost_after_end: u64,
+    /// Slots already seen (a duplicate or an older slot of the node): ignored.
     pub out_of_order: u64,
+    /// Slots that arrived after their instant was handed on: skipped.
+    pub late: u64,
+    /// END/ABORT markers accepted (one per node and stream).
+    pub markers: u64,
+    /// Slots skipped, by reason.
+    pub skipped: Skipped,
+    /// Fields of accepted slots that were not used, by field.
+    pub anomalies: Anomalies,
     /// Instants handed to the estimators.
     pub instants: u64,
+}
+
+impl Counts {
+    /// Every slot pushed, each counted once: accepted, a marker, a duplicate, late or
+    /// skipped.
+    pub fn slots_seen(&self) -> u64 {
+        self.received + self.markers + self.out_of_order + self.late + self.skipped.total()
+    }
 }
 
 /// What a pushed slot meant.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Pushed {
-    /// Data slot consumed.
+    /// Data slot accepted.
     Data,
-    /// The slot belongs to another stream than the current one (channel-sim restarted). Not
-    /// consumed: call [`Assembler::reset`] and push it again.
+    /// A data slot whose content is malformed ([`SlotFault::content_only`]): the node's slot
+    /// of that instant is handed on as lost.
+    Refused(SlotFault),
+    /// The slot starts a new stream of its node (the node's publisher restarted). Not
+    /// consumed: start a new session, call [`Assembler::reset`] and push it again.
     NewStream,
-    /// END marker: the stream is complete (tail gaps have been filled).
+    /// A node's END/ABORT; other nodes' streams go on.
+    Marker,
+    /// The last node's END marker: every stream is complete, every instant handed on.
     End,
-    /// ABORT marker: the publisher was stopped early.
+    /// The last node's marker, and some node's was an ABORT (its publisher stopped early).
     Abort,
+    /// Skipped, counted ([`Counts`]).
+    Ignored,
 }
 
-/// Reassembles instants from slots without allocating.
+/// One node's stream as far as it was followed.
+#[derive(Clone, Copy, Debug, Default)]
+struct NodeStream {
+    sid: Option<u64>,
+    /// The stream a restart replaced: its slots still in the queue are skipped.
+    stale: Option<u64>,
+    /// The next instant expected from the node (every earlier one is known).
+    next_k: u64,
+    /// The node's END/ABORT: its last instant and whether it was an ABORT.
+    end: Option<(u64, bool)>,
+}
+
+/// One pending instant.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    /// Bit m: node m's slot is known.
+    known: u16,
+    /// When the instant's first slot became known (its deadline runs from here).
+    first_ns: u64,
+    obs: [Observation; MAX_NODES],
+}
+
+/// Why a node's slot is given up when its instant is handed on without it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum GiveUp {
+    Deadline,
+    Overrun,
+}
+
+/// Reassembles instants from per-node slot streams; allocates only when built.
 #[derive(Debug)]
 pub struct Assembler {
     nodes: u8,
-    ny: u8,
-    stream: Option<u64>,
-    joined_at: u64,
+    all: u16,
+    ny: [u8; MAX_NODES],
+    expected: StreamHeader,
+    limits: Limits,
     subscribed_ns: u64,
-    next_seq: u64,
-    obs: [Observation; MAX_NODES],
-    /// Running counts (over all streams).
+    session_started: bool,
+    /// The streams were given up (publisher lost): the next stream starts a new session.
+    restart_pending: bool,
+    paced: bool,
+    /// The next instant to hand on.
+    base: u64,
+    ring: Box<[Pending]>,
+    node: [NodeStream; MAX_NODES],
+    first_seen: Option<Reason>,
+    /// Running counts (over all sessions).
     pub counts: Counts,
 }
 
-impl Assembler {
-    /// For a scenario with `nodes` nodes and measurement dimension `ny`.
-    pub fn new(nodes: u8, ny: u8) -> Self {
-        Self {
-            nodes,
-            ny,
-            stream: None,
-            joined_at: 0,
-            subscribed_ns: 0,
-            next_seq: 0,
-            obs: [Observation::dropped(0, 0, ny, 0); MAX_NODES],
-            counts: Counts::default(),
+/// A reason counted for the first time ([`Assembler::take_first_seen`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reason {
+    /// A malformed slot.
+    Fault(SlotFault),
+    /// The stream header differs.
+    Header,
+    /// Another stream id, not a restart.
+    Stream,
+    /// A replaced stream's slot.
+    Stale,
+    /// A jump of `k` beyond `--max-gap`.
+    Gap,
+    /// An END/ABORT out of bounds.
+    Marker,
+    /// A slot after the node's END/ABORT.
+    AfterMarker,
+    /// `period_ns` too long.
+    Period,
+    /// `send_ns` unusable.
+    SendNs,
+    /// A slot after its instant was handed on.
+    Late,
+}
+
+impl Reason {
+    /// One line: what was wrong and what the runner does about it.
+    pub fn describe(self) -> String {
+        match self {
+            Self::Fault(f) if f.content_only() => {
+                format!("malformed slot ({f}): counted, handed on as lost")
+            }
+            Self::Fault(f) => format!("malformed slot ({f}): counted and skipped"),
+            Self::Header => {
+                "a slot whose stream header differs from the stream's: counted and skipped".into()
+            }
+            Self::Stream => "a slot with another stream id than its node's stream, not at its \
+                             first slot (no restart): counted and skipped"
+                .into(),
+            Self::Stale => "a slot of a stream a restart replaced: counted and skipped".into(),
+            Self::Gap => "a slot whose k jumps more than --max-gap past its node's last \
+                          instant: counted and skipped (no instants filled)"
+                .into(),
+            Self::Marker => "an END/ABORT before its node's last instant or more than \
+                             --max-gap past it: counted and skipped"
+                .into(),
+            Self::AfterMarker => "a slot after its node's END/ABORT: counted and skipped".into(),
+            Self::Period => format!(
+                "a slot with period_ns above {} s: counted, period ignored for loss detection",
+                MAX_PERIOD_NS / 1_000_000_000
+            ),
+            Self::SendNs => {
+                "a slot with send_ns 0 or in the future: counted, not used for latency".into()
+            }
+            Self::Late => "a slot after its instant was handed on: counted as late and \
+                           skipped"
+                .into(),
         }
+    }
+}
+
+/// Whether `h` announces the stream `expected` describes (the fields
+/// [`StreamHeader::check`] compares, and the version).
+pub fn same_stream_shape(h: &StreamHeader, expected: &StreamHeader) -> bool {
+    h.version == expected.version
+        && h.nodes == expected.nodes
+        && h.nx == expected.nx
+        && h.ny == expected.ny
+        && h.model == expected.model
+}
+
+/// The slot's `send_ns` if it can be used for latency: not 0 and not after `recv_ns`.
+#[inline]
+pub fn usable_send_ns(slot: &Slot, recv_ns: u64) -> Option<u64> {
+    (slot.send_ns != 0 && slot.send_ns <= recv_ns).then_some(slot.send_ns)
+}
+
+impl Assembler {
+    /// For streams announcing `expected` (its nodes and every node's ny).
+    pub fn new(expected: &StreamHeader, limits: Limits) -> Self {
+        let nodes = expected.nodes.min(MAX_NODES as u8);
+        let mut ny = [0; MAX_NODES];
+        for (d, &s) in ny.iter_mut().zip(expected.ny_per_node()) {
+            *d = s.min(MAX_NY as u8);
+        }
+        let empty = Pending {
+            known: 0,
+            first_ns: 0,
+            obs: [Observation::dropped(0, 0, 0, 0); MAX_NODES],
+        };
+        let mut a = Self {
+            nodes,
+            all: (1u16 << nodes) - 1,
+            ny,
+            expected: *expected,
+            limits,
+            subscribed_ns: 0,
+            session_started: false,
+            restart_pending: false,
+            paced: false,
+            base: 1,
+            ring: vec![empty; WINDOW].into_boxed_slice(),
+            node: [NodeStream::default(); MAX_NODES],
+            first_seen: None,
+            counts: Counts::default(),
+        };
+        a.reset();
+        a
     }
 
     /// When the runner's subscriber was created (`CLOCK_MONOTONIC`): slots missing before the
@@ -86,235 +426,410 @@ impl Assembler {
         self.subscribed_ns = ns;
     }
 
-    /// The stream currently followed.
-    pub fn stream(&self) -> Option<u64> {
-        self.stream
+    /// The stream node `m` is followed on (node 0's is the truth's: its process publishes
+    /// the truth).
+    pub fn stream_of(&self, m: u8) -> Option<u64> {
+        self.node.get(usize::from(m)).and_then(|n| n.sid)
     }
 
-    /// Forgets the current stream (the next slot starts a new one); counts are kept.
+    /// The next instant to hand on.
+    pub fn next_instant(&self) -> u64 {
+        self.base
+    }
+
+    /// Whether every stream of the session was paced (`period_ns > 0`) so far.
+    pub fn paced(&self) -> bool {
+        self.paced
+    }
+
+    /// A reason counted for the first time since the last call (to say it once).
+    pub fn take_first_seen(&mut self) -> Option<Reason> {
+        self.first_seen.take()
+    }
+
+    /// Starts a new session: every node's current stream becomes stale (its slots still in
+    /// the queue are skipped), pending instants are dropped; counts are kept.
     pub fn reset(&mut self) {
-        self.stream = None;
-        self.next_seq = 0;
+        for n in &mut self.node {
+            if n.sid.is_some() {
+                n.stale = n.sid;
+            }
+            n.sid = None;
+            n.end = None;
+            n.next_k = 1;
+        }
+        for p in self.ring.iter_mut() {
+            p.known = 0;
+        }
+        self.base = 1;
+        self.session_started = false;
+        self.restart_pending = false;
+        self.paced = false;
     }
 
-    fn lost(&mut self, seq: u64, emit: &mut impl FnMut(u32, &[Observation])) {
-        let (k, node) = Slot::position_of(seq, self.nodes);
-        if seq < self.joined_at {
-            self.counts.missed_before_join += 1;
-        } else {
-            self.counts.lost_in_ipc += 1;
-        }
-        self.obs[usize::from(node)] = Observation::dropped(k, node, self.ny, FLAG_IPC_LOST);
-        if node + 1 == self.nodes {
-            self.counts.instants += 1;
-            emit(k, &self.obs[..usize::from(self.nodes)]);
+    /// The publishers were lost (`--wait-for-restart`): their streams become stale and the
+    /// next stream, starting at any k (its first slot may have been lost too), is pushed as
+    /// [`Pushed::NewStream`] (a new session).
+    pub fn lose_streams(&mut self) {
+        self.reset();
+        self.restart_pending = true;
+    }
+
+    fn note(&mut self, r: Reason, first: bool) {
+        if first && self.first_seen.is_none() {
+            self.first_seen = Some(r);
         }
     }
 
-    fn fill_to(&mut self, seq: u64, emit: &mut impl FnMut(u32, &[Observation])) {
-        while self.next_seq < seq {
-            self.lost(self.next_seq, emit);
-            self.next_seq += 1;
-        }
+    fn skip(&mut self, r: Reason) -> Pushed {
+        let s = &mut self.counts.skipped;
+        let c = match r {
+            Reason::Fault(f) => s.fault(f),
+            Reason::Header => &mut s.header,
+            Reason::Stream => &mut s.stream,
+            Reason::Stale => &mut s.stale_stream,
+            Reason::Gap => &mut s.gap,
+            Reason::Marker => &mut s.marker,
+            Reason::AfterMarker => &mut s.after_marker,
+            Reason::Late => &mut self.counts.late,
+            Reason::Period | Reason::SendNs => unreachable!("anomalies are not skips"),
+        };
+        *c += 1;
+        let first = *c == 1;
+        self.note(r, first);
+        Pushed::Ignored
     }
 
-    /// Consumes one slot; calls `emit(k, observations)` for every instant it completes (gap
-    /// instants included), in order.
+    /// Consumes one slot (with the stream header it came with, received at `recv_ns`); calls
+    /// `emit(k, observations)` for every instant it completes, strictly in order.
     pub fn push(
         &mut self,
         slot: &Slot,
+        header: &StreamHeader,
+        recv_ns: u64,
         emit: &mut impl FnMut(u32, &[Observation]),
-    ) -> Result<Pushed, WireError> {
-        slot.validate()?;
-        match self.stream {
-            Some(s) if s != slot.stream_id => return Ok(Pushed::NewStream),
-            Some(_) => {}
-            None => {
-                self.stream = Some(slot.stream_id);
-                self.next_seq = 0;
-                // A stream that started before we subscribed was joined in the middle: what
-                // precedes the first instant we see was sent before we existed.
-                self.joined_at = if slot.stream_start_ns >= self.subscribed_ns {
-                    0
-                } else if slot.kind == SLOT_DATA {
-                    Slot::seq_of(slot.k, 0, slot.nodes)
+    ) -> Pushed {
+        if !same_stream_shape(header, &self.expected) {
+            return self.skip(Reason::Header);
+        }
+        let fault = slot.fault(self.nodes, &self.ny[..usize::from(self.nodes)]);
+        if let Some(f) = fault.filter(|f| !f.content_only()) {
+            return self.skip(Reason::Fault(f));
+        }
+        let m = usize::from(slot.node);
+        let ns = self.node[m];
+        if ns.stale == Some(slot.stream_id) && ns.sid != Some(slot.stream_id) {
+            return self.skip(Reason::Stale);
+        }
+        match ns.sid {
+            Some(s) if s != slot.stream_id => {
+                // A restart starts again at the node's first slot; anything else with another
+                // stream id is a stray (or a flipped field), never a reason to reset.
+                return if slot.kind == SLOT_DATA && slot.k == 1 && fault.is_none() {
+                    Pushed::NewStream
                 } else {
-                    slot.seq
+                    self.skip(Reason::Stream)
                 };
             }
+            Some(_) => {}
+            None => {
+                if self.restart_pending {
+                    return Pushed::NewStream;
+                }
+                if !self.session_started {
+                    self.start_session(slot, emit);
+                }
+                self.node[m].sid = Some(slot.stream_id);
+            }
+        }
+        if self.node[m].end.is_some() {
+            return self.skip(Reason::AfterMarker);
         }
         if slot.kind != SLOT_DATA {
-            if slot.nodes == self.nodes {
-                self.fill_to(slot.seq, emit);
-            }
-            return Ok(match slot.kind {
-                SLOT_END => Pushed::End,
-                SLOT_ABORT => Pushed::Abort,
-                _ => unreachable!("validated"),
-            });
+            return self.marker(slot, recv_ns, emit);
         }
-        if slot.nodes != self.nodes {
-            return Err(WireError::Invalid(
-                "node count differs from the scenario the runner was started with",
-            ));
-        }
-        // Estimators read `ny` entries: a measurement of another size is refused, not read.
-        if slot.delivered == 1 && slot.ny != self.ny {
-            return Err(WireError::Invalid(
-                "ny differs from the scenario the runner was started with",
-            ));
-        }
-        if slot.seq < self.next_seq {
+        let k = u64::from(slot.k);
+        let next = self.node[m].next_k;
+        if k < next {
             self.counts.out_of_order += 1;
-            return Ok(Pushed::Data);
+            return Pushed::Ignored;
         }
-        self.fill_to(slot.seq, emit);
-        let mut obs = channel_sim::wire::observation_of(slot)?;
-        obs.ny = self.ny;
-        if obs.flags & estpipe_wire::FLAG_NET_LOST != 0 {
-            self.counts.lost_on_network += 1;
+        if k < self.base {
+            // Its instant was handed on without it (deadline or overrun); what lies between
+            // was given up with it.
+            self.node[m].next_k = k + 1;
+            return self.skip(Reason::Late);
+        }
+        // From what is still pending: a node that fell behind (its slots given up) may come
+        // back.
+        if k - next.max(self.base) > u64::from(self.limits.max_gap) || !self.make_room(k, m, emit) {
+            return self.skip(Reason::Gap);
+        }
+        if slot.period_ns > MAX_PERIOD_NS {
+            self.counts.anomalies.period_ns += 1;
+            let first = self.counts.anomalies.period_ns == 1;
+            self.note(Reason::Period, first);
+        } else if slot.period_ns > 0 {
+            self.paced = true;
+        }
+        if usable_send_ns(slot, recv_ns).is_none() {
+            self.counts.anomalies.send_ns += 1;
+            let first = self.counts.anomalies.send_ns == 1;
+            self.note(Reason::SendNs, first);
+        }
+        self.fill_gap(m, k, recv_ns);
+        let (obs, pushed) = match fault {
+            Some(f) => {
+                self.skip(Reason::Fault(f));
+                let o = Observation::dropped(slot.k, slot.node, self.ny[m], FLAG_IPC_LOST);
+                (o, Pushed::Refused(f))
+            }
+            None => {
+                let mut y = [0.0; MAX_NY];
+                if let Some(v) = slot.measurement() {
+                    y[..v.len()].copy_from_slice(v);
+                }
+                if slot.flags & FLAG_NET_LOST != 0 {
+                    // A bridge's stand-in for a slot the network lost (docs/bridge.md).
+                    self.counts.lost_on_network += 1;
+                } else {
+                    self.counts.received += 1;
+                    if slot.delivered == 1 {
+                        self.counts.delivered += 1;
+                    } else {
+                        self.counts.dropped_by_channel += 1;
+                    }
+                }
+                let o = Observation {
+                    k: slot.k,
+                    node: slot.node,
+                    delivered: slot.delivered == 1,
+                    ny: self.ny[m],
+                    y,
+                    flags: slot.flags & !FLAG_IPC_LOST,
+                };
+                (o, Pushed::Data)
+            }
+        };
+        self.set(k, m, obs, recv_ns);
+        self.node[m].next_k = k + 1;
+        self.advance(emit);
+        self.expire(recv_ns, emit);
+        pushed
+    }
+
+    /// The first slot of a session: whether this runner saw the stream start, and where the
+    /// session's instants begin.
+    fn start_session(&mut self, slot: &Slot, emit: &mut impl FnMut(u32, &[Observation])) {
+        self.session_started = true;
+        if slot.stream_start_ns >= self.subscribed_ns {
+            return; // base 1: anything missing before the first slot was lost in the IPC
+        }
+        // Joined mid-stream: what precedes the first instant seen was sent before we existed.
+        let first = if slot.kind == SLOT_DATA {
+            u64::from(slot.k)
         } else {
-            self.counts.received += 1;
-            if obs.delivered {
-                self.counts.delivered += 1;
-            } else {
-                self.counts.dropped_by_channel += 1;
+            u64::from(slot.k) + 1
+        }
+        .max(1);
+        let missed = first - 1;
+        self.counts.missed_before_join += missed * u64::from(self.nodes);
+        if missed <= u64::from(self.limits.max_gap) {
+            // Within the gap bound the estimators step through the missed instants as lost
+            // ones (the instant count then matches the publisher's).
+            for j in 1..first {
+                let p = &mut self.ring[(j as usize) % WINDOW];
+                for n in 0..self.nodes {
+                    p.obs[usize::from(n)] =
+                        Observation::dropped(j as u32, n, self.ny[usize::from(n)], FLAG_IPC_LOST);
+                }
+                self.counts.instants += 1;
+                emit(j as u32, &p.obs[..usize::from(self.nodes)]);
             }
         }
-        self.obs[usize::from(obs.node)] = obs;
-        self.next_seq = slot.seq + 1;
-        if obs.node + 1 == self.nodes {
-            self.counts.instants += 1;
-            emit(obs.k, &self.obs[..usize::from(self.nodes)]);
+        self.base = first;
+        for n in &mut self.node {
+            n.next_k = first;
         }
-        Ok(Pushed::Data)
+    }
+
+    fn marker(
+        &mut self,
+        slot: &Slot,
+        recv_ns: u64,
+        emit: &mut impl FnMut(u32, &[Observation]),
+    ) -> Pushed {
+        let m = usize::from(slot.node);
+        let k = u64::from(slot.k);
+        let last = self.node[m].next_k.max(self.base) - 1;
+        if k + 1 < self.node[m].next_k
+            || k.saturating_sub(last) > u64::from(self.limits.max_gap)
+            || !self.make_room(k, m, emit)
+        {
+            return self.skip(Reason::Marker);
+        }
+        self.fill_gap(m, k + 1, recv_ns);
+        self.node[m].next_k = k + 1;
+        self.node[m].end = Some((k, slot.kind == SLOT_ABORT));
+        self.counts.markers += 1;
+        self.advance(emit);
+        let nodes = &self.node[..usize::from(self.nodes)];
+        if nodes.iter().all(|n| n.end.is_some()) {
+            // Every stream is over: hand on what is left (the other nodes' instants after an
+            // early END are complete with this node's slots lost).
+            let last_k = nodes.iter().filter_map(|n| n.end).map(|e| e.0).max();
+            let abort = nodes.iter().any(|n| n.end.is_some_and(|e| e.1));
+            while last_k.is_some_and(|e| self.base <= e) {
+                self.give_up(GiveUp::Overrun, emit);
+            }
+            return if abort { Pushed::Abort } else { Pushed::End };
+        }
+        Pushed::Marker
+    }
+
+    /// Node `m`'s slots of instants `next_k..k` (those still pending) were lost in the IPC.
+    fn fill_gap(&mut self, m: usize, k: u64, recv_ns: u64) {
+        let from = self.node[m].next_k.max(self.base);
+        for j in from..k {
+            if self.ring[(j as usize) % WINDOW].known & (1 << m) == 0 {
+                self.counts.lost_in_ipc += 1;
+                let o = Observation::dropped(j as u32, m as u8, self.ny[m], FLAG_IPC_LOST);
+                self.set(j, m, o, recv_ns);
+            }
+        }
+    }
+
+    #[inline]
+    fn set(&mut self, k: u64, m: usize, o: Observation, recv_ns: u64) {
+        let p = &mut self.ring[(k as usize) % WINDOW];
+        if p.known == 0 {
+            p.first_ns = recv_ns;
+        }
+        p.known |= 1 << m;
+        p.obs[m] = o;
+    }
+
+    /// Makes instant `k` fit the window, handing on the oldest instants without their
+    /// missing slots; `false` if that would take more than `--max-gap` instants.
+    fn make_room(&mut self, k: u64, m: usize, emit: &mut impl FnMut(u32, &[Observation])) -> bool {
+        let top = self.base + WINDOW as u64 - 1;
+        if k <= top {
+            return true;
+        }
+        if k - top > u64::from(self.limits.max_gap) {
+            return false;
+        }
+        for _ in 0..k - top {
+            self.give_up_for(GiveUp::Overrun, Some(m), emit);
+            self.advance(emit);
+        }
+        true
+    }
+
+    /// Whether node `n`'s slot of instant `j` is known to be absent after its END/ABORT.
+    #[inline]
+    fn ended_before(&self, n: usize, j: u64) -> bool {
+        self.node[n].end.is_some_and(|e| j > e.0)
+    }
+
+    /// Hands on the complete instants at the front of the window.
+    fn advance(&mut self, emit: &mut impl FnMut(u32, &[Observation])) {
+        loop {
+            let j = self.base;
+            let known = self.ring[(j as usize) % WINDOW].known;
+            if known == 0 {
+                return;
+            }
+            if known != self.all
+                && (0..usize::from(self.nodes))
+                    .any(|n| known & (1 << n) == 0 && !self.ended_before(n, j))
+            {
+                return;
+            }
+            self.hand_on(emit);
+        }
+    }
+
+    /// Hands on instant `base`: every node's slot not known is lost (after its END, or for
+    /// `why`).
+    fn give_up(&mut self, why: GiveUp, emit: &mut impl FnMut(u32, &[Observation])) {
+        self.give_up_for(why, None, emit);
+    }
+
+    fn give_up_for(
+        &mut self,
+        why: GiveUp,
+        gap_of: Option<usize>,
+        emit: &mut impl FnMut(u32, &[Observation]),
+    ) {
+        let j = self.base;
+        for n in 0..usize::from(self.nodes) {
+            if self.ring[(j as usize) % WINDOW].known & (1 << n) != 0 {
+                continue;
+            }
+            if self.ended_before(n, j) {
+                self.counts.lost_after_end += 1;
+            } else if gap_of == Some(n) && j >= self.node[n].next_k {
+                // The node whose slot made room: this is a gap of its own sequence.
+                self.counts.lost_in_ipc += 1;
+            } else {
+                match why {
+                    GiveUp::Deadline => self.counts.lost_deadline += 1,
+                    GiveUp::Overrun => self.counts.lost_overrun += 1,
+                }
+            }
+            let p = &mut self.ring[(j as usize) % WINDOW];
+            p.obs[n] = Observation::dropped(j as u32, n as u8, self.ny[n], FLAG_IPC_LOST);
+            p.known |= 1 << n;
+        }
+        self.hand_on(emit);
+    }
+
+    /// Emits instant `base` (every node's slot known) and moves on.
+    fn hand_on(&mut self, emit: &mut impl FnMut(u32, &[Observation])) {
+        let j = self.base;
+        let nodes = usize::from(self.nodes);
+        for n in 0..nodes {
+            if self.ring[(j as usize) % WINDOW].known & (1 << n) == 0 {
+                // After its END: lost, known only now that the instant is handed on.
+                self.counts.lost_after_end += 1;
+                self.ring[(j as usize) % WINDOW].obs[n] =
+                    Observation::dropped(j as u32, n as u8, self.ny[n], FLAG_IPC_LOST);
+            }
+        }
+        let p = &mut self.ring[(j as usize) % WINDOW];
+        p.known = 0;
+        self.counts.instants += 1;
+        self.base = j + 1;
+        emit(j as u32, &p.obs[..nodes]);
+    }
+
+    /// Hands on every pending instant without the slots that have not come (counted as lost
+    /// by the deadline): the publishers are gone or the run ends, and what arrived is still
+    /// stepped.
+    pub fn flush(&mut self, emit: &mut impl FnMut(u32, &[Observation])) {
+        while self.ring[(self.base as usize) % WINDOW].known != 0 {
+            self.give_up(GiveUp::Deadline, emit);
+            self.advance(emit);
+        }
+    }
+
+    /// When the oldest pending instant's deadline passes (paced mode), if one is pending.
+    pub fn next_expiry(&self) -> Option<u64> {
+        let p = &self.ring[(self.base as usize) % WINDOW];
+        (self.paced && self.limits.instant_deadline_ns > 0 && p.known != 0)
+            .then(|| p.first_ns.saturating_add(self.limits.instant_deadline_ns))
+    }
+
+    /// Hands on every pending instant whose deadline passed by `now` (paced mode only),
+    /// without the slots that have not come.
+    pub fn expire(&mut self, now: u64, emit: &mut impl FnMut(u32, &[Observation])) {
+        while self.next_expiry().is_some_and(|t| now >= t) {
+            self.give_up(GiveUp::Deadline, emit);
+            self.advance(emit);
+        }
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use channel_sim::sim::MAX_NY;
-    use estpipe_wire::SLOT_END;
-
-    fn slot(k: u32, node: u8, nodes: u8, stream: u64) -> Slot {
-        let mut y = [0.0; MAX_NY];
-        y[0] = f64::from(k) + f64::from(node) / 10.0;
-        let o = Observation {
-            k,
-            node,
-            delivered: node != 1,
-            ny: 1,
-            y: if node != 1 { y } else { [0.0; MAX_NY] },
-            flags: 0,
-        };
-        channel_sim::wire::slot_of(&o, nodes, stream, 0, 0, 100)
-    }
-
-    fn collect(a: &mut Assembler, slots: &[Slot]) -> Vec<(u32, Vec<Observation>)> {
-        let mut out = Vec::new();
-        for s in slots {
-            a.push(s, &mut |k, o: &[Observation]| out.push((k, o.to_vec())))
-                .unwrap();
-        }
-        out
-    }
-
-    #[test]
-    fn complete_stream_yields_every_instant_once() {
-        let mut a = Assembler::new(3, 1);
-        let slots: Vec<Slot> = (1..=4)
-            .flat_map(|k| (0..3).map(move |n| slot(k, n, 3, 7)))
-            .collect();
-        let out = collect(&mut a, &slots);
-        assert_eq!(out.iter().map(|o| o.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
-        assert!(out
-            .iter()
-            .all(|(k, o)| o.len() == 3 && o.iter().all(|x| x.k == *k)));
-        assert_eq!(a.counts.received, 12);
-        assert_eq!(a.counts.delivered, 8);
-        assert_eq!(a.counts.dropped_by_channel, 4);
-        assert_eq!(a.counts.lost_in_ipc, 0);
-    }
-
-    #[test]
-    fn gaps_become_counted_ipc_drops_at_the_right_instant_and_node() {
-        let mut a = Assembler::new(2, 1);
-        // Lose (2,1), (3,0), (3,1), (4,0).
-        let slots = [
-            slot(1, 0, 2, 1),
-            slot(1, 1, 2, 1),
-            slot(2, 0, 2, 1),
-            slot(4, 1, 2, 1),
-        ];
-        let out = collect(&mut a, &slots);
-        assert_eq!(out.iter().map(|o| o.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
-        assert_eq!(a.counts.lost_in_ipc, 4);
-        let lost = |k: usize, n: usize| {
-            let o = &out[k - 1].1[n];
-            !o.delivered && o.flags & FLAG_IPC_LOST != 0 && o.k == k as u32 && o.node == n as u8
-        };
-        assert!(lost(2, 1) && lost(3, 0) && lost(3, 1) && lost(4, 0));
-        assert!(out[1].1[0].delivered && out[3].1[1].flags & FLAG_IPC_LOST == 0);
-    }
-
-    #[test]
-    fn end_marker_fills_the_tail() {
-        let mut a = Assembler::new(2, 1);
-        let mut out = 0;
-        let mut emit = |_k: u32, _o: &[Observation]| out += 1;
-        a.push(&slot(1, 0, 2, 5), &mut emit).unwrap();
-        let end = Slot::marker(SLOT_END, 6, 3, 2, 5, 0);
-        assert_eq!(a.push(&end, &mut emit).unwrap(), Pushed::End);
-        assert_eq!(out, 3);
-        assert_eq!(a.counts.lost_in_ipc, 5);
-    }
-
-    #[test]
-    fn joining_mid_stream_and_restarts() {
-        let mut a = Assembler::new(1, 1);
-        // Subscribed after the stream started (at 100): a join.
-        a.set_subscribed_ns(200);
-        let out = collect(&mut a, &[slot(3, 0, 1, 9), slot(4, 0, 1, 9)]);
-        assert_eq!(out.iter().map(|o| o.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
-        assert_eq!(a.counts.missed_before_join, 2);
-        assert_eq!(a.counts.lost_in_ipc, 0);
-        let mut n = 0;
-        let restarted = slot(1, 0, 1, 10);
-        assert_eq!(
-            a.push(&restarted, &mut |_, _: &[Observation]| n += 1)
-                .unwrap(),
-            Pushed::NewStream
-        );
-        a.reset();
-        assert_eq!(
-            a.push(&restarted, &mut |_, _: &[Observation]| n += 1)
-                .unwrap(),
-            Pushed::Data
-        );
-        assert_eq!(n, 1);
-    }
-
-    #[test]
-    fn losses_before_the_first_slot_of_a_stream_we_saw_start_are_ipc_losses() {
-        let mut a = Assembler::new(1, 1);
-        a.set_subscribed_ns(50); // before the stream started at 100
-        let out = collect(&mut a, &[slot(3, 0, 1, 9)]);
-        assert_eq!(out.len(), 3);
-        assert_eq!(a.counts.lost_in_ipc, 2);
-        assert_eq!(a.counts.missed_before_join, 0);
-    }
-
-    #[test]
-    fn wrong_version_and_node_count_are_errors() {
-        let mut a = Assembler::new(2, 1);
-        let mut s = slot(1, 0, 2, 1);
-        s.version += 1;
-        assert!(matches!(
-            a.push(&s, &mut |_, _: &[Observation]| {}),
-            Err(WireError::Version { .. })
-        ));
-        let s = slot(1, 0, 3, 1);
-        assert!(a.push(&s, &mut |_, _: &[Observation]| {}).is_err());
-    }
-}
+mod tests;

@@ -19,7 +19,7 @@ use super::truth::Scores;
 /// The slot that completed the current instant, as the receive path saw it.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct SlotTimes {
-    /// channel-sim's send time of the last data slot.
+    /// The publisher's send time of the last slot (0: unusable, not a latency).
     pub(super) send_ns: u64,
     /// When this runner received it.
     pub(super) recv_ns: u64,
@@ -151,8 +151,20 @@ impl Runner {
         for &(t0, t1) in &self.step_ns {
             Latency::record(&mut self.latency.step, t0, t1);
         }
-        Latency::record(&mut self.latency.end_to_end, self.slot.send_ns, done_ns);
+        // A slot's unusable send time (0, or in the future) is not a latency.
+        if self.slot.send_ns != 0 {
+            Latency::record(&mut self.latency.end_to_end, self.slot.send_ns, done_ns);
+        }
         self.last_k = k;
+        // The slot log (for `replay`) in instant order, whatever order the nodes' slots
+        // came in; a slot the runner lost is missing from it, which `replay` reads as lost.
+        for o in obs {
+            if o.flags & wire::FLAG_IPC_LOST == 0
+                && self.traj.slots.len() < self.traj.slots.capacity()
+            {
+                self.traj.slots.push(*o);
+            }
+        }
         self.evaluate(t, k, done_ns);
         self.out.loan_ahead(t);
     }
@@ -184,6 +196,8 @@ impl Runner {
                 mse: self.scores.mse(e),
                 mse_instants: self.scores.err_n[e],
                 rejected: self.rejected[e],
+                gate: crate::estimators::gate_counts(&**est)
+                    .map(|(tested, rejected)| super::report::GateCount { tested, rejected }),
             })
             .collect()
     }

@@ -30,9 +30,11 @@
 //!
 //! Faults: when no slot arrives within `period + --deadline-ms` of the previous one the
 //! runner cleans up dead nodes (`try_cleanup_dead_nodes`: a SIGKILLed publisher is otherwise
-//! invisible), reports the publisher as lost and exits with [`EXIT_PUBLISHER_LOST`], or with
-//! `--wait-for-restart` waits for a new channel-sim and starts a new session (fresh
-//! estimators; the new process starts its stream at k = 1).
+//! invisible). A publisher still registered then is alive: *stalled*, waited for and reported
+//! (up to `--stall-limit`). One that is gone is lost: the runner exits with
+//! [`EXIT_PUBLISHER_LOST`], or with `--wait-for-restart` waits for a new channel-sim and
+//! starts a new session (fresh estimators; the new process starts its stream at k = 1). Only
+//! SIGINT/SIGTERM stop the loop; any other signal is a wake-up (docs/security.md, "Signals").
 //!
 //! The parts, one file each: `args` ([`RunArgs`]), `slot_loop` (the loop, [`run_loop`]),
 //! `instant` (one instant's work), `publish`, `truth` (the evaluation beside the loop),
@@ -53,17 +55,26 @@ mod truth;
 mod wait;
 
 pub use args::{RunArgs, WaitMode};
-pub use report::{exit_code, finish, Ending, EstimatorReport, RunReport, EXIT_PUBLISHER_LOST};
-pub use slot_loop::{run_loop, Hooks, Progress};
+pub use report::{
+    conclude, exit_code, finish, Ending, EstimatorReport, ExitWith, RunReport, Stalls,
+    EXIT_PUBLISHER_LOST,
+};
+pub use slot_loop::{run_loop, Hooks, Progress, PEER_CHECK_NS};
 pub use trajectories::Trajectories;
 
+use crate::limits;
 use anyhow::Result;
 use std::sync::Arc;
 
-/// `ipc-runner run`: resolves scenario and estimators, runs the loop, prints the summary.
-/// Returns the process exit code.
+/// `ipc-runner run`: checks the outputs and the memory budget, resolves scenario and
+/// estimators, runs the loop, prints the summary and writes the files (also when the loop
+/// ends in a failure). Returns the process exit code.
 pub fn main(args: &RunArgs) -> Result<i32> {
+    args.check_outputs()?;
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
+    let choice = select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    // Before any estimator is built: the particle filter allocates its particles at once.
+    args.check_memory(scenario.nx(), scenario.nodes(), 0, choice.particles)?;
     let scenario: Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators_with(
         scenario.clone(),
@@ -73,8 +84,11 @@ pub fn main(args: &RunArgs) -> Result<i32> {
             run: args.run,
             horizon: args.steps,
         },
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate),
-    )?;
+        choice,
+    )
+    .map_err(|e| limits::BadInput(format!("{e:#}")))?;
+    let n_est = make()?.len();
+    args.check_memory(scenario.nx(), scenario.nodes(), n_est, choice.particles)?;
     let (report, traj) = run_loop(
         args,
         scenario.nx(),
@@ -83,7 +97,5 @@ pub fn main(args: &RunArgs) -> Result<i32> {
         &make,
         Hooks::default(),
     )?;
-    finish(args, &report, &traj, scenario.ny())?;
-    println!("{}", report.summary());
-    Ok(exit_code(&report))
+    conclude(args, &report, &traj, scenario.ny())
 }

@@ -1,5 +1,12 @@
 //! What a run reports: the [`RunReport`] (the summary a person reads, the `--json` file),
 //! the output files at the end and the process's exit code.
+//!
+//! Whatever ends a run that stepped any instant — the END marker, a signal, a lost
+//! publisher, a transport failure or a refused slot in the middle of the stream — the
+//! summary is printed and every requested file written, with the ending (and the error) in
+//! both ([`conclude`]); the files' paths were checked writable before the loop started
+//! ([`super::RunArgs::check_outputs`]). A run that fails before its first instant has
+//! computed nothing and writes nothing.
 
 use crate::latency::LatencySummary;
 use anyhow::{Context, Result};
@@ -23,6 +30,19 @@ pub struct EstimatorReport {
     pub mse_instants: u64,
     /// Steps the estimator refused (e.g. non-finite measurement); its state was kept.
     pub rejected: u64,
+    /// `--gate P`: measurements its innovation gate tested and rejected (docs/gate.md;
+    /// not written for an ungated estimator).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gate: Option<GateCount>,
+}
+
+/// What an estimator's innovation gate did in a run.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct GateCount {
+    /// Delivered measurements tested.
+    pub tested: u64,
+    /// Of those, rejected (not used).
+    pub rejected: u64,
 }
 
 /// How the run ended.
@@ -37,6 +57,32 @@ pub enum Ending {
     Interrupted,
     /// The data deadline passed and no restart was awaited.
     PublisherLost,
+    /// The loop failed after it had processed instants (transport failure, a refused slot);
+    /// [`RunReport::error`] says why.
+    Failed,
+}
+
+/// Silences of a publisher that was alive (its iceoryx2 node was) past the data deadline:
+/// stalled, not lost (docs/pipeline.md, "Stalled or lost").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Stalls {
+    /// Stalls.
+    pub count: u32,
+    /// The longest silence in ms: from the last slot before it to the first one after it (or
+    /// to the end of the run).
+    pub longest_ms: f64,
+    /// All stalls' silences together, ms.
+    pub total_ms: f64,
+}
+
+impl Stalls {
+    /// Records a stall that was `silence_ns` long.
+    pub fn record(&mut self, silence_ns: u64) {
+        let ms = silence_ns as f64 / 1e6;
+        self.count += 1;
+        self.longest_ms = self.longest_ms.max(ms);
+        self.total_ms += ms;
+    }
 }
 
 /// What a run did.
@@ -54,10 +100,15 @@ pub struct RunReport {
     pub latency: LatencySummary,
     /// Streams followed (1 + publisher restarts).
     pub sessions: u32,
-    /// Times the data deadline passed.
+    /// Times the publisher was lost (dead, or stalled past `--stall-limit`).
     pub publisher_losses: u32,
+    /// Times the publisher was alive but silent past the data deadline, and for how long.
+    pub stalls: Stalls,
     /// Truth messages missing for processed instants.
     pub truth_missing: u64,
+    /// Truth messages with a non-finite component: those instants are left out of every
+    /// estimator's MSE (one would otherwise make them all NaN).
+    pub truth_nonfinite: u64,
     /// Allocations after warm-up (only with an allocation probe).
     pub allocations_after_warmup: Option<usize>,
     /// Slots received after warm-up (denominator of the above).
@@ -73,6 +124,12 @@ pub struct RunReport {
     pub warnings: Vec<String>,
     /// How the run ended.
     pub ending: Ending,
+    /// Why the run failed ([`Ending::Failed`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// The exit code of that failure ([`crate::exit_code_of`]).
+    #[serde(skip)]
+    pub error_code: i32,
 }
 
 impl RunReport {
@@ -92,10 +149,48 @@ impl RunReport {
             c.lost_in_ipc,
             c.missed_before_join,
         );
+        if let Some(e) = &self.error {
+            s.push_str(&format!("failed: {e}\n"));
+        }
+        if self.truth_nonfinite > 0 {
+            s.push_str(&format!(
+                "truth not finite at {} instant(s): left out of every MSE\n",
+                self.truth_nonfinite
+            ));
+        }
+        let lost_other = c.lost_deadline + c.lost_overrun + c.lost_after_end;
+        if lost_other + c.late + c.out_of_order > 0 {
+            s.push_str(&format!(
+                "slots lost by the instant deadline {}, by overrun {}, after a node's end {}; \
+                 {} late, {} duplicate\n",
+                c.lost_deadline, c.lost_overrun, c.lost_after_end, c.late, c.out_of_order
+            ));
+        }
+        if c.skipped.total() > 0 {
+            s.push_str(&format!(
+                "slots skipped: {} ({})\n",
+                c.skipped.total(),
+                c.skipped.describe()
+            ));
+        }
+        if c.anomalies.period_ns + c.anomalies.send_ns > 0 {
+            s.push_str(&format!(
+                "fields ignored: period_ns {}, send_ns {}\n",
+                c.anomalies.period_ns, c.anomalies.send_ns
+            ));
+        }
         if self.sessions > 1 || self.publisher_losses > 0 {
             s.push_str(&format!(
                 "publisher lost {} time(s); {} session(s)\n",
                 self.publisher_losses, self.sessions
+            ));
+        }
+        let st = &self.stalls;
+        if st.count > 0 {
+            s.push_str(&format!(
+                "publisher stalled {} time(s) (alive but silent past the deadline): longest \
+                 {:.1} ms, {:.1} ms in all\n",
+                st.count, st.longest_ms, st.total_ms
             ));
         }
         s.push_str("estimator         MSE vs truth   instants   rejected\n");
@@ -104,6 +199,14 @@ impl RunReport {
                 "{:<16} {:>13.6} {:>10} {:>10}\n",
                 e.name, e.mse, e.mse_instants, e.rejected
             ));
+        }
+        for e in &self.estimators {
+            if let Some(g) = e.gate {
+                s.push_str(&format!(
+                    "{}: innovation gate rejected {} of {} measurements\n",
+                    e.name, g.rejected, g.tested
+                ));
+            }
         }
         s.push_str(&self.latency.table());
         if let Some(a) = self.allocations_after_warmup {
@@ -120,30 +223,78 @@ impl RunReport {
     }
 }
 
-/// Writes the requested output files.
+/// Writes the requested output files, each on its own: one that fails does not keep the
+/// others from being written; the errors come back together.
 pub fn finish(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize) -> Result<()> {
+    let mut failures: Vec<String> = Vec::new();
+    let mut note = |r: Result<()>| {
+        if let Err(e) = r {
+            failures.push(format!("{e:#}"));
+        }
+    };
     if let Some(p) = &args.estimates_csv {
-        traj.write_estimates_csv(p)?;
+        note(traj.write_estimates_csv(p));
     }
     if let Some(p) = &args.slots_csv {
-        traj.write_slots_csv(p, ny)?;
+        note(traj.write_slots_csv(p, ny));
     }
     if let Some(p) = &args.latency_csv {
-        traj.write_latency_csv(p)?;
+        note(traj.write_latency_csv(p));
     }
     if let Some(p) = &args.json {
-        std::fs::write(p, serde_json::to_string_pretty(report)?)
-            .with_context(|| format!("cannot write {p:?}"))?;
+        note(
+            serde_json::to_string_pretty(report)
+                .map_err(anyhow::Error::from)
+                .and_then(|j| {
+                    std::fs::write(p, j + "\n").with_context(|| format!("cannot write {p:?}"))
+                }),
+        );
     }
-    Ok(())
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        anyhow::bail!("{}", failures.join("; "))
+    }
 }
 
+/// The end of `ipc-runner run`: prints the summary, then writes the files (so a file that
+/// cannot be written loses nothing the summary shows). Returns the exit code
+/// ([`exit_code`]), or the error of a run that failed or of a file that was not written.
+pub fn conclude(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize) -> Result<i32> {
+    println!("{}", report.summary());
+    let written = finish(args, report, traj, ny);
+    if report.ending == Ending::Failed {
+        let e = report.error.as_deref().unwrap_or("the loop failed");
+        let n = report.counts.instants;
+        let msg = match written {
+            Ok(()) => format!("{e} (after {n} instants; the summary and files were written)"),
+            Err(w) => format!("{e} (after {n} instants); also: {w:#}"),
+        };
+        return Err(ExitWith(report.error_code, msg).into());
+    }
+    written?;
+    Ok(exit_code(report))
+}
+
+/// An error that carries its exit code (a failed run's: that of its cause).
+#[derive(Debug)]
+pub struct ExitWith(pub i32, pub String);
+
+impl std::fmt::Display for ExitWith {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.1)
+    }
+}
+
+impl std::error::Error for ExitWith {}
+
 /// 0 for a completed (or cleanly stopped) run, [`EXIT_PUBLISHER_LOST`] when the publisher was
-/// lost, 130 when interrupted.
+/// lost, 130 when interrupted, the cause's code when the loop failed.
 pub fn exit_code(r: &RunReport) -> i32 {
     match r.ending {
         Ending::Completed | Ending::PublisherStopped => 0,
         Ending::PublisherLost => EXIT_PUBLISHER_LOST,
         Ending::Interrupted => 130,
+        Ending::Failed => r.error_code.max(1),
     }
 }

@@ -30,6 +30,8 @@ pub struct Choice {
     pub particles: usize,
     /// `p_loss` of the occlusion estimators' `-mix` variants (0: not built).
     pub loss_rate: f64,
+    /// `--gate P`: the innovation gate's probability (None: off; docs/gate.md).
+    pub gate: Option<f64>,
 }
 
 impl Choice {
@@ -37,6 +39,7 @@ impl Choice {
     pub const EVERY: Self = Self {
         particles: crate::estimators::pf::DEFAULT_PARTICLES,
         loss_rate: 0.0,
+        gate: None,
     };
 
     /// The choice of `run`, `replay` and `demo`: `pf` only when asked for (`--particles N`,
@@ -46,7 +49,15 @@ impl Choice {
         Self {
             particles: crate::eval::cli::particles(particles, names),
             loss_rate,
+            gate: None,
         }
+    }
+
+    /// With the innovation gate of `--gate P` (docs/gate.md).
+    #[must_use]
+    pub fn gated(mut self, gate: Option<f64>) -> Self {
+        self.gate = gate;
+        self
     }
 }
 
@@ -78,6 +89,7 @@ pub fn estimators_with(
         seed: exp.seed,
         particles: choice.particles,
         loss_rate: choice.loss_rate,
+        gate: choice.gate,
         ..EvalOptions::default()
     };
     let all = build_all(FACTORIES, scenario.as_ref(), &options, exp.seed, exp.run)?;
@@ -87,7 +99,10 @@ pub fn estimators_with(
         .map(|e| e.name())
         .collect();
     for n in names {
-        if !available.contains(&n.as_str()) {
+        if !available
+            .iter()
+            .any(|a| crate::estimators::names_match(a, n))
+        {
             let oracle = all.iter().any(|e| e.name() == n && e.full_information());
             bail!(
                 "estimator {n:?} {} for scenario {:?}; available: {}",

@@ -6,16 +6,16 @@
 use crate::latency::Latency;
 use crate::transport::Transport;
 use crate::Estimator;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use channel_sim::Observation;
-use estpipe_wire::{self as wire, ContractError, StreamHeader, WIRE_VERSION};
+use estpipe_wire::{self as wire, SlotFault, StreamHeader};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::time::Duration;
 
 use super::args::{RunArgs, WaitMode};
-use super::assemble::{Assembler, Counts, Pushed};
+use super::assemble::{self, Assembler, Counts, Limits, Pushed, Reason};
 use super::instant::Runner;
-use super::report::{Ending, RunReport};
+use super::report::{Ending, RunReport, Stalls};
 use super::system;
 use super::trajectories::Trajectories;
 use super::wait::{self, Waiter, Woke};
@@ -33,6 +33,11 @@ pub struct Hooks<'a> {
     pub warmup: u64,
     /// Called at most every 100 ms with the latest instant and the counts.
     pub progress: Option<&'a mut Progress<'a>>,
+    /// Asked about every [`PEER_CHECK_NS`] while the loop waits (`demo`: its child
+    /// publisher): `Some(why)` when the publisher process has ended. The run then takes what
+    /// is still queued and ends as [`Ending::PublisherLost`], or fails with `why` if no slot
+    /// ever came.
+    pub peer: Option<&'a mut dyn FnMut() -> Option<String>>,
 }
 
 impl std::fmt::Debug for Hooks<'_> {
@@ -52,14 +57,18 @@ const UPDATE_CONNECTIONS_NS: u64 = 10_000_000;
 /// Progress is reported at most this often.
 const PROGRESS_EVERY_NS: u64 = 100_000_000;
 
+/// A [`Hooks::peer`] is asked this often, and no wait is longer while there is one.
+pub const PEER_CHECK_NS: u64 = 10_000_000;
+
 /// Runs the loop with estimators from `make` (called again for every new stream) until the
 /// stream ends. Errors are configuration/transport failures; a lost publisher is reported in
-/// [`RunReport::ending`].
+/// [`RunReport::ending`]. Every node's ny comes from the scenario's stream header (`_ny` is
+/// not used: nodes may differ).
 pub fn run_loop(
     args: &RunArgs,
     nx: usize,
     nodes: u8,
-    ny: u8,
+    _ny: u8,
     make: &dyn Fn() -> Result<Vec<Box<dyn Estimator>>>,
     mut hooks: Hooks<'_>,
 ) -> Result<(RunReport, Trajectories)> {
@@ -69,7 +78,18 @@ pub fn run_loop(
     let machine = Machine::set_up(args);
     let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
     let runner = Runner::new(&t, args, make()?, nx, nodes)?;
-    let mut asm = Assembler::new(nodes, ny);
+    if !(args.instant_deadline_ms >= 0.0 && args.instant_deadline_ms.is_finite()) {
+        return Err(wire::ContractError::Refused(format!(
+            "--instant-deadline-ms must be a number ≥ 0 (0 = for ever), got {}",
+            args.instant_deadline_ms
+        ))
+        .into());
+    }
+    let limits = Limits {
+        max_gap: args.max_gap,
+        instant_deadline_ns: (args.instant_deadline_ms * 1e6) as u64,
+    };
+    let mut asm = Assembler::new(&expected, limits);
     asm.set_subscribed_ns(t.subscribed_ns);
     let mut lp = Loop {
         args,
@@ -80,18 +100,17 @@ pub fn run_loop(
         deadline: Deadline::new(args),
         allocs: Allocs::new(&hooks),
         publisher_losses: 0,
+        stalls: Stalls::default(),
+        last_peer_check: 0,
         last_progress: 0,
         expected,
-        checked_stream: None,
         last_update_ns: 0,
     };
 
-    // iceoryx2 installs its SIGINT/SIGTERM handler on the first `Node::wait`; do that before
-    // announcing the wait, so Ctrl-C ends the run cleanly in every wait mode from here on
-    // (the listener's wait would otherwise leave the signal to its default action, which
-    // kills the process without a report). Before this call a signal ends the process, so
-    // there is no earlier signal to carry over.
-    let _ = t.node.wait(Duration::ZERO);
+    // Before announcing the wait: from here on SIGINT/SIGTERM set the flag every wait mode
+    // reads, and no other signal ends the run (docs/security.md, "Signals"). Earlier, a
+    // signal takes its default action (the process ends without a report, as nothing ran).
+    channel_sim::signal::install();
     lp.say(&format!(
         "waiting for channel-sim on prefix {:?} ({} wait)",
         args.prefix,
@@ -99,16 +118,43 @@ pub fn run_loop(
     ));
     let waitset = wait::waitset(args.wait, &t)?;
     let mut waiter = Waiter::new(&t, waitset.as_ref())?;
+    let max_wait_ns = if hooks.peer.is_some() {
+        PEER_CHECK_NS
+    } else {
+        MAX_WAIT_NS
+    };
 
+    // A failure once instants were processed ends the run with its report (report.rs): what
+    // the run computed is not lost. Before the first instant there is nothing to report.
+    let mut failure: Option<anyhow::Error> = None;
     let ending = loop {
-        if let Some(ending) = lp.drain(&mut hooks)? {
-            break ending;
+        match lp.drain(&mut hooks) {
+            Ok(Some(ending)) => break ending,
+            Ok(None) => {}
+            Err(e) => {
+                failure = Some(e);
+                break Ending::Failed;
+            }
         }
         // Nothing pending: check the deadline, then wait.
         let Some(now) = waiter.now() else {
             break Ending::Interrupted;
         };
         lp.update_connections(now);
+        if let Some(why) = lp.peer_gone(&mut hooks, now) {
+            // Whatever the publisher sent before it ended is still queued: that first.
+            if let Some(ending) = lp.drain(&mut hooks)? {
+                break ending;
+            }
+            if lp.asm.counts.received == 0 {
+                bail!("{why} before it sent a slot");
+            }
+            lp.say(&format!("publisher lost: {why}"));
+            lp.publisher_losses += 1;
+            lp.flush();
+            break Ending::PublisherLost;
+        }
+        lp.expire(now);
         let due = lp.deadline.due();
         if now > due {
             match lp.missed(now) {
@@ -116,12 +162,28 @@ pub fn run_loop(
                 None => continue,
             }
         }
-        match waiter.wait(due.saturating_sub(now).min(MAX_WAIT_NS))? {
-            Woke::Ready => {}
-            Woke::Signal => break Ending::Interrupted,
+        let due = lp.asm.next_expiry().map_or(due, |t| t.min(due));
+        match waiter.wait(due.saturating_sub(now).min(max_wait_ns)) {
+            Ok(Woke::Ready) => {}
+            Ok(Woke::Signal) => break Ending::Interrupted,
+            Err(e) => {
+                failure = Some(e);
+                break Ending::Failed;
+            }
         }
     };
+    if matches!(ending, Ending::Interrupted | Ending::Failed) {
+        lp.flush();
+    }
+    let processed = lp.asm.counts.instants;
+    if let Some(e) = failure.take_if(|_| processed == 0) {
+        return Err(e);
+    }
     let (mut report, traj) = lp.finish(ending, machine);
+    if let Some(e) = failure {
+        report.error_code = crate::exit_code_of(&e);
+        report.error = Some(format!("{e:#}"));
+    }
     // The scenario's own name: a `--config` file's, not the `--scenario` default.
     report.scenario = scenario.name().to_string();
     Ok((report, traj))
@@ -137,11 +199,12 @@ struct Loop<'a> {
     deadline: Deadline,
     allocs: Allocs,
     publisher_losses: u32,
+    stalls: Stalls,
+    /// When [`Hooks::peer`] was last asked.
+    last_peer_check: u64,
     last_progress: u64,
     /// The header of the scenario the estimators were built for.
     expected: StreamHeader,
-    /// The stream whose header was checked against `expected`.
-    checked_stream: Option<u64>,
     /// When the estimate publisher last looked for new subscribers.
     last_update_ns: u64,
 }
@@ -157,6 +220,11 @@ impl Loop<'_> {
     #[inline]
     fn drain(&mut self, hooks: &mut Hooks<'_>) -> Result<Option<Ending>> {
         loop {
+            // Also between the slots of a long burst (a catch-up): a stop ends the run within
+            // one slot's work, and what is still queued stays unread.
+            if channel_sim::signal::termination_requested() {
+                return Ok(Some(Ending::Interrupted));
+            }
             let sample = match self.t.slot_sub.receive() {
                 Ok(Some(s)) => s,
                 Ok(None) => return Ok(None),
@@ -164,43 +232,52 @@ impl Loop<'_> {
             };
             let recv_ns = wire::monotonic_ns();
             let slot = sample.payload();
-            if slot.version != WIRE_VERSION {
-                let e = wire::WireError::Version {
-                    found: slot.version,
-                };
-                return Err(ContractError::Refused(e.to_string()).into());
+            let header = sample.user_header();
+            // Before any estimator has stepped, a stream of another shape or model is refused
+            // (exit 2), never fed to estimators built for this one; later such a slot is
+            // counted and skipped (docs/wire.md, What the runner does with a bad slot).
+            if self.asm.counts.instants == 0
+                && self.asm.counts.received == 0
+                && !assemble::same_stream_shape(header, &self.expected)
+            {
+                header.check(&self.expected)?;
             }
-            // Once per stream, before any of its slots reaches an estimator: a stream of
-            // another shape or model is refused, never fed to estimators built for this one.
-            if self.checked_stream != Some(slot.stream_id) {
-                sample.user_header().check(&self.expected)?;
-                self.checked_stream = Some(slot.stream_id);
+            // Whatever it carries, a slot shows the publisher alive.
+            if let Some(silence) = self.deadline.data(recv_ns) {
+                self.stall_ended(silence);
             }
-            self.deadline.last_data_ns = Some(recv_ns);
-            if slot.kind == wire::SLOT_DATA {
-                self.deadline.period_ns = slot.period_ns;
-                self.runner.slot.send_ns = slot.send_ns;
-                self.runner.slot.recv_ns = recv_ns;
-            }
-            self.runner.slot.stream_id = slot.stream_id;
+            self.runner.slot.send_ns = assemble::usable_send_ns(slot, recv_ns).unwrap_or(0);
+            self.runner.slot.recv_ns = recv_ns;
+            // Estimates and truth belong to node 0's stream (its process publishes the truth).
+            self.runner.slot.stream_id = self.asm.stream_of(0).unwrap_or(slot.stream_id);
             let (t, runner) = (self.t, &mut self.runner);
-            let mut pushed = self.asm.push(slot, &mut |k, obs: &[Observation]| {
-                runner.on_instant(t, k, obs);
-            });
-            if pushed == Ok(Pushed::NewStream) {
-                self.new_stream()?;
-                let runner = &mut self.runner;
-                pushed = self.asm.push(slot, &mut |k, obs: &[Observation]| {
+            let mut pushed = self
+                .asm
+                .push(slot, header, recv_ns, &mut |k, obs: &[Observation]| {
                     runner.on_instant(t, k, obs);
                 });
+            if pushed == Pushed::NewStream {
+                self.new_stream()?;
+                self.runner.slot.stream_id = self.asm.stream_of(0).unwrap_or(slot.stream_id);
+                let runner = &mut self.runner;
+                pushed = self
+                    .asm
+                    .push(slot, header, recv_ns, &mut |k, obs: &[Observation]| {
+                        runner.on_instant(t, k, obs);
+                    });
             }
-            let pushed = pushed.with_context(|| "refusing slot from channel-sim")?;
-            // After the instant this slot may have completed was published.
-            if slot.kind == wire::SLOT_DATA {
-                Latency::record(&mut self.runner.latency.transport, slot.send_ns, recv_ns);
+            if let Some(r) = self.asm.take_first_seen() {
+                self.warn(r, slot);
             }
-            if self.args.slots_csv.is_some() && pushed == Pushed::Data {
-                self.runner.traj.record_slot(slot);
+            if pushed == Pushed::Data {
+                // A period beyond the bound is not used for the data deadline.
+                if slot.period_ns <= assemble::MAX_PERIOD_NS {
+                    self.deadline.period_ns = slot.period_ns;
+                }
+                // After the instant this slot may have completed was published.
+                if self.runner.slot.send_ns != 0 {
+                    Latency::record(&mut self.runner.latency.transport, slot.send_ns, recv_ns);
+                }
             }
             drop(sample);
             if let Some(e) = self.runner.out.take_error() {
@@ -231,6 +308,36 @@ impl Loop<'_> {
         }
     }
 
+    /// Says once per reason that slots are being counted and skipped (or a field ignored).
+    fn warn(&self, r: Reason, slot: &wire::Slot) {
+        let m = match r {
+            Reason::Fault(SlotFault::Version) => wire::WireError::Version {
+                found: slot.version,
+            }
+            .to_string(),
+            r => r.describe(),
+        };
+        self.say(&format!("first {m} (further ones are counted silently)"));
+    }
+
+    /// Hands on every pending instant without its missing slots (the publishers are gone, or
+    /// the run ends).
+    fn flush(&mut self) {
+        let (t, runner) = (self.t, &mut self.runner);
+        self.asm.flush(&mut |k, obs: &[Observation]| {
+            runner.on_instant(t, k, obs);
+        });
+    }
+
+    /// Hands on the pending instants whose deadline passed (paced mode).
+    #[inline]
+    fn expire(&mut self, now: u64) {
+        let (t, runner) = (self.t, &mut self.runner);
+        self.asm.expire(now, &mut |k, obs: &[Observation]| {
+            runner.on_instant(t, k, obs);
+        });
+    }
+
     /// While idle, at most every [`UPDATE_CONNECTIONS_NS`]: hands a subscriber that connected
     /// since the last estimate the estimate history (`docs/wire.md`, QoS), which iceoryx2
     /// otherwise delivers only with the next `send()`.
@@ -244,7 +351,7 @@ impl Loop<'_> {
 
     /// channel-sim restarted: a new session with fresh estimators.
     fn new_stream(&mut self) -> Result<()> {
-        let old = self.asm.stream();
+        let old = self.asm.stream_of(0);
         self.asm.reset();
         self.runner.session += 1;
         self.runner.estimators = (self.make)()?;
@@ -255,8 +362,34 @@ impl Loop<'_> {
         Ok(())
     }
 
-    /// The deadline passed at `now`: `Some` when the run ends, `None` when it waits for a
-    /// restarted publisher (`--wait-for-restart`).
+    /// [`Hooks::peer`]'s answer, asked at most every [`PEER_CHECK_NS`].
+    fn peer_gone(&mut self, hooks: &mut Hooks<'_>, now: u64) -> Option<String> {
+        let peer = hooks.peer.as_mut()?;
+        if now.saturating_sub(self.last_peer_check) < PEER_CHECK_NS {
+            return None;
+        }
+        self.last_peer_check = now;
+        peer()
+    }
+
+    /// A stall ended with a slot after `silence_ns` without one.
+    fn stall_ended(&mut self, silence_ns: u64) {
+        self.stalls.record(silence_ns);
+        self.say(&format!(
+            "publisher resumed after {:.1} ms of silence (stalled, not lost)",
+            silence_ns as f64 / 1e6
+        ));
+    }
+
+    /// The deadline passed at `now`: `Some` when the run ends, `None` when it waits on — for
+    /// a stalled publisher, or for a restarted one (`--wait-for-restart`).
+    ///
+    /// Stalled or lost (docs/pipeline.md): a publisher is lost when no publisher is left on
+    /// the slot service once dead nodes are cleaned up (iceoryx2 finds a dead process's node
+    /// by its released monitoring lock; a publisher that exited dropped its port), or when
+    /// its silence exceeds `--stall-limit`. A publisher whose node is alive is stalled (a
+    /// SIGSTOP, a debugger, an overloaded machine): the loop waits on and looks again every
+    /// `--deadline-ms`.
     fn missed(&mut self, now: u64) -> Option<Ending> {
         let args = self.args;
         let Some(t_last) = self.deadline.last_data_ns else {
@@ -266,27 +399,68 @@ impl Loop<'_> {
             ));
             return Some(Ending::PublisherLost);
         };
-        self.publisher_losses += 1;
+        // The runner itself was late (stopped, not scheduled): the slots are there.
+        if self.t.slot_sub.has_samples().unwrap_or(false) {
+            return None;
+        }
         let cleaned = self.t.node.try_cleanup_dead_nodes();
+        let publishers = self.t.publishers();
+        let silence_ns = now - t_last;
+        let over_limit = self.deadline.stall_ns > 0 && silence_ns > self.deadline.stall_ns;
+        if publishers > 0 && !over_limit {
+            if self.deadline.recheck_ns.is_none() {
+                self.say(&format!(
+                    "publisher stalled: no slot for {:.1} ms after instant {} (deadline {} ms \
+                     past the expected slot), but its node is alive; waiting (lost after \
+                     --stall-limit {} s)",
+                    silence_ns as f64 / 1e6,
+                    self.runner.last_k,
+                    args.deadline_ms,
+                    args.stall_limit
+                ));
+            }
+            self.deadline.recheck_ns = Some(now + self.deadline.deadline_ns.max(1_000_000));
+            return None;
+        }
+        if self.deadline.recheck_ns.take().is_some() {
+            self.stalls.record(silence_ns);
+        }
+        self.publisher_losses += 1;
+        self.flush();
+        let why = if publishers > 0 {
+            format!(
+                "; alive but silent longer than --stall-limit {} s",
+                args.stall_limit
+            )
+        } else {
+            String::new()
+        };
         self.say(&format!(
             "publisher lost: no slot for {:.1} ms after instant {} (deadline {} ms past the \
-             expected slot); cleaned up {} dead node(s), {} publisher(s) remain",
-            (now - t_last) as f64 / 1e6,
+             expected slot); cleaned up {} dead node(s), {publishers} publisher(s) remain{why}",
+            silence_ns as f64 / 1e6,
             self.runner.last_k,
             args.deadline_ms,
             cleaned.cleanups,
-            self.t.publishers()
         ));
         if !args.wait_for_restart {
             return Some(Ending::PublisherLost);
         }
         self.say("waiting for channel-sim to restart (--wait-for-restart)");
+        // The lost publisher's stream is over: a restarted one may begin anywhere (its
+        // first slot may itself have been lost) and starts a new session.
+        self.asm.lose_streams();
         self.deadline.last_data_ns = None;
         self.deadline.waiting_since = now;
         None
     }
 
-    fn finish(self, ending: Ending, machine: Machine) -> (RunReport, Trajectories) {
+    fn finish(mut self, ending: Ending, machine: Machine) -> (RunReport, Trajectories) {
+        // A stall still going on when the run ends counts up to now.
+        if let (Some(_), Some(t_last)) = (self.deadline.recheck_ns, self.deadline.last_data_ns) {
+            self.stalls
+                .record(wire::monotonic_ns().saturating_sub(t_last));
+        }
         let (runner, counts, allocs) = (self.runner, self.asm.counts, self.allocs);
         let report = RunReport {
             scenario: self.args.scenario.clone(),
@@ -296,7 +470,9 @@ impl Loop<'_> {
             latency: runner.latency.summary(),
             sessions: runner.session,
             publisher_losses: self.publisher_losses,
+            stalls: self.stalls,
             truth_missing: runner.scores.truth_missing,
+            truth_nonfinite: runner.scores.truth_nonfinite,
             allocations_after_warmup: match (allocs.at_warmup, allocs.at_end) {
                 (Some(a), Some(b)) => Some(b - a),
                 _ => None,
@@ -307,6 +483,8 @@ impl Loop<'_> {
             memory_lock: machine.memory_lock,
             warnings: machine.warnings,
             ending,
+            error: None,
+            error_code: 0,
         };
         (report, runner.traj)
     }
@@ -316,10 +494,14 @@ impl Loop<'_> {
 struct Deadline {
     deadline_ns: u64,
     connect_ns: u64,
+    /// `--stall-limit` (0: none).
+    stall_ns: u64,
     period_ns: u64,
     /// `None` while waiting for the first slot of a stream (the connect timeout applies).
     last_data_ns: Option<u64>,
     waiting_since: u64,
+    /// While the publisher is stalled: when to look at it again.
+    recheck_ns: Option<u64>,
 }
 
 impl Deadline {
@@ -327,17 +509,33 @@ impl Deadline {
         Self {
             deadline_ns: (args.deadline_ms * 1e6) as u64,
             connect_ns: (args.connect_timeout * 1e9) as u64,
+            stall_ns: (args.stall_limit * 1e9) as u64,
             period_ns: 0,
             last_data_ns: None,
             waiting_since: wire::monotonic_ns(),
+            recheck_ns: None,
         }
     }
 
+    /// A slot arrived at `recv_ns`; the silence it ended if the publisher was stalled.
+    #[inline]
+    fn data(&mut self, recv_ns: u64) -> Option<u64> {
+        let last = self.last_data_ns.replace(recv_ns);
+        self.recheck_ns
+            .take()
+            .map(|_| recv_ns.saturating_sub(last.unwrap_or(recv_ns)))
+    }
+
     fn due(&self) -> u64 {
+        if let Some(t) = self.recheck_ns {
+            return t;
+        }
         match self.last_data_ns {
-            Some(t_last) => t_last + self.period_ns + self.deadline_ns,
+            Some(t_last) => t_last
+                .saturating_add(self.period_ns)
+                .saturating_add(self.deadline_ns),
             None if self.connect_ns == 0 => u64::MAX,
-            None => self.waiting_since + self.connect_ns,
+            None => self.waiting_since.saturating_add(self.connect_ns),
         }
     }
 }

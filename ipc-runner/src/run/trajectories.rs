@@ -4,7 +4,6 @@
 use anyhow::{Context, Result};
 use channel_sim::sim::MAX_NX;
 use channel_sim::Observation;
-use estpipe_wire::Slot;
 
 /// Recorded trajectories (preallocated; recording stops when full).
 #[derive(Debug, Default)]
@@ -64,15 +63,6 @@ impl Trajectories {
         }
         for x in xhat {
             self.estimates.extend_from_slice(&x[..nx]);
-        }
-    }
-
-    /// Records a received data slot while there is room.
-    pub(super) fn record_slot(&mut self, slot: &Slot) {
-        if self.slots.len() < self.slots.capacity() {
-            if let Ok(o) = channel_sim::wire::observation_of(slot) {
-                self.slots.push(o);
-            }
         }
     }
 

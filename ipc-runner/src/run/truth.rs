@@ -18,6 +18,8 @@ pub(super) struct Scores {
     pub(super) err_n: Vec<u64>,
     /// Processed instants whose truth was missing.
     pub(super) truth_missing: u64,
+    /// Received truths with a non-finite component (not scored).
+    pub(super) truth_nonfinite: u64,
 }
 
 impl Scores {
@@ -30,6 +32,7 @@ impl Scores {
             sq_err: vec![0.0; n_est],
             err_n: vec![0; n_est],
             truth_missing: 0,
+            truth_nonfinite: 0,
         }
     }
 
@@ -60,8 +63,13 @@ impl Scores {
     }
 
     /// Adds the squared errors of the estimates `xhat` (first `nx` values each) against
-    /// `truth`.
+    /// `truth`. A truth with a non-finite component (a publisher's bug, or a plant that
+    /// overflowed) is no sample: counted and left out, so it cannot turn every MSE into NaN.
     pub(super) fn score(&mut self, truth: &[f64; MAX_NX], xhat: &[[f64; MAX_NX]], nx: usize) {
+        if truth[..nx].iter().any(|v| !v.is_finite()) {
+            self.truth_nonfinite += 1;
+            return;
+        }
         for (e, xhat) in xhat.iter().enumerate() {
             let d: f64 = (0..nx).map(|j| (truth[j] - xhat[j]).powi(2)).sum();
             self.sq_err[e] += d;

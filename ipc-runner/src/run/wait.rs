@@ -7,13 +7,18 @@
 //!
 //! A wake-up says only that something may be there: wake-ups can be spurious and one
 //! notification may stand for several slots, so the loop re-drains `receive()` after each.
+//!
+//! Only SIGINT/SIGTERM stop a run: the flag of `channel_sim::signal`, read after every
+//! wake-up. iceoryx2 reports every wait that a signal cut short as an interrupt (SIGCONT, a
+//! stop and continue, SIGUSR1 …); that is a wake-up like any other (docs/security.md,
+//! "Signals").
 
 use crate::transport::Transport;
 use anyhow::{anyhow, bail, Result};
 use estpipe_wire as wire;
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::{WaitSetGuard, WaitSetRunResult};
+use iceoryx2::waitset::WaitSetGuard;
 use std::time::Duration;
 
 use super::args::WaitMode;
@@ -24,9 +29,6 @@ use super::args::WaitMode;
 /// `docs/pipeline.md`). The deadlines the clock serves are milliseconds; 256 polls are far
 /// shorter.
 pub const SPIN_CLOCK_EVERY: u32 = 256;
-
-/// Signals are checked at most once per this many ns while waiting (spin, listener).
-const SIGNAL_CHECK_NS: u64 = 1_000_000;
 
 /// Why a wait returned.
 #[derive(Debug)]
@@ -74,10 +76,7 @@ impl<'a> Waiter<'a> {
                 waitset: ws,
                 listener: l,
             }),
-            (None, Some(l)) => Self::Listener(Sleep {
-                listener: l,
-                last_signal_check: 0,
-            }),
+            (None, Some(l)) => Self::Listener(Sleep { listener: l }),
             _ => Self::Spin(Spin::new()),
         })
     }
@@ -110,38 +109,42 @@ impl<'a> Waiter<'a> {
     }
 }
 
-/// The spin loop's clock: read every [`SPIN_CLOCK_EVERY`] polls, signals checked every ms.
+/// The spin loop's clock: read every [`SPIN_CLOCK_EVERY`] polls, and the stop flag with it.
 pub(super) struct Spin {
     idle_polls: u32,
     clock: u64,
-    signal_check: u64,
 }
 
 impl Spin {
     fn new() -> Self {
-        let clock = wire::monotonic_ns();
         Self {
             idle_polls: 0,
-            clock,
-            signal_check: clock,
+            clock: wire::monotonic_ns(),
         }
     }
 
-    /// Signals through `channel_sim::signal` (iceoryx2's handler asked directly), not
-    /// `Node::wait(ZERO)`: its `nanosleep(0)` would leave the loop deaf for the timer slack.
+    /// Signals through `channel_sim::signal` (one atomic load), not `Node::wait(ZERO)`: its
+    /// `nanosleep(0)` would leave the loop deaf for the timer slack.
     #[inline]
     fn now(&mut self) -> Option<u64> {
         self.idle_polls = self.idle_polls.wrapping_add(1);
         if self.idle_polls.is_multiple_of(SPIN_CLOCK_EVERY) {
             self.clock = wire::monotonic_ns();
-            if self.clock - self.signal_check > SIGNAL_CHECK_NS {
-                self.signal_check = self.clock;
-                if channel_sim::signal::termination_requested() {
-                    return None;
-                }
+            if channel_sim::signal::termination_requested() {
+                return None;
             }
         }
         Some(self.clock)
+    }
+}
+
+/// After a wake-up (whatever its cause): a stop, or slots may be there.
+#[inline]
+fn woke() -> Woke {
+    if channel_sim::signal::termination_requested() {
+        Woke::Signal
+    } else {
+        Woke::Ready
     }
 }
 
@@ -155,8 +158,10 @@ pub(super) struct Block<'a> {
 impl Block<'_> {
     fn wait(&mut self, timeout_ns: u64) -> Result<Woke> {
         let (g, l) = (&self.guard, self.listener);
-        let r = self
-            .waitset
+        // The result (`Interrupt` for any signal, SIGCONT too; `TerminationRequest` for
+        // iceoryx2's own record of one; else events or a timeout) is a wake-up either way:
+        // the stop flag decides, as after every other wake-up.
+        self.waitset
             .wait_and_process_once_with_timeout(
                 |id| {
                     if id.has_event_from(g) {
@@ -168,17 +173,13 @@ impl Block<'_> {
                 Duration::from_nanos(timeout_ns.max(1000)),
             )
             .map_err(|e| anyhow!("WaitSet failed: {e:?}"))?;
-        Ok(match r {
-            WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => Woke::Signal,
-            _ => Woke::Ready,
-        })
+        Ok(woke())
     }
 }
 
 /// `--wait listener`: a timed wait on the listener itself.
 pub(super) struct Sleep<'a> {
     listener: &'a Listener<ipc::Service>,
-    last_signal_check: u64,
 }
 
 impl Sleep<'_> {
@@ -187,18 +188,9 @@ impl Sleep<'_> {
             .listener
             .timed_wait(|_| {}, Duration::from_nanos(timeout_ns.max(1000)))
         {
-            Ok(_) => {}
-            // A signal interrupts the wait itself; it is the user's Ctrl-C, not a failure.
-            Err(ListenerWaitError::InterruptSignal) => return Ok(Woke::Signal),
+            // A signal cut the wait short: Ctrl-C if the flag says so, else nothing.
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(woke()),
             Err(e) => bail!("listener wait failed: {e:?}"),
         }
-        let now = wire::monotonic_ns();
-        if now - self.last_signal_check > SIGNAL_CHECK_NS {
-            self.last_signal_check = now;
-            if channel_sim::signal::termination_requested() {
-                return Ok(Woke::Signal);
-            }
-        }
-        Ok(Woke::Ready)
     }
 }

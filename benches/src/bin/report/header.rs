@@ -83,6 +83,15 @@ impl Machine {
         let _ = writeln!(md, "| valgrind | {valgrind} |");
         let _ = writeln!(
             md,
+            "| benchmark binaries | {} |",
+            if o.plain_release {
+                "plain `cargo build --release` (`--plain-release`)"
+            } else {
+                "`profile.bench` (thin LTO, one codegen unit)"
+            }
+        );
+        let _ = writeln!(
+            md,
             "| load average (1/5/15 min) at start / end | {load0} / {load1} |"
         );
         let _ = writeln!(

@@ -21,7 +21,7 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         anyhow!("{bin:?} list failed (build it: cargo build --release -p benches)")
     })?;
     let n: u64 = if o.quick { 200 } else { 1000 };
-    prose::push(md, &intro(n));
+    prose::push(md, &intro(n, o.plain_release));
     md.push_str("| kernel | I(N) | I(2N) | I(2N) again | same twice | instructions / step |\n|---|---:|---:|---:|---|---:|\n");
     let mut res = BTreeMap::new();
     for k in list.lines() {
@@ -58,8 +58,17 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
     Ok(())
 }
 
-fn intro(n: u64) -> String {
-    prose::fill(include_str!("prose/icount.md"), &[("n", &n)])
+fn intro(n: u64, plain_release: bool) -> String {
+    let build = if plain_release {
+        "built by a plain `cargo build --release` in this regeneration (`--plain-release`: no \
+         LTO, the workspace's codegen units), not with `profile.bench` as criterion builds"
+    } else {
+        "built with `profile.bench` like criterion's: thin LTO, one codegen unit"
+    };
+    prose::fill(
+        include_str!("prose/icount.md"),
+        &[("n", &n), ("build", &build)],
+    )
 }
 
 /// Instructions executed by `bin kernel n`, from callgrind's `I refs`.
@@ -95,6 +104,6 @@ fn callgrind_ir(bin: &Path, kernel: &str, n: u64) -> Result<u64> {
 mod tests {
     #[test]
     fn the_prose_fills() {
-        assert!(super::intro(1000).contains("with N = 1000,"));
+        assert!(super::intro(1000, false).contains("with N = 1000,"));
     }
 }

@@ -12,25 +12,28 @@
 //!   plugin);
 //! - `ipc` ([`raw_transports`]): `ipc_latency` (raw iceoryx2 and Unix socket ping-pong);
 //! - `pipeline` ([`pipeline`]): `ipc-runner demo` end to end (slot sent → estimates
-//!   published), spin ([`spin_verdict`], [`tail_breakdown`]) and blocking, and a sustained
-//!   100 000 slots/s run ([`sustained`]);
-//! - `idle` ([`idle_penalty`]): the same small works back to back and paced;
+//!   published), one spinning and one sleeping runner, one table;
+//! - `eval-baseline` ([`eval_baseline`]): issue #23's Monte-Carlo command against commit
+//!   `b7a974e`, CPU time and instructions side by side, the JSON compared, where the
+//!   instructions go;
 //! - `eval` ([`eval_throughput`]): Monte-Carlo throughput of `ipc-runner eval` per scenario
 //!   preset.
 //!
 //! `--quick` shortens every part (for trying the script; the committed file uses the full run).
+//! A part that is skipped keeps its section of the existing output file, if it has one, marked
+//! as not rerun ([`carried`]): the deterministic parts can be regenerated on their own.
 //!
 //! The prose of the report is in `prose/*.md` ([`prose`]).
 
 mod command;
 mod criterion;
 mod demo;
+mod eval_baseline;
 mod eval_throughput;
 mod firmware;
 mod format;
 mod header;
 mod icount;
-mod idle_penalty;
 mod ipc_latency;
 mod kf_comparison;
 mod kf_forms;
@@ -38,13 +41,9 @@ mod kf_interleaved;
 mod opts;
 mod pct;
 mod pipeline;
-mod plots;
 mod prose;
 mod rate;
 mod raw_transports;
-mod spin_verdict;
-mod sustained;
-mod tail_breakdown;
 
 use anyhow::{Context, Result};
 use command::say;
@@ -56,7 +55,56 @@ use std::fmt::Write as _;
 struct Body {
     md: String,
     failures: Vec<String>,
+    /// The output file as it was before this run (empty if there was none).
+    old: String,
 }
+
+/// The headings each part's section starts with, in the order of the file.
+const SECTIONS: &[(&str, &str)] = &[
+    ("criterion", "## Kalman step: ours against `adskalman`"),
+    ("icount", "## Instructions per step on the host"),
+    ("firmware", "## The Cortex-M4F on QEMU"),
+    ("ipc", "## IPC latency: raw transports"),
+    ("pipeline", "## IPC latency: the full pipeline end to end"),
+    // Retired (issue #23): it only ends the section before it in an older file.
+    ("idle", "## What idling costs here"),
+    (
+        "eval-baseline",
+        "## Monte-Carlo evaluation: issue #23's command",
+    ),
+    ("eval", "## Monte-Carlo evaluation throughput"),
+];
+
+/// Part `name`'s section of the previous file `old` (from its heading up to the next part's
+/// or a "## Parts that did not run"), with a line saying it was not rerun; `None` if `old`
+/// has none.
+fn carried(old: &str, name: &str) -> Option<String> {
+    let (_, head) = SECTIONS.iter().find(|(n, _)| *n == name)?;
+    let start = old.find(&format!("\n{head}"))? + 1;
+    let rest = &old[start..];
+    let end = SECTIONS
+        .iter()
+        .filter_map(|(_, h)| rest[1..].find(&format!("\n{h}")).map(|i| i + 2))
+        .chain(rest[1..].find("\n## Parts that did not run").map(|i| i + 2))
+        .min()
+        .unwrap_or(rest.len());
+    let section = rest[..end].trim_end();
+    // Carried before: its note already names the run it is from.
+    if section.lines().last().is_some_and(|l| l.starts_with(NOTE)) {
+        return Some(format!("{section}\n\n"));
+    }
+    let commit = old
+        .lines()
+        .find_map(|l| l.strip_prefix("| commit | "))
+        .and_then(|l| l.strip_suffix(" |"))
+        .unwrap_or("?");
+    Some(format!(
+        "{section}\n\n{NOTE} carried over from the `BENCHMARKS.md` of commit {commit}.)*\n\n"
+    ))
+}
+
+/// How a carried section's last line starts.
+const NOTE: &str = "*(Not rerun in this regeneration:";
 
 impl Body {
     /// Runs part `name` unless skipped. It writes into a buffer of its own, kept only if the
@@ -68,6 +116,9 @@ impl Body {
         f: impl FnOnce(&Opts, &mut String) -> Result<T>,
     ) -> Option<T> {
         if !o.runs(name) {
+            if let Some(old) = carried(&self.old, name) {
+                self.md.push_str(&old);
+            }
             return None;
         }
         let mut part = String::new();
@@ -90,15 +141,16 @@ fn run() -> Result<()> {
         return Ok(());
     };
     let machine = header::Machine::now(&o);
-    let mut body = Body::default();
+    let mut body = Body {
+        old: std::fs::read_to_string(&o.out).unwrap_or_default(),
+        ..Body::default()
+    };
     body.part(&o, "criterion", kf_comparison::part);
     body.part(&o, "icount", icount::part);
     body.part(&o, "firmware", firmware::part);
-    let raw = body
-        .part(&o, "ipc", raw_transports::part)
-        .unwrap_or_default();
-    body.part(&o, "pipeline", |o, md| pipeline::part(o, md, &raw));
-    body.part(&o, "idle", idle_penalty::part);
+    body.part(&o, "ipc", raw_transports::part);
+    body.part(&o, "pipeline", pipeline::part);
+    body.part(&o, "eval-baseline", eval_baseline::part);
     body.part(&o, "eval", eval_throughput::part);
 
     let mut md = machine.header(&o);
@@ -119,5 +171,26 @@ fn main() {
     if let Err(e) = run() {
         eprintln!("report: {e:#}");
         std::process::exit(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::carried;
+
+    #[test]
+    fn a_skipped_part_keeps_its_old_section() {
+        let old = "# B\n\n| commit | abc |\n\n## Instructions per step on the host (x)\n\nt1\n\n### sub\n\nt2\n\n## The Cortex-M4F on QEMU: y\n\nf\n\n## Parts that did not run\n\n- z\n";
+        let icount = carried(old, "icount").unwrap();
+        assert_eq!(
+            icount,
+            "## Instructions per step on the host (x)\n\nt1\n\n### sub\n\nt2\n\n*(Not rerun in \
+             this regeneration: carried over from the `BENCHMARKS.md` of commit abc.)*\n\n"
+        );
+        let fw = carried(old, "firmware").unwrap();
+        assert!(fw.starts_with("## The Cortex-M4F on QEMU: y\n\nf\n\n*(Not rerun"));
+        // Carried twice, still one note.
+        assert_eq!(carried(&format!("x\n{fw}"), "firmware").unwrap(), fw);
+        assert!(carried(old, "criterion").is_none());
     }
 }

@@ -4,10 +4,13 @@ use anyhow::{anyhow, bail, Result};
 use std::path::PathBuf;
 
 const USAGE: &str =
-    "report [--quick] [--skip criterion,icount,firmware,ipc,pipeline,idle,eval] [--out FILE]";
+    "report [--quick] [--plain-release] [--skip criterion,icount,firmware,ipc,pipeline,eval-baseline,eval] [--out FILE]";
 
 pub struct Opts {
     pub quick: bool,
+    /// The benchmark binaries were built by a plain `cargo build --release` instead of
+    /// `profile.bench` (`--plain-release`: said in the header and by the instruction counts).
+    pub plain_release: bool,
     pub skip: Vec<String>,
     pub out: PathBuf,
     pub root: PathBuf,
@@ -24,6 +27,7 @@ impl Opts {
             .to_path_buf();
         let mut o = Self {
             quick: false,
+            plain_release: false,
             skip: Vec::new(),
             out: root.join("BENCHMARKS.md"),
             target: std::env::var_os("CARGO_TARGET_DIR")
@@ -34,6 +38,7 @@ impl Opts {
         while let Some(a) = args.next() {
             match a.as_str() {
                 "--quick" => o.quick = true,
+                "--plain-release" => o.plain_release = true,
                 "--skip" => {
                     o.skip = args
                         .next()

@@ -45,7 +45,8 @@ impl Pct {
         )
     }
 
-    /// Back to the runner's type, which the plots take.
+    /// Back to the runner's type (what the test compares with).
+    #[cfg(test)]
     pub fn percentiles(&self) -> ipc_runner::latency::Percentiles {
         ipc_runner::latency::Percentiles {
             count: self.count,

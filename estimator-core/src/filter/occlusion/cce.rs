@@ -48,6 +48,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{admits_linear, GateCounts, GatedStep, InnovationGate};
 use crate::filter::kalman::kalman_update;
 use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
@@ -186,12 +187,36 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         k: usize,
         y: Option<&SVector<T, NY>>,
     ) -> Result<usize> {
-        if let Some(y) = y {
+        self.advance(model, k, Some(y))?;
+        Ok(self.label)
+    }
+
+    /// Instant `k ≥ 1` without information (a packet lost in transport,
+    /// [`Packet::Lost`]): the prediction (11) only; the label and the region weights keep the values of the last update. On error nothing changes.
+    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+    ) -> Result<()> {
+        self.advance(model, k, None)
+    }
+
+    /// Instant `k`: `y` is `Some(Some(z_k))` on arrival, `Some(None)` on a dropout, `None`
+    /// for a loss (prediction only). The one place that predicts (eq. 11), so that the
+    /// prediction is inlined once into every step.
+    #[inline(always)]
+    fn advance<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: Option<Option<&SVector<T, NY>>>,
+    ) -> Result<()> {
+        if let Some(Some(y)) = y {
             check_finite(y, "measurement")?;
         }
         let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
         match y {
-            Some(y) => {
+            Some(Some(y)) => {
                 let (x, p, _) = kalman_update(
                     &xp,
                     &pp,
@@ -203,25 +228,14 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
                 self.est = Estimate::trusted(x, p);
                 self.label = 0;
             }
-            None => {
+            Some(None) => {
                 let (x, p, label, lw) = self.dropout_update(&xp, &pp)?;
                 self.est = Estimate::trusted(x, p);
                 self.label = label;
                 self.region_log_weights = lw;
             }
+            None => self.est = Estimate::trusted(xp, pp),
         }
-        Ok(self.label)
-    }
-
-    /// Instant `k ≥ 1` without information (a packet lost in transport,
-    /// [`Packet::Lost`]): the prediction (11) only; the label and the region weights keep the values of the last update. On error nothing changes.
-    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-    ) -> Result<()> {
-        let (x, p) = predict(model, k, self.est.state(), self.est.covariance())?;
-        self.est = Estimate::trusted(x, p);
         Ok(())
     }
 
@@ -339,16 +353,50 @@ impl<
     type Measurement = Packet<T, NY>;
 
     fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        match y {
-            Packet::Delivered(y) => self.filter.step(&self.model, k, Some(y)).map(|_label| ()),
-            Packet::Dropped => self.filter.step(&self.model, k, None).map(|_label| ()),
-            Packet::Lost => self.filter.predict_to(&self.model, k),
-        }
+        let y = match y {
+            Packet::Delivered(y) => Some(Some(y)),
+            Packet::Dropped => Some(None),
+            Packet::Lost => None,
+        };
+        self.filter.advance(&self.model, k, y)
     }
 
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
+/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
+/// region).
+impl<
+        T: Real,
+        const NX: usize,
+        const NE: usize,
+        const S: usize,
+        const N: usize,
+        const NY: usize,
+        M: LinearSystem<T, NX, NY>,
+    > GatedStep<T, NX> for OnModel<M, CrossCoupledEstimator<T, NX, NE, S, N>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let Packet::Delivered(z) = y else {
+            return self.step(k, y).map(|()| GateCounts::NONE);
+        };
+        let est = self.filter.estimate();
+        let used = admits_linear(gate, &self.model, k, est.state(), est.covariance(), z)?;
+        if used {
+            self.step(k, y)?;
+        } else {
+            self.filter.predict_to(&self.model, k)?;
+        }
+        Ok(GateCounts::one(used))
     }
 }
 

@@ -31,13 +31,16 @@
 //! and the equations above are unchanged otherwise (`p_loss = 0`, the default, is the filter
 //! above).
 
+use core::cmp::Ordering;
+
 use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::time_update::predict;
-use crate::gauss::{ln_interval_prob, LogSumExp};
-use crate::linalg::{check_finite, solve_spd_right, symmetrize};
+use crate::gauss::{ln_interval_prob, ln_sf, LogSumExp};
+use crate::linalg::{all_finite, check_finite, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::{check_loss_rate, Packet};
 use crate::protocol::occlusion::Occlusion;
@@ -98,16 +101,99 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         self.arrival_prob
     }
 
-    /// `P(u in no region)` for `u ~ N(m, s²)`.
+    /// `P(u in no region)` for `u ~ N(m, s²)`: the log-sum-exp of the gaps' `ln P` in gap
+    /// order, bit for bit, but without evaluating a gap whose term provably cannot change
+    /// the sum. [`LogSumExp`] keeps `(top, sum)` with `sum ≥ 1` once a finite term is in; a
+    /// term `x < top − 40` adds `exp(x − top) < 4.3·10⁻¹⁸`, under half an ulp of `sum`, so
+    /// the state stays the same bits. A gap in standard units `(a, b)` has
+    /// `ln P ≤ −a²/2` for `a > 0` and `≤ −b²/2` for `b < 0` (`Q(a) ≤ e^{−a²/2}/2`), so
+    /// a gap whose bound is 40 below the running top is skipped. Gaps before the first
+    /// evaluated one are skipped when it exceeds all of their bounds by `41 + S`
+    /// (`≥ 40 + ln(S + 1)`: their whole sum then vanishes in its `1` the same way); when it
+    /// does not, they are evaluated after all, in order, before it. The gap with the
+    /// largest bound is evaluated first, as the reference for the leading gaps.
     fn prob_outside(&self, m: T, s: T) -> T {
-        let inf = T::one() / T::zero();
-        let mut total = LogSumExp::default();
+        let neg_inf = -T::one() / T::zero();
+        let margin = T::lit(40.0);
+        let lead_margin = T::lit(41.0 + S as f64);
+        let mut anchor = (0, neg_inf);
         for j in 0..=S {
-            let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
-            let hi = if j == S { inf } else { self.sorted[j].0 };
-            total.push(ln_interval_prob((lo - m) / s, (hi - m) / s));
+            let u = Self::gap_bound(self.gap(j, m, s));
+            if u > anchor.1 {
+                anchor = (j, u);
+            }
+        }
+        let (lo, hi) = self.gap(anchor.0, m, s);
+        let at_anchor = ln_gap_prob(lo, hi);
+        let mut total = LogSumExp::default();
+        let mut top = neg_inf;
+        let mut skipped_lead = neg_inf;
+        for j in 0..=S {
+            let x = if j == anchor.0 {
+                at_anchor
+            } else {
+                let (lo, hi) = self.gap(j, m, s);
+                let u = Self::gap_bound((lo, hi));
+                if top.finite() {
+                    if u < top - margin {
+                        continue;
+                    }
+                } else if top == neg_inf && u < at_anchor - lead_margin {
+                    if u > skipped_lead {
+                        skipped_lead = u;
+                    }
+                    continue;
+                }
+                ln_gap_prob(lo, hi)
+            };
+            if top == neg_inf
+                && skipped_lead > neg_inf
+                && x.partial_cmp(&(skipped_lead + lead_margin)) != Some(Ordering::Greater)
+            {
+                // The leading gaps were skipped against the anchor, but this term is not
+                // far enough above them: push them as the plain sum would have.
+                for i in 0..j {
+                    let (lo, hi) = self.gap(i, m, s);
+                    let l = ln_gap_prob(lo, hi);
+                    total.push(l);
+                    if raises(l, top) {
+                        top = l;
+                    }
+                }
+                skipped_lead = neg_inf;
+            }
+            total.push(x);
+            if raises(x, top) {
+                top = x;
+            }
         }
         total.value().exp().min(T::one())
+    }
+
+    /// Gap `j` (`0..=S`: below the first region, between regions, above the last) in
+    /// standard units of `u ~ N(m, s²)`.
+    #[inline]
+    fn gap(&self, j: usize, m: T, s: T) -> (T, T) {
+        let inf = T::one() / T::zero();
+        let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
+        let hi = if j == S { inf } else { self.sorted[j].0 };
+        ((lo - m) / s, (hi - m) / s)
+    }
+
+    /// An upper bound of `ln P(a < Z < b)`: `−a²/2` for `a > 0`, `−b²/2` for `b < 0`, else
+    /// 0 (NaN for NaN ends, which compares false and so is never skipped).
+    #[inline]
+    fn gap_bound((a, b): (T, T)) -> T {
+        let half = T::lit(0.5);
+        if a > T::zero() {
+            -half * a * a
+        } else if b < T::zero() {
+            -half * b * b
+        } else if a.partial_cmp(&b).is_none() {
+            a + b
+        } else {
+            T::zero()
+        }
     }
 
     /// One instant `k ≥ 1`: predict, then the linear MMSE update with `ỹ = z_k` (arrival) or
@@ -118,14 +204,68 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         k: usize,
         y: Option<&SVector<T, NY>>,
     ) -> Result<()> {
+        self.advance(model, k, Some(y))
+    }
+
+    /// Instant `k ≥ 1` without information (a packet lost in transport,
+    /// [`Packet::Lost`]): the prediction only; the arrival probability keeps its last value. On error nothing changes.
+    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+    ) -> Result<()> {
+        self.advance(model, k, None)
+    }
+
+    /// Instant `k`: `y` is `Some(Some(z_k))` on arrival, `Some(None)` on a dropout, `None`
+    /// for a loss (prediction only). The one place that predicts, so that the prediction is
+    /// inlined once into every step.
+    #[inline(always)]
+    fn advance<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        model: &M,
+        k: usize,
+        y: Option<Option<&SVector<T, NY>>>,
+    ) -> Result<()> {
         let y_tilde = match y {
-            Some(y) => {
+            Some(Some(y)) => {
                 check_finite(y, "measurement")?;
                 *y
             }
-            None => SVector::<T, NY>::zeros(),
+            _ => SVector::<T, NY>::zeros(),
         };
+        let (xp, pp, p, s_prime) = self.prior(model, k)?;
+        let c = model.c(k);
+        let pct = pp * c.transpose();
+        let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
+        let x = xp + gain * (y_tilde - c * xp * p);
+        let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
+        check_finite(&x, "updated state")?;
+        check_finite(&p_new, "updated covariance")?;
+        self.est = Estimate::trusted(x, p_new);
+        self.arrival_prob = p;
+        Ok(())
+    }
+
+    /// The prediction of instant `k`, the arrival probability `p_k` and `S' = S_y / p_k`
+    /// (module docs).
+    ///
+    /// `S'` is formed as the module docs write it; only if that is not finite (after one
+    /// accepted huge measurement, `x̂⁻x̂⁻ᵀ` in `X` overflows and `0 · ∞` turns `S'` into NaN
+    /// at `p_k = 1`, so every later step used to fail) is it formed again as
+    /// `C P⁻ Cᵀ + DRDᵀ + (√(1 − p) C x̂⁻)(√(1 − p) C x̂⁻)ᵀ`, the same matrix without the
+    /// overflowing product: the filter recovers instead of refusing every instant.
+    #[allow(clippy::type_complexity)]
+    fn prior<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T, SMatrix<T, NY, NY>)> {
         let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
+        if y.is_none() {
+            self.est = Estimate::trusted(xp, pp);
+            return Ok(());
+        }
         let e = &self.occ.e;
         let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
         // × (1 − p_loss): the packet must also survive the transport (exactly × 1 by default).
@@ -141,28 +281,69 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         let s_prime = symmetrize(
             &(c * pp * c.transpose() * p + c * big_x * c.transpose() * (T::one() - p) + r),
         );
-        let pct = pp * c.transpose();
-        let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
-        let x = xp + gain * (y_tilde - c * xp * p);
-        let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
-        check_finite(&x, "updated state")?;
-        check_finite(&p_new, "updated covariance")?;
-        self.est = Estimate::trusted(x, p_new);
-        self.arrival_prob = p;
-        Ok(())
+        if all_finite(&s_prime) {
+            return Ok((xp, pp, p, s_prime));
+        }
+        let cx = c * xp * (T::one() - p).sqrt();
+        let s_prime = symmetrize(&(c * pp * c.transpose() + r + cx * cx.transpose()));
+        Ok((xp, pp, p, s_prime))
     }
 
-    /// Instant `k ≥ 1` without information (a packet lost in transport,
-    /// [`Packet::Lost`]): the prediction only; the arrival probability keeps its last value. On error nothing changes.
-    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
+    /// Whether `gate` admits the delivered `y_k`: the NIS of the filter's own innovation
+    /// `ỹ − p_k C x̂⁻` with `ỹ = y_k` against `S_y = p_k S'` (docs/gate.md). A delivery at
+    /// `p_k = 0` (certainly occluded) is never admitted. The off gate admits without a test.
+    pub fn admits<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
         model: &M,
         k: usize,
-    ) -> Result<()> {
-        let (x, p) = predict(model, k, self.est.state(), self.est.covariance())?;
-        self.est = Estimate::trusted(x, p);
-        Ok(())
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if gate.is_off() {
+            return Ok(true);
+        }
+        check_finite(y, "measurement")?;
+        let (xp, _, p, s_prime) = self.prior(model, k)?;
+        if p <= T::zero() {
+            return Ok(false);
+        }
+        let nu = y - model.c(k) * xp * p;
+        gate.admits(&nu, &(s_prime * p))
     }
+}
+
+/// Whether the term `x` becomes [`LogSumExp`]'s top after `top`: a larger one, or NaN, which
+/// then stays.
+#[inline]
+fn raises<T: Real>(x: T, top: T) -> bool {
+    top.partial_cmp(&top).is_some() && (x > top || x.partial_cmp(&x).is_none())
+}
+
+/// [`ln_interval_prob`] bit for bit, without the far end's `ln Q` when it cannot matter. For
+/// `0 < a < b` that is `ln Q(a) + ln(1 − e^{ln Q(b) − ln Q(a)})`; when a bound proves
+/// `ln Q(b) − ln Q(a) < −40` the second term is below `4.4·10⁻¹⁸` in magnitude, under half
+/// an ulp of `ln Q(a)` (`|ln Q(a)| > ln 2`), so the sum is `ln Q(a)` itself. The bounds:
+/// `ln Q(b) ≤ −b²/2` (`Q(b) ≤ e^{−b²/2}/2`) and `ln Q(a) ≥ −a²/2 − 2a` for `a ≥ 1` (from
+/// `Q(a) ≥ φ(a) a/(1 + a²)`), `≥ −1.85` for `a < 1` (`Q(1) > 0.158`). The far end `b = ∞`
+/// of the half-lines is the common case. A non-finite `ln Q(a)` takes the full formula.
+fn ln_gap_prob<T: Real>(a: T, b: T) -> T {
+    if a > T::zero() && a < b {
+        let half = T::lit(0.5);
+        let la_low = if a >= T::one() {
+            -half * a * a - (a + a)
+        } else {
+            T::lit(-1.85)
+        };
+        if -half * b * b - la_low < T::lit(-40.0) {
+            let la = ln_sf(a);
+            if la.finite() {
+                return la;
+            }
+        }
+    } else if b < T::zero() && a < b {
+        return ln_gap_prob(-b, -a);
+    }
+    ln_interval_prob(a, b)
 }
 
 /// Delivered or dropped: the linear MMSE update (`ỹ = z_k` or `0`); lost: prediction only.
@@ -172,16 +353,42 @@ impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<
     type Measurement = Packet<T, NY>;
 
     fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        match y {
-            Packet::Delivered(y) => self.filter.step(&self.model, k, Some(y)),
-            Packet::Dropped => self.filter.step(&self.model, k, None),
-            Packet::Lost => self.filter.predict_to(&self.model, k),
-        }
+        let y = match y {
+            Packet::Delivered(y) => Some(Some(y)),
+            Packet::Dropped => Some(None),
+            Packet::Lost => None,
+        };
+        self.filter.advance(&self.model, k, y)
     }
 
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
+/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
+/// region).
+impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<M, KfIo<T, NX, S>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let Packet::Delivered(z) = y else {
+            return self.step(k, y).map(|()| GateCounts::NONE);
+        };
+        let used = self.filter.admits(&self.model, k, z, gate)?;
+        if used {
+            self.step(k, y)?;
+        } else {
+            self.filter.predict_to(&self.model, k)?;
+        }
+        Ok(GateCounts::one(used))
     }
 }
 
@@ -192,6 +399,35 @@ mod tests {
     use crate::model::LinearModel;
     use crate::papers::Seed001Example;
     use nalgebra::{matrix, vector};
+
+    /// `ln_gap_prob` against `gauss::ln_interval_prob`, bit for bit, over ends near, far
+    /// and at infinity on both sides.
+    #[test]
+    fn gap_probabilities_are_the_interval_probabilities_bit_for_bit() {
+        let inf = f64::INFINITY;
+        let ends = [
+            -inf, -1e3, -60.0, -38.5, -12.0, -9.0, -7.3, -3.0, -1.0, -0.2, 0.0, 0.3, 1.0, 1.7, 2.5,
+            6.0, 8.9, 9.1, 11.0, 25.0, 40.0, 77.0, 1e4, inf,
+        ];
+        let mut skipped = 0;
+        for &a in &ends {
+            for &b in &ends {
+                let want = ln_interval_prob(a, b);
+                let got = ln_gap_prob(a, b);
+                assert_eq!(got.to_bits(), want.to_bits(), "({a}, {b}): {got} vs {want}");
+                let ga = ln_gap_prob(a as f32, b as f32);
+                assert_eq!(
+                    ga.to_bits(),
+                    ln_interval_prob(a as f32, b as f32).to_bits(),
+                    "f32 ({a}, {b})"
+                );
+                skipped += usize::from(
+                    a > 0.0 && b > a && -0.5 * b * b + 0.5 * a * a + 2.0 * a.max(1.0) < -40.0,
+                );
+            }
+        }
+        assert!(skipped > 20, "the shortcut was taken {skipped} times");
+    }
 
     fn setup() -> (LinearModel<f64, 3, 3, 2, 2>, Occlusion<f64, 3, 1, 4>) {
         (

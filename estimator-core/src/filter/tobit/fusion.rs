@@ -22,6 +22,7 @@ use super::config::TobitFilterConfig;
 use super::local::{diagonal_variances, TobitFilter};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::linalg::{check_finite, inverse_spd, solve_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
@@ -149,12 +150,26 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         r: &[SVector<T, NY>; L],
         received: [Option<&SVector<T, NY>>; L],
     ) -> Result<()> {
+        self.step_with_input(a, bqb, None, c, r, received)
+    }
+
+    /// [`TobitFusion::step`] for a system with a known input term `gu` = G u_{k−1}, which
+    /// every local filter adds to its prior mean.
+    pub fn step_with_input(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &[SMatrix<T, NY, NX>; L],
+        r: &[SVector<T, NY>; L],
+        received: [Option<&SVector<T, NY>>; L],
+    ) -> Result<()> {
         let mut locals = self.locals;
         let mut xs = [SVector::<T, NX>::zeros(); L];
         let mut ps = [SMatrix::<T, NX, NX>::zeros(); L];
         for m in 0..L {
             let q_m = bqb / self.alpha[m];
-            locals[m].step(a, &q_m, &c[m], &r[m], received[m])?;
+            locals[m].step_with_input(a, &q_m, gu, &c[m], &r[m], received[m])?;
             (xs[m], ps[m]) = locals[m].estimate().into_parts();
         }
         let (xg, pg) = federated_fuse(&xs, &ps)?;
@@ -182,13 +197,43 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
             c[m] = models[m].c(k);
             r[m] = diagonal_variances(&models[m].measurement_cov(k))?;
         }
-        self.step(
+        self.step_with_input(
             &models[0].a(prev),
             &models[0].process_cov(prev),
+            models[0].input(prev).as_ref(),
             &c,
             &r,
             received,
         )
+    }
+}
+
+/// Behind a gate: each node's delivered measurement is tested by its local filter
+/// ([`TobitFilter::admits`]); a rejected one is stepped as dropped (θ = 1).
+impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<[M; L], TobitFusion<T, NX, NY, L>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &[Packet<T, NY>; L],
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let (models, prev) = (&self.model, k.saturating_sub(1));
+        let (a, bqb) = (models[0].a(prev), models[0].process_cov(prev));
+        let mut counts = GateCounts::NONE;
+        let mut received: [Option<&SVector<T, NY>>; L] = [None; L];
+        for m in 0..L {
+            if let Some(z) = y[m].delivered() {
+                let r = diagonal_variances(&models[m].measurement_cov(k))?;
+                let q_m = bqb / self.filter.alpha[m];
+                let used = self.filter.locals[m].admits(&a, &q_m, &models[m].c(k), &r, z, gate)?;
+                counts.add(GateCounts::one(used));
+                received[m] = used.then_some(z);
+            }
+        }
+        self.filter.step_models(models, k, received)?;
+        Ok(counts)
     }
 }
 

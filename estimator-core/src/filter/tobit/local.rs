@@ -36,6 +36,7 @@ use super::config::{Kappas, TobitFilterConfig, UpsilonPlacement};
 use super::gain::GainProblem;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
@@ -142,6 +143,21 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         r: &SVector<T, NY>,
         received: Option<&SVector<T, NY>>,
     ) -> Result<LocalStepPlan<T, NX, NY>> {
+        self.plan_with_input(a, bqb, None, c, r, received)
+    }
+
+    /// [`TobitFilter::plan`] for a system with a known input term `gu` = G u_{t−1}: the
+    /// prior mean (21) becomes `A x̂ + G u`, and every term of (30) built on it (Ω₁, the
+    /// Tobit statistics) uses that prior.
+    pub fn plan_with_input(
+        &self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        received: Option<&SVector<T, NY>>,
+    ) -> Result<LocalStepPlan<T, NX, NY>> {
         check_finite(a, "A")?;
         check_finite(bqb, "process covariance")?;
         check_finite(c, "C")?;
@@ -153,7 +169,13 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             None => (T::one(), self.y_held),
         };
         let (x, p) = (*self.est.state(), *self.est.covariance());
-        let x_prior = a * x;
+        let x_prior = match gu {
+            None => a * x,
+            Some(gu) => {
+                check_finite(gu, "input")?;
+                a * x + gu
+            }
+        };
         let p_prior = symmetrize(&(a * p * a.transpose() + bqb));
         check_finite(&p_prior, "predicted bound")?;
         let tau = self.cfg.tau;
@@ -229,7 +251,20 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         r: &SVector<T, NY>,
         received: Option<&SVector<T, NY>>,
     ) -> Result<()> {
-        let plan = self.plan(a, bqb, c, r, received)?;
+        self.step_with_input(a, bqb, None, c, r, received)
+    }
+
+    /// [`TobitFilter::step`] with a known input term (see [`TobitFilter::plan_with_input`]).
+    pub fn step_with_input(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        received: Option<&SVector<T, NY>>,
+    ) -> Result<()> {
+        let plan = self.plan_with_input(a, bqb, gu, c, r, received)?;
         let k = plan.problem.gain()?;
         let x = plan.x_prior + k * (plan.y_bar - plan.stats.mean);
         let p = plan.problem.bound(&k);
@@ -246,6 +281,28 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         Ok(())
     }
 
+    /// Whether `gate` admits the received `y` (docs/gate.md): the NIS of the innovation of
+    /// (22), `y − ŷ_{t|t−1}`, against `Φ` of (37) at θ = 0 — the paper's bound on its
+    /// covariance, so a consistent filter rejects fewer than `1 − p` of its good measurements.
+    /// Arguments as [`TobitFilter::plan`]. A `Φ` that cannot be factored (components whose
+    /// `Φ_jj` underflowed, to which the gain gives no weight) cannot be tested: admitted.
+    pub fn admits(
+        &self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        y: &SVector<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<bool> {
+        if gate.is_off() {
+            return Ok(true);
+        }
+        let plan = self.plan(a, bqb, c, r, Some(y))?;
+        let nu = plan.y_bar - plan.stats.mean;
+        Ok(gate.admits(&nu, &plan.problem.phi()).unwrap_or(true))
+    }
+
     /// One instant `k ≥ 1` of a model: `A_{k−1}`, `B Q_{k−1} Bᵀ` scaled by `q_scale`
     /// (α_m⁻¹ under fusion, 1 alone), `C_k`, and the diagonal of the measurement covariance.
     pub fn step_model<M: LinearSystem<T, NX, NY>>(
@@ -257,9 +314,10 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
     ) -> Result<()> {
         let prev = k.saturating_sub(1);
         let r = diagonal_variances(&model.measurement_cov(k))?;
-        self.step(
+        self.step_with_input(
             &model.a(prev),
             &(model.process_cov(prev) * q_scale),
+            model.input(prev).as_ref(),
             &model.c(k),
             &r,
             received,
@@ -285,6 +343,31 @@ impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Esti
     #[inline]
     fn estimate(&self) -> &Estimate<T, NX> {
         self.filter.estimate()
+    }
+}
+
+/// Behind a gate: a delivered packet the gate rejects is stepped as dropped (θ = 1, the
+/// held ȳ — never the rejected measurement — enters (30)), as a lost one is.
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> GatedStep<T, NX>
+    for OnModel<M, TobitFilter<T, NX, NY>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &Packet<T, NY>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let Some(z) = y.delivered() else {
+            return self.step(k, y).map(|()| GateCounts::NONE);
+        };
+        let (m, prev) = (&self.model, k.saturating_sub(1));
+        let r = diagonal_variances(&m.measurement_cov(k))?;
+        let used = self
+            .filter
+            .admits(&m.a(prev), &m.process_cov(prev), &m.c(k), &r, z, gate)?;
+        let received = if used { Some(z) } else { None };
+        self.filter.step_model(&self.model, k, T::one(), received)?;
+        Ok(GateCounts::one(used))
     }
 }
 

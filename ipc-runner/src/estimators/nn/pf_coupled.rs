@@ -47,7 +47,8 @@
 //! against `ε` and `N`, and that the filter follows the plant when its cloud starts at `x₀`
 //! but does not lock on from the prior `N(0, 10 I)`.
 //!
-//! The estimate is the weighted mean of the predicted particles, `x̂_{k+1} ≈ E[x_{k+1} |
+//! The estimate is the weighted mean of the predicted particles (its covariance their
+//! weighted sample covariance), `x̂_{k+1} ≈ E[x_{k+1} |
 //! y_{0:k}]`, the same one-step prediction every seed 003 estimator reports; `y₀` comes with
 //! the run's start as for the others. Diagnostics: `ess` (effective sample size / N after the
 //! last sent instant's weighting, before resampling). Random numbers: xoshiro256++ seeded from `(seed, run)`, a stream of its own.
@@ -90,6 +91,8 @@ pub struct CoupledPf {
     /// `y_k` if it was sent (processed by the next step).
     y: Option<V2>,
     mean: V3,
+    /// The weighted covariance of the predicted particles about `mean` (P_0 at first).
+    cov: M3,
     ess: f64,
     rng: Rng,
 }
@@ -155,6 +158,7 @@ impl CoupledPf {
             k: 0,
             y: y0,
             mean: x0,
+            cov: p0,
             ess: 1.0,
             rng,
         })
@@ -265,10 +269,17 @@ impl CoupledPf {
                 what: "pf: predicted particles",
             });
         }
+        // Its covariance: Σ w (x − x̂)(x − x̂)ᵀ (each term exactly symmetric).
+        let mut cov = M3::zeros();
+        for (x, &l) in self.next.iter().zip(&self.lw_next) {
+            let d = x - mean;
+            cov += d * d.transpose() * (l - t).exp();
+        }
         // Commit.
         std::mem::swap(&mut self.x, &mut self.next);
         std::mem::swap(&mut self.lw, &mut self.lw_next);
         self.mean = mean;
+        self.cov = cov;
         self.ess = ess;
         self.y = y_next;
         self.k = k + 1;
@@ -386,6 +397,15 @@ impl Estimator for CoupledPf {
         out[..3].copy_from_slice(self.mean.as_slice());
     }
 
+    fn covariance(&self, out: &mut [f64]) -> crate::CovarianceKind {
+        for i in 0..3 {
+            for j in 0..3 {
+                out[i * 3 + j] = self.cov[(i, j)];
+            }
+        }
+        crate::CovarianceKind::Estimate
+    }
+
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
         sink("ess", self.ess);
     }
@@ -454,6 +474,40 @@ mod tests {
             (0.3 * bound..2.0 * bound).contains(&mse),
             "pf {mse} vs bound {bound}"
         );
+    }
+
+    /// The reported covariance is the cloud's: after each step, Σ w x xᵀ − x̂ x̂ᵀ over the
+    /// particles and normalised weights the filter holds (another formula for the same
+    /// quantity), to 1e-9 of its largest entry; P_0 before the first step.
+    #[test]
+    fn covariance_is_the_weighted_covariance_of_the_cloud() {
+        let (x0, y0, steps) = simulate(5, 1, 8);
+        let p0 = M3::identity() * 10.0;
+        let mut pf = CoupledPf::new(x0, p0, 0.1, y0, 400, 5, 1).unwrap();
+        let mut got = [0.0; 9];
+        assert_eq!(pf.covariance(&mut got), crate::CovarianceKind::Estimate);
+        assert_eq!(M3::from_row_slice(&got), p0);
+        for (k, (_, o)) in (1..=8).zip(&steps) {
+            pf.step(k, std::slice::from_ref(o)).unwrap();
+            pf.covariance(&mut got);
+            let t = log_sum_exp(&pf.lw);
+            let (mut m, mut second) = (V3::zeros(), M3::zeros());
+            for (x, &l) in pf.x.iter().zip(&pf.lw) {
+                let w = (l - t).exp();
+                m += x * w;
+                second += x * x.transpose() * w;
+            }
+            let want = second - m * m.transpose();
+            let got = M3::from_row_slice(&got);
+            assert!(
+                (got - want).amax() <= 1e-9 * want.amax(),
+                "k={k}: {got} vs {want}"
+            );
+            assert_eq!(got, got.transpose());
+            let mut xhat = [0.0; 3];
+            pf.estimate(&mut xhat);
+            assert!((V3::from_column_slice(&xhat) - m).amax() < 1e-9 * (1.0 + m.amax()));
+        }
     }
 
     #[test]

@@ -1,0 +1,468 @@
+//! Part `eval`, its first table: issue #23's command, `ipc-runner eval --scenario occlusion
+//! --runs 5000 --horizon 100`, against the same command of commit [`BASELINE`], both binaries
+//! alternating in one run. CPU time (user + sys, `/usr/bin/time`) of every repetition and
+//! their medians; the instructions of a smaller run under callgrind, twice per binary
+//! (deterministic); whether the `estimators` parts of the two JSON files agree; and where the
+//! current binary's instructions go.
+//!
+//! The baseline is exported from git (`git archive`, no worktree) into
+//! `target/baseline-<commit>/src` and built there with its own target directory, once.
+
+use crate::command::say;
+use crate::opts::Opts;
+use crate::prose;
+use anyhow::{anyhow, bail, Context, Result};
+use serde_json::Value;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+/// The commit issue #23 measured its 1.4 CPU-seconds at.
+pub const BASELINE: &str = "b7a974e";
+/// The command of the issue (the JSON and the quiet flag added, which do not change the work).
+const SCENARIO: &str = "occlusion";
+const HORIZON: u32 = 100;
+
+pub fn part(o: &Opts, md: &mut String) -> Result<()> {
+    let base = baseline_binary(o)?;
+    let cur = o.target.join("release/ipc-runner");
+    if !cur.exists() {
+        bail!("{cur:?} missing (benches/run.sh builds it)");
+    }
+    let (runs, reps, cg_runs) = if o.quick {
+        (1000u64, 2usize, 50u64)
+    } else {
+        (5000, 5, 200)
+    };
+    let tmp = std::env::temp_dir().join(format!("benches-report-eval23-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp)?;
+    // CPU time, alternating which binary goes first.
+    let mut cpu: [Vec<(f64, f64)>; 2] = [Vec::new(), Vec::new()];
+    for rep in 0..reps {
+        for which in if rep % 2 == 0 { [0, 1] } else { [1, 0] } {
+            let bin = if which == 0 { &base } else { &cur };
+            let json = tmp.join(format!("{which}.json"));
+            say(&format!(
+                "eval {SCENARIO} --runs {runs}: {} (rep {rep})",
+                label(which)
+            ));
+            cpu[which].push(timed(bin, runs, &json, &tmp.join("time"))?);
+        }
+    }
+    let same = compare(&tmp.join("0.json"), &tmp.join("1.json"))?;
+    // Instructions, twice each: the whole process, and the runs alone (`run_one`, inclusive),
+    // which do not depend on how the threads met.
+    let mut ir = [[0u64; 2]; 2];
+    let mut runs_ir = [[0u64; 2]; 2];
+    for (which, bin) in [&base, &cur].into_iter().enumerate() {
+        for r in 0..2 {
+            say(&format!(
+                "callgrind eval --runs {cg_runs}: {} ({r})",
+                label(which)
+            ));
+            let file = tmp.join(format!("cg.{which}.{r}"));
+            ir[which][r] = callgrind(bin, cg_runs, &file)?;
+            runs_ir[which][r] = inclusive(&file, &["ipc_runner::eval::run_one ["])?;
+        }
+    }
+    let split = breakdown(&tmp.join("cg.1.0"))?;
+    let _ = std::fs::remove_dir_all(&tmp);
+
+    let cmd = format!(
+        "ipc-runner eval --scenario {SCENARIO} --runs {runs} --horizon {HORIZON} --quiet --json FILE"
+    );
+    let cg_cmd = format!(
+        "valgrind --tool=callgrind ipc-runner eval --scenario {SCENARIO} --runs {cg_runs} \
+         --horizon {HORIZON} --quiet --threads 1"
+    );
+    prose::push(md, &intro(reps, &cmd, &cg_cmd));
+    md.push_str(
+        "| binary | CPU s (user + sys) of each repetition | median CPU s | median wall s | \
+         instructions | again | of which the runs | again | same twice |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---|\n",
+    );
+    let med = |v: &[(f64, f64)], f: fn(&(f64, f64)) -> f64| median(v.iter().map(f).collect());
+    for which in 0..2 {
+        let reps: Vec<String> = cpu[which].iter().map(|c| format!("{:.2}", c.0)).collect();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.2} | {:.2} | {} | {} | {} | {} | {} |",
+            label(which),
+            reps.join(", "),
+            med(&cpu[which], |c| c.0),
+            med(&cpu[which], |c| c.1),
+            ir[which][0],
+            ir[which][1],
+            runs_ir[which][0],
+            runs_ir[which][1],
+            if runs_ir[which][0] == runs_ir[which][1] {
+                "yes (the runs)"
+            } else {
+                "**no**"
+            }
+        );
+    }
+    let cpu_ratio = med(&cpu[0], |c| c.0) / med(&cpu[1], |c| c.0);
+    let per_rep: Vec<f64> = cpu[0].iter().zip(&cpu[1]).map(|(b, c)| b.0 / c.0).collect();
+    let ir_ratio = ir[0][0] as f64 / ir[1][0] as f64;
+    let runs_ratio = runs_ir[0][0] as f64 / runs_ir[1][0] as f64;
+    let verdict = |r: f64| if r >= 4.0 { "met" } else { "**missed**" };
+    let _ = writeln!(
+        md,
+        "\nCPU: {} ÷ this build = **{cpu_ratio:.2}×** (ratio of the medians; per repetition {}), \
+         target ≥ 4×: {}. Instructions: **{ir_ratio:.2}×** ({:.0} against {:.0} per run-step, \
+         the {cg_runs} runs × {HORIZON} instants of one process, start-up included; the runs \
+         alone {runs_ratio:.2}×), target ≥ 4×: {}. The whole process's count moves by a few \
+         hundred instructions between two runs (the worker threads' hand-offs); the runs' \
+         count (`run_one` and all it calls) is the same twice.\n",
+        label(0),
+        per_rep
+            .iter()
+            .map(|r| format!("{r:.2}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        verdict(cpu_ratio),
+        ir[0][0] as f64 / (cg_runs * HORIZON as u64) as f64,
+        ir[1][0] as f64 / (cg_runs * HORIZON as u64) as f64,
+        verdict(ir_ratio),
+    );
+    let _ = writeln!(md, "{same}\n");
+    md.push_str("Where this build's instructions go (the callgrind run above, inclusive costs):\n\n| part | instructions | share | per run-step |\n|---|---:|---:|---:|\n");
+    let total = ir[1][0] as f64;
+    for (name, v) in &split {
+        let _ = writeln!(
+            md,
+            "| {name} | {v} | {:.1} % | {:.0} |",
+            100.0 * *v as f64 / total,
+            *v as f64 / (cg_runs * HORIZON as u64) as f64
+        );
+    }
+    md.push('\n');
+    Ok(())
+}
+
+fn label(which: usize) -> String {
+    if which == 0 {
+        format!("`{BASELINE}`")
+    } else {
+        "this build".into()
+    }
+}
+
+fn intro(reps: usize, cmd: &str, cg_cmd: &str) -> String {
+    prose::fill(
+        include_str!("prose/eval_baseline.md"),
+        &[
+            ("baseline", &BASELINE),
+            ("reps", &reps),
+            ("cmd", &cmd),
+            ("cg_cmd", &cg_cmd),
+        ],
+    )
+}
+
+/// The baseline's `ipc-runner`, exported and built on first use.
+fn baseline_binary(o: &Opts) -> Result<PathBuf> {
+    let dir = o.target.join(format!("baseline-{BASELINE}"));
+    let bin = dir.join("target/release/ipc-runner");
+    if bin.exists() {
+        return Ok(bin);
+    }
+    let src = dir.join("src");
+    if !src.join("Cargo.toml").exists() {
+        say(&format!("exporting {BASELINE} into {src:?}"));
+        std::fs::create_dir_all(&src)?;
+        let archive = Command::new("git")
+            .args(["archive", "--format=tar", BASELINE])
+            .current_dir(&o.root)
+            .stdout(Stdio::piped())
+            .spawn()
+            .context("git archive")?;
+        let st = Command::new("tar")
+            .arg("-x")
+            .arg("-C")
+            .arg(&src)
+            .stdin(
+                archive
+                    .stdout
+                    .ok_or_else(|| anyhow!("git archive: no stdout"))?,
+            )
+            .status()
+            .context("tar")?;
+        if !st.success() {
+            bail!("exporting {BASELINE} failed");
+        }
+    }
+    say(&format!("building {BASELINE}'s ipc-runner"));
+    let st = Command::new("cargo")
+        .args(["build", "--release", "-p", "ipc-runner"])
+        .current_dir(&src)
+        .env("CARGO_TARGET_DIR", dir.join("target"))
+        .status()
+        .context("cargo build (baseline)")?;
+    if !st.success() || !bin.exists() {
+        bail!("building {BASELINE}'s ipc-runner failed");
+    }
+    Ok(bin)
+}
+
+/// `(user + sys, wall)` seconds of one run of the command.
+fn timed(bin: &Path, runs: u64, json: &Path, out: &Path) -> Result<(f64, f64)> {
+    let st = Command::new("/usr/bin/time")
+        .args(["-f", "%U %S %e", "-o"])
+        .arg(out)
+        .arg(bin)
+        .args(["eval", "--scenario", SCENARIO, "--quiet"])
+        .args([
+            "--runs",
+            &runs.to_string(),
+            "--horizon",
+            &HORIZON.to_string(),
+        ])
+        .arg("--json")
+        .arg(json)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .context("/usr/bin/time")?;
+    if !st.success() {
+        bail!("{bin:?} eval failed: {st}");
+    }
+    let text = std::fs::read_to_string(out)?;
+    let v: Vec<f64> = text
+        .split_whitespace()
+        .rev()
+        .take(3)
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("/usr/bin/time wrote {text:?}"))?;
+    // Reversed: wall, sys, user.
+    Ok((v[2] + v[1], v[0]))
+}
+
+/// Total instructions of the command under callgrind, `--threads 1`.
+fn callgrind(bin: &Path, runs: u64, out: &Path) -> Result<u64> {
+    let st = Command::new("valgrind")
+        .arg("--tool=callgrind")
+        .arg(format!("--callgrind-out-file={}", out.display()))
+        .arg(bin)
+        .args(["eval", "--scenario", SCENARIO, "--quiet", "--threads", "1"])
+        .args([
+            "--runs",
+            &runs.to_string(),
+            "--horizon",
+            &HORIZON.to_string(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .context("valgrind")?;
+    if !st.success() {
+        bail!("callgrind of {bin:?} failed: {st}");
+    }
+    let text = std::fs::read_to_string(out)?;
+    text.lines()
+        .find_map(|l| {
+            l.strip_prefix("summary: ")
+                .or_else(|| l.strip_prefix("totals: "))
+        })
+        .and_then(|v| v.trim().parse().ok())
+        .ok_or_else(|| anyhow!("{out:?}: no summary line"))
+}
+
+/// The `estimators` of the two JSON files: every estimator both have, identical or not.
+fn compare(base: &Path, cur: &Path) -> Result<String> {
+    let read =
+        |p: &Path| -> Result<Value> { Ok(serde_json::from_str(&std::fs::read_to_string(p)?)?) };
+    let (a, b) = (read(base)?, read(cur)?);
+    let (Some(a), Some(b)) = (a["estimators"].as_object(), b["estimators"].as_object()) else {
+        bail!("no estimators in the JSON");
+    };
+    let mut same = Vec::new();
+    let mut differ = Vec::new();
+    for (name, va) in a {
+        let Some(vb) = b.get(name) else { continue };
+        if va == vb {
+            same.push(format!("`{name}`"));
+        } else {
+            differ.push(format!(
+                "`{name}` (largest relative difference {:.1e})",
+                max_rel(va, vb)
+            ));
+        }
+    }
+    let only: Vec<String> = b
+        .keys()
+        .filter(|n| !a.contains_key(*n))
+        .map(|n| format!("`{n}`"))
+        .collect();
+    let mut s = format!(
+        "JSON (`estimators`, the last repetition's files): bit-identical for {}",
+        if same.is_empty() {
+            "none".into()
+        } else {
+            same.join(", ")
+        }
+    );
+    if !differ.is_empty() {
+        let _ = write!(s, "; different for {}", differ.join(", "));
+    }
+    if !only.is_empty() {
+        let _ = write!(s, "; only in this build: {}", only.join(", "));
+    }
+    s.push('.');
+    Ok(s)
+}
+
+/// The largest `|a − b| / max(|a|, |b|)` over the numbers of two JSON values of one shape.
+fn max_rel(a: &Value, b: &Value) -> f64 {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap_or(0.0), y.as_f64().unwrap_or(0.0));
+            let m = x.abs().max(y.abs());
+            if m == 0.0 {
+                0.0
+            } else {
+                (x - y).abs() / m
+            }
+        }
+        (Value::Array(x), Value::Array(y)) => x
+            .iter()
+            .zip(y)
+            .map(|(x, y)| max_rel(x, y))
+            .fold(0.0, f64::max),
+        (Value::Object(x), Value::Object(y)) => x
+            .iter()
+            .filter_map(|(k, v)| y.get(k).map(|w| max_rel(v, w)))
+            .fold(0.0, f64::max),
+        _ if a == b => 0.0,
+        _ => f64::INFINITY,
+    }
+}
+
+/// The parts of the run, by the inclusive cost of the functions that do them (symbols of
+/// this build; what matches none is "the rest").
+const PARTS: &[(&str, &[&str])] = &[
+    (
+        "simulation (plant, sensor, channel)",
+        &["<channel_sim::scenario::composed::ComposedSimulation as channel_sim::sim::Simulation>::next_instant"],
+    ),
+    ("`kf` and `ikf` steps", &["<ipc_runner::estimators::kf::NodeByNode<"]),
+    ("`cce` steps", &["estimator_core::filter::occlusion::cce::<impl estimator_core::estimator::Estimator<"]),
+    ("`kf-io` steps", &["estimator_core::filter::occlusion::kf_io::<impl estimator_core::estimator::Estimator<"]),
+    ("`adf` steps", &["estimator_core::filter::occlusion::adf::<impl estimator_core::estimator::Estimator<"]),
+    (
+        "squared errors and diagnostics per step",
+        &["ipc_runner::eval::record_estimate"],
+    ),
+    (
+        "estimators built per run",
+        &["ipc_runner::estimators::build_all"],
+    ),
+    (
+        "accumulating the runs, the report and the JSON",
+        &[
+            "ipc_runner::eval::report::Accumulator::add",
+            "ipc_runner::eval::report::Accumulator::finish",
+            "ipc_runner::eval::report::EvalResult::to_json",
+            "ipc_runner::eval::report::EvalResult::summary",
+        ],
+    ),
+];
+
+/// `callgrind_annotate --inclusive=yes` of a callgrind file, every function listed.
+fn annotate(file: &Path) -> Result<String> {
+    let out = Command::new("callgrind_annotate")
+        .args(["--inclusive=yes", "--threshold=100"])
+        .arg(file)
+        .output()
+        .context("callgrind_annotate")?;
+    if !out.status.success() {
+        bail!("callgrind_annotate failed");
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// The inclusive instructions of the functions whose symbols start with one of `syms`.
+fn inclusive(file: &Path, syms: &[&str]) -> Result<u64> {
+    let text = annotate(file)?;
+    Ok(text
+        .lines()
+        .filter_map(|line| {
+            let (count, rest) = line.trim_start().split_once(' ')?;
+            let count = count.replace(',', "").parse::<u64>().ok()?;
+            let sym = rest.split_once("???:")?.1;
+            syms.iter().any(|p| sym.starts_with(p)).then_some(count)
+        })
+        .sum())
+}
+
+/// `PARTS` of a callgrind file, and the rest.
+fn breakdown(file: &Path) -> Result<Vec<(String, u64)>> {
+    let text = annotate(file)?;
+    let mut total = 0u64;
+    let mut rows = Vec::new();
+    let mut seen = 0u64;
+    for (name, syms) in PARTS {
+        let mut sum = 0u64;
+        for line in text.lines() {
+            let Some((count, rest)) = line.trim_start().split_once(' ') else {
+                continue;
+            };
+            let Ok(count) = count.replace(',', "").parse::<u64>() else {
+                continue;
+            };
+            if rest.contains("PROGRAM TOTALS") {
+                total = count;
+            }
+            // `???:symbol [binary]`: the symbol must start with one of the part's prefixes.
+            let Some(sym) = rest.split_once("???:").map(|(_, s)| s) else {
+                continue;
+            };
+            if syms.iter().any(|p| sym.starts_with(p)) {
+                sum += count;
+            }
+        }
+        seen += sum;
+        rows.push((name.to_string(), sum));
+    }
+    rows.push((
+        "the rest (process start-up, threads, the adapters' packet conversion, …)".into(),
+        total.saturating_sub(seen),
+    ));
+    Ok(rows)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_prose_fills_and_medians_are_medians() {
+        let t = intro(5, "A", "B");
+        assert!(t.contains(BASELINE) && t.contains("`A`") && t.contains("`B`"));
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
+    }
+
+    #[test]
+    fn relative_differences_walk_the_json() {
+        let a: Value = serde_json::json!({"x": [1.0, 2.0], "y": {"z": 4.0}});
+        let b: Value = serde_json::json!({"x": [1.0, 2.0], "y": {"z": 5.0}});
+        assert_eq!(max_rel(&a, &a), 0.0);
+        assert!((max_rel(&a, &b) - 0.2).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,101 @@
+//! The command line of `ipc-runner` (and of the test binary `pipeline-node`, which is the
+//! same dispatch under another name): subcommands, and how an ending becomes an exit code.
+//!
+//! Exit codes (docs/pipeline.md, "Exit codes and limits"): 0 ok; 1 a failure while running
+//! (transport, I/O after the checks); 2 bad input (flags, scenario, CSV/slot-log content,
+//! unwritable outputs, memory budget, a peer outside the wire contract); 3 `run`/`demo`:
+//! the publisher was lost; 130 `run`/`demo`: interrupted (SIGINT/SIGTERM). A clap error, a
+//! bad value or a refused file is one line on stderr, `<name>: error: …`.
+
+use clap::{Parser, Subcommand};
+
+use crate::eval::cli::{CommandError, EvalArgs};
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "ipc-runner",
+    version,
+    about = "Estimation over lossy, rationed channels: evaluation, real-time loop, demo"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Monte-Carlo evaluation of every estimator that applies to a scenario.
+    Eval(EvalArgs),
+    /// One-command demo of the shared-memory pipeline: starts the publisher as a child
+    /// process, runs the real-time loop, prints the summary and writes a plot.
+    Demo(crate::demo::DemoArgs),
+    /// The real-time loop against a running channel-sim (same --prefix).
+    Run(crate::run::RunArgs),
+    /// Run the estimators over a recorded slot log (CSV, see docs/replay.md).
+    Replay(crate::replay::ReplayArgs),
+    /// Carry a prefix's services over zenoh to another host, every message checked on
+    /// arrival (docs/bridge.md).
+    Bridge(estpipe_bridge::BridgeArgs),
+    /// Print the stream header a publisher of this scenario must write into every slot
+    /// (JSON; see docs/wire.md).
+    StreamHeader(crate::stream_header::StreamHeaderArgs),
+    /// The channel-sim publisher built into this executable (what `demo` starts).
+    #[command(hide = true)]
+    ChannelSim(channel_sim::publisher::PublisherArgs),
+}
+
+/// Runs a pipeline subcommand: its exit code, or the error chain with the code of
+/// [`crate::exit_code_of`].
+fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
+    match r {
+        Ok(0) => Ok(()),
+        Ok(code) => std::process::exit(code),
+        Err(e) => Err(CommandError {
+            code: crate::exit_code_of(&e),
+            message: format!("{e:#}"),
+        }),
+    }
+}
+
+/// Parses the command line, runs the subcommand and exits; `name` prefixes the one-line
+/// error messages.
+pub fn main(name: &str) -> ! {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            eprintln!(
+                "{name}: error: {} (see --help)",
+                channel_sim::flags::one_line(&e)
+            );
+            std::process::exit(2);
+        }
+    };
+    let result = match cli.command {
+        Command::Eval(args) => crate::eval::cli::run(args),
+        Command::Demo(a) => pipeline(crate::demo::main(&a)),
+        Command::Run(a) => pipeline(crate::run::main(&a)),
+        Command::Replay(a) => pipeline(crate::replay::main(&a)),
+        Command::Bridge(a) => pipeline(estpipe_bridge::main(&a)),
+        Command::StreamHeader(a) => pipeline(crate::stream_header::main(&a)),
+        Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
+    };
+    match result {
+        Ok(()) => std::process::exit(0),
+        Err(CommandError { code, message }) => {
+            // One line, whatever a message quoted from a file contained.
+            let message = message.replace(['\n', '\r'], " ");
+            eprintln!("{name}: error: {message}");
+            std::process::exit(code);
+        }
+    }
+}

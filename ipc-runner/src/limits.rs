@@ -1,0 +1,369 @@
+//! What every command checks before it works, and the bounds it works within (issue #20;
+//! docs/pipeline.md "Exit codes and limits"):
+//!
+//! * **outputs first** ([`check_output`], [`check_output_dir`]): every file a command will
+//!   write is opened for writing (or created and removed again) before any work, so an
+//!   unwritable `--json` fails in milliseconds, not after the computation;
+//! * **a memory budget** ([`Budget`]): what a command's flags make it hold (eval's per-k
+//!   sums over the horizon and its per-run averages, run's trajectory recording, replay's
+//!   instants from 1 to the log's last k) is computed from the flags, or while reading, and
+//!   refused beyond `--max-memory MIB` (default [`DEFAULT_MAX_MEMORY_MIB`]) with the numbers;
+//! * **bounded readers** ([`BoundedLines`]): a line of a CSV or slot log longer than
+//!   [`MAX_LINE_BYTES`] or beyond a row limit is an error naming file and line, so
+//!   `--input /dev/zero` ends at once instead of growing until memory runs out;
+//! * **progress without a terminal** ([`Progress`]): a bar on a terminal, else a line every
+//!   few seconds with done/total and ETA, so a long job in a pipe or a log is visibly alive.
+
+use std::io::{BufRead, Read};
+use std::os::unix::fs::OpenOptionsExt as _;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+pub use channel_sim::flags::BadInput;
+
+/// Default of `--max-memory`, in MiB: a quarter of a small machine's RAM, far above what
+/// the papers' experiments need (seed 003's 500 × 300 eval holds a few MiB).
+pub const DEFAULT_MAX_MEMORY_MIB: u64 = 2048;
+
+/// Longest line a CSV reader accepts (bytes, without the newline). A slot-log row has
+/// 4 + ny ≤ 20 short fields; extra columns are allowed, so the bound is generous.
+pub const MAX_LINE_BYTES: usize = 64 * 1024;
+
+const MIB: u64 = 1 << 20;
+
+/// A memory budget (`--max-memory MIB`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Budget {
+    /// Bytes allowed.
+    pub bytes: u64,
+}
+
+impl Budget {
+    /// `mib` MiB.
+    pub fn mib(mib: u64) -> Self {
+        Self {
+            bytes: mib.saturating_mul(MIB),
+        }
+    }
+
+    /// Refuses `need` bytes beyond the budget: `Err` names what was asked (`what`), the
+    /// bytes it needs, the budget and the flag that raises it.
+    pub fn check(&self, what: &str, need: u64) -> Result<(), BadInput> {
+        if need <= self.bytes {
+            Ok(())
+        } else {
+            Err(BadInput(format!(
+                "{what} needs about {} of memory; the budget is {} (--max-memory MIB raises it)",
+                human_bytes(need),
+                human_bytes(self.bytes)
+            )))
+        }
+    }
+}
+
+/// `bytes` in MiB or GiB with three significant digits.
+pub fn human_bytes(bytes: u64) -> String {
+    let b = bytes as f64;
+    if b >= (1u64 << 40) as f64 {
+        format!("{:.3} TiB", b / (1u64 << 40) as f64)
+    } else if b >= (1u64 << 30) as f64 {
+        format!("{:.3} GiB", b / (1u64 << 30) as f64)
+    } else {
+        format!("{:.1} MiB", b / MIB as f64)
+    }
+}
+
+/// `a · b · …` in u64, saturating (a product of flags must not wrap into a small number).
+pub fn product(factors: &[u64]) -> u64 {
+    factors.iter().fold(1u64, |p, &f| p.saturating_mul(f))
+}
+
+/// Checks that `path` (the value of `flag`) can be written, before any work: an existing
+/// file is opened for writing without truncating it; a missing one is created and removed
+/// again (no empty file is left behind if the command fails later).
+pub fn check_output(flag: &str, path: &Path) -> Result<(), BadInput> {
+    let fail = |why: String| BadInput(format!("{flag} {}: {why}", path.display()));
+    if path.as_os_str().is_empty() {
+        return Err(fail("empty path".into()));
+    }
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => Err(fail("is a directory".into())),
+        // Non-blocking: a FIFO without a reader fails at once instead of hanging the check.
+        Ok(_) => std::fs::OpenOptions::new()
+            .write(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(path)
+            .map(drop)
+            .map_err(|e| fail(format!("cannot write ({e})"))),
+        Err(_) => {
+            std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(path)
+                .map_err(|e| fail(format!("cannot create ({e})")))?;
+            // Created by this check: gone again unless the command writes it.
+            let _ = std::fs::remove_file(path);
+            Ok(())
+        }
+    }
+}
+
+/// Checks that directory `dir` (the value of `flag`) exists or can be created, and that
+/// files can be created in it (it is created if missing: the command fills it).
+pub fn check_output_dir(flag: &str, dir: &Path) -> Result<(), BadInput> {
+    let fail = |why: String| BadInput(format!("{flag} {}: {why}", dir.display()));
+    std::fs::create_dir_all(dir).map_err(|e| fail(format!("cannot create directory ({e})")))?;
+    let probe = dir.join(format!(".ipc-runner-write-check-{}", std::process::id()));
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+        .map_err(|e| fail(format!("cannot create files in it ({e})")))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// The lines of a text file, each bounded by [`MAX_LINE_BYTES`] and their number by
+/// `max_lines`: errors are [`BadInput`] naming the file and the 1-based line.
+#[derive(Debug)]
+pub struct BoundedLines<R> {
+    reader: R,
+    file: String,
+    max_lines: u64,
+    /// Lines read so far (the number of the last line returned).
+    pub line: u64,
+    buf: Vec<u8>,
+}
+
+impl<R: BufRead> BoundedLines<R> {
+    /// Lines of `reader`, named `file` in errors, at most `max_lines` of them.
+    pub fn new(reader: R, file: &Path, max_lines: u64) -> Self {
+        Self {
+            reader,
+            file: format!("{}", file.display()),
+            max_lines,
+            line: 0,
+            buf: Vec::new(),
+        }
+    }
+
+    /// The next line's 1-based number and text without its line ending, `None` at the end
+    /// of the file.
+    pub fn next_line(&mut self) -> Result<Option<(u64, &str)>, BadInput> {
+        self.buf.clear();
+        let limit = MAX_LINE_BYTES as u64 + 2; // the line, "\r\n"
+        let n = (&mut self.reader)
+            .take(limit)
+            .read_until(b'\n', &mut self.buf)
+            .map_err(|e| {
+                BadInput(format!(
+                    "{} line {}: cannot read ({e})",
+                    self.file,
+                    self.line + 1
+                ))
+            })?;
+        if n == 0 {
+            return Ok(None);
+        }
+        self.line += 1;
+        if self.line > self.max_lines {
+            return Err(BadInput(format!(
+                "{} line {}: more than {} lines (the row limit of the memory budget; \
+                 --max-memory MIB raises it)",
+                self.file, self.line, self.max_lines
+            )));
+        }
+        while matches!(self.buf.last(), Some(b'\n' | b'\r')) {
+            self.buf.pop();
+        }
+        if self.buf.len() > MAX_LINE_BYTES {
+            return Err(BadInput(format!(
+                "{} line {}: longer than {MAX_LINE_BYTES} bytes",
+                self.file, self.line
+            )));
+        }
+        std::str::from_utf8(&self.buf)
+            .map(|s| Some((self.line, s)))
+            .map_err(|_| BadInput(format!("{} line {}: not UTF-8 text", self.file, self.line)))
+    }
+}
+
+/// Progress of a job of `total` units on stderr: indicatif's bar when stderr is a terminal,
+/// else a line every `every` (done/total, elapsed, ETA); nothing when `quiet`.
+/// Thread-safe: workers call [`Progress::inc`].
+#[derive(Debug)]
+pub struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    lines: Option<Lines>,
+}
+
+#[derive(Debug)]
+struct Lines {
+    what: String,
+    unit: &'static str,
+    total: u64,
+    every_ns: u64,
+    start: Instant,
+    done: AtomicU64,
+    last_ns: AtomicU64,
+}
+
+/// Default interval of the progress lines written when stderr is not a terminal.
+pub const PROGRESS_LINE_EVERY: Duration = Duration::from_secs(5);
+
+impl Progress {
+    /// Progress of `total` `unit`s of `what`.
+    pub fn new(what: String, unit: &'static str, total: u64, quiet: bool, every: Duration) -> Self {
+        use std::io::IsTerminal;
+        if quiet {
+            return Self {
+                bar: None,
+                lines: None,
+            };
+        }
+        if std::io::stderr().is_terminal() {
+            let bar = indicatif::ProgressBar::new(total).with_style(
+                indicatif::ProgressStyle::with_template(&format!(
+                    "{{msg}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{elapsed}} (eta {{eta}})"
+                ))
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                .progress_chars("=> "),
+            );
+            bar.set_message(what);
+            return Self {
+                bar: Some(bar),
+                lines: None,
+            };
+        }
+        Self {
+            bar: None,
+            lines: Some(Lines {
+                what,
+                unit,
+                total,
+                every_ns: u64::try_from(every.as_nanos()).unwrap_or(u64::MAX).max(1),
+                start: Instant::now(),
+                done: AtomicU64::new(0),
+                last_ns: AtomicU64::new(0),
+            }),
+        }
+    }
+
+    /// `n` more units done.
+    pub fn inc(&self, n: u64) {
+        if let Some(b) = &self.bar {
+            b.inc(n);
+        }
+        let Some(l) = &self.lines else { return };
+        let done = l.done.fetch_add(n, Ordering::Relaxed) + n;
+        let now = u64::try_from(l.start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        let last = l.last_ns.load(Ordering::Relaxed);
+        // One worker wins the interval and prints; the others carry on.
+        if now.saturating_sub(last) >= l.every_ns
+            && l.last_ns
+                .compare_exchange(last, now, Ordering::Relaxed, Ordering::Relaxed)
+                .is_ok()
+        {
+            let secs = now as f64 * 1e-9;
+            let eta = if done > 0 {
+                secs * (l.total.saturating_sub(done)) as f64 / done as f64
+            } else {
+                f64::NAN
+            };
+            eprintln!(
+                "{}: {done}/{} {} ({:.1} %), {secs:.0} s elapsed, ETA {eta:.0} s",
+                l.what,
+                l.total,
+                l.unit,
+                100.0 * done as f64 / l.total.max(1) as f64
+            );
+        }
+    }
+
+    /// Removes the bar (the lines need no clean-up).
+    pub fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outputs_are_checked_without_leaving_files_behind() {
+        let dir = std::env::temp_dir().join(format!("limits-out-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let new = dir.join("new.json");
+        check_output("--json", &new).unwrap();
+        assert!(!new.exists(), "the check left {new:?} behind");
+        std::fs::write(&new, "keep").unwrap();
+        check_output("--json", &new).unwrap();
+        assert_eq!(std::fs::read_to_string(&new).unwrap(), "keep");
+        let e = check_output("--json", &dir.join("missing/x.json")).unwrap_err();
+        assert!(
+            e.0.starts_with("--json ") && e.0.contains("cannot create"),
+            "{e}"
+        );
+        assert!(check_output("--csv", &dir)
+            .unwrap_err()
+            .0
+            .contains("is a directory"));
+        // A FIFO nobody reads: refused at once, not a hang.
+        let fifo = dir.join("fifo");
+        if std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .is_ok_and(|s| s.success())
+        {
+            let e = check_output("--json", &fifo).unwrap_err();
+            assert!(e.0.contains("cannot write"), "{e}");
+            std::fs::remove_file(&fifo).unwrap();
+        }
+        check_output_dir("--out", &dir.join("sub")).unwrap();
+        assert_eq!(std::fs::read_dir(dir.join("sub")).unwrap().count(), 0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn budget_names_the_numbers_and_the_flag() {
+        let b = Budget::mib(1);
+        b.check("x", 1 << 20).unwrap();
+        let e = b.check("--horizon 5", (1 << 20) + 1).unwrap_err().0;
+        assert!(e.contains("--horizon 5") && e.contains("1.0 MiB") && e.contains("--max-memory"));
+        assert_eq!(product(&[u64::MAX, 2]), u64::MAX);
+    }
+
+    #[test]
+    fn lines_are_bounded_in_length_and_number() {
+        let p = Path::new("f.csv");
+        let mut l = BoundedLines::new(&b"a\r\nb\n\nc"[..], p, 10);
+        let mut got = Vec::new();
+        while let Some((n, s)) = l.next_line().unwrap() {
+            got.push(format!("{n}:{s}"));
+        }
+        assert_eq!(got, ["1:a", "2:b", "3:", "4:c"]);
+        let long = vec![b'0'; MAX_LINE_BYTES + 1];
+        let e = BoundedLines::new(&long[..], p, 10)
+            .next_line()
+            .unwrap_err()
+            .0;
+        assert_eq!(
+            e,
+            format!("f.csv line 1: longer than {MAX_LINE_BYTES} bytes")
+        );
+        let exact = vec![b'0'; MAX_LINE_BYTES];
+        assert!(BoundedLines::new(&exact[..], p, 10).next_line().is_ok());
+        let mut l = BoundedLines::new(&b"a\nb\nc\n"[..], p, 2);
+        l.next_line().unwrap();
+        l.next_line().unwrap();
+        assert!(l
+            .next_line()
+            .unwrap_err()
+            .0
+            .contains("line 3: more than 2 lines"));
+    }
+}
