@@ -6,7 +6,7 @@
 use std::any::Any;
 
 use estpipe_wire::Fnv1a64;
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 
 use super::control::Control;
 use super::time_matrix::TimeMatrix;
@@ -254,7 +254,9 @@ impl PlantRun for LinearRun {
             *x = ax + bw;
         }
         if let Some(c) = &p.control {
-            self.x += c.input(prev);
+            for (x, u) in self.x.iter_mut().zip(c.input(prev).iter()) {
+                *x += u;
+            }
         }
         for ((s_m, l_r), z_m) in p.sensors.iter().zip(&p.r_factors).zip(z.iter_mut()) {
             let nv = s_m.r.nrows();

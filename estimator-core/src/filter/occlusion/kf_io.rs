@@ -234,7 +234,12 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             }
             _ => SVector::<T, NY>::zeros(),
         };
-        let (xp, pp, p, s_prime) = self.prior(model, k)?;
+        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
+        if y.is_none() {
+            self.est = Estimate::trusted(xp, pp);
+            return Ok(());
+        }
+        let (p, s_prime) = self.arrival(model, k, &xp, &pp)?;
         let c = model.c(k);
         let pct = pp * c.transpose();
         let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
@@ -262,10 +267,19 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         k: usize,
     ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T, SMatrix<T, NY, NY>)> {
         let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
-        if y.is_none() {
-            self.est = Estimate::trusted(xp, pp);
-            return Ok(());
-        }
+        let (p, s_prime) = self.arrival(model, k, &xp, &pp)?;
+        Ok((xp, pp, p, s_prime))
+    }
+
+    /// `p_k` and `S'` from the prediction `(x̂⁻, P⁻)` of instant `k` ([`Self::prior`]).
+    fn arrival<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+    ) -> Result<(T, SMatrix<T, NY, NY>)> {
+        let (xp, pp) = (*xp, *pp);
         let e = &self.occ.e;
         let s2 = (e * pp * e.transpose())[(0, 0)] + self.occ.psi[(0, 0)];
         // × (1 − p_loss): the packet must also survive the transport (exactly × 1 by default).
@@ -282,11 +296,11 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             &(c * pp * c.transpose() * p + c * big_x * c.transpose() * (T::one() - p) + r),
         );
         if all_finite(&s_prime) {
-            return Ok((xp, pp, p, s_prime));
+            return Ok((p, s_prime));
         }
         let cx = c * xp * (T::one() - p).sqrt();
         let s_prime = symmetrize(&(c * pp * c.transpose() + r + cx * cx.transpose()));
-        Ok((xp, pp, p, s_prime))
+        Ok((p, s_prime))
     }
 
     /// Whether `gate` admits the delivered `y_k`: the NIS of the filter's own innovation
