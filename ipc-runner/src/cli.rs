@@ -33,6 +33,9 @@ enum Command {
     Run(crate::run::RunArgs),
     /// Run the estimators over a recorded slot log (CSV, see docs/replay.md).
     Replay(crate::replay::ReplayArgs),
+    /// Carry a prefix's services over zenoh to another host, every message checked on
+    /// arrival (docs/bridge.md).
+    Bridge(estpipe_bridge::BridgeArgs),
     /// Print the stream header a publisher of this scenario must write into every slot
     /// (JSON; see docs/wire.md).
     StreamHeader(crate::stream_header::StreamHeaderArgs),
@@ -82,6 +85,7 @@ pub fn main(name: &str) -> ! {
         Command::Demo(a) => pipeline(crate::demo::main(&a)),
         Command::Run(a) => pipeline(crate::run::main(&a)),
         Command::Replay(a) => pipeline(crate::replay::main(&a)),
+        Command::Bridge(a) => pipeline(estpipe_bridge::main(&a)),
         Command::StreamHeader(a) => pipeline(crate::stream_header::main(&a)),
         Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
     };

@@ -16,6 +16,7 @@
 //! | [`services`] | service names, QoS and opening the services with them |
 //! | [`qos`] | [`qos::PubSubQos`]: what a publish-subscribe service is created with |
 //! | [`explain`] | what a failed open means, in one line |
+//! | [`net`] | the byte form of every payload between hosts (the zenoh bridge), decoded with every check |
 //! | [`layout`] | every payload's field offsets, sizes and alignments (what the docs and the C header are checked against) |
 //! | [`error`] | [`WireError`] (a bad payload) and [`ContractError`] (a peer outside the contract) |
 //! | [`clock`] | [`monotonic_ns`], the one clock of every timestamp |
@@ -31,6 +32,7 @@ pub mod explain;
 pub mod fingerprint;
 pub mod header;
 pub mod layout;
+pub mod net;
 pub mod qos;
 pub mod services;
 pub mod slot;
@@ -50,7 +52,8 @@ pub use services::{
     MAX_SUBSCRIBER_BUFFER, READY_EVENT, SLOTS, SLOTS_READY, TRUTH,
 };
 pub use slot::{
-    Slot, SlotFault, FLAG_CENSORED, FLAG_IPC_LOST, FLAG_OCCLUDED, FLAG_RANDOM_LOSS,
+    Slot, SlotFault, FLAGS_LOST, FLAG_CENSORED, FLAG_IPC_LOST, FLAG_NET_LOST, FLAG_OCCLUDED,
+    FLAG_RANDOM_LOSS,
     FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, SLOT_ABORT, SLOT_DATA, SLOT_END,
 };
 pub use truth::Truth;

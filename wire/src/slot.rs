@@ -31,6 +31,13 @@ pub const FLAG_OCCLUDED: u32 = 1 << 4;
 /// window of pending instants). The estimators read it as a loss, not as a channel dropout.
 /// Above every channel-side flag.
 pub const FLAG_IPC_LOST: u32 = 1 << 31;
+/// Written by the estimator side of a bridge (`ipc-runner bridge`, docs/bridge.md) for a slot
+/// the network lost, detected by a gap in sequence numbers on arrival: no measurement, no
+/// information (a loss, never a channel dropout).
+pub const FLAG_NET_LOST: u32 = 1 << 30;
+/// The flags of a slot that was lost on its way ([`FLAG_IPC_LOST`], [`FLAG_NET_LOST`]): it
+/// carries no information about the state, unlike a packet the channel dropped.
+pub const FLAGS_LOST: u32 = FLAG_IPC_LOST | FLAG_NET_LOST;
 
 /// One node's observation of one sampling instant (a *slot*).
 ///

@@ -10,12 +10,14 @@
 //!   channel): [`Packet::Dropped`], which may carry information;
 //! * never received — a slot lost inside the IPC, missed before the runner joined the stream,
 //!   a row flagged lost in a slot log, a slot lost by `eval --transport-loss`, all marked
-//!   [`FLAG_IPC_LOST`], and a node or instant the runner has no observation of at all:
+//!   [`FLAG_IPC_LOST`](estpipe_wire::FLAG_IPC_LOST), a slot a bridge wrote for what the
+//!   network lost ([`FLAG_NET_LOST`](estpipe_wire::FLAG_NET_LOST), docs/bridge.md), and a node
+//!   or instant the runner has no observation of at all:
 //!   [`Packet::Lost`], which carries none.
 
 use channel_sim::Observation;
 use estimator_core::Packet;
-use estpipe_wire::FLAG_IPC_LOST;
+use estpipe_wire::FLAGS_LOST;
 use nalgebra::SVector;
 
 /// A core measurement read from the observations of one instant.
@@ -38,7 +40,7 @@ pub(crate) fn packet<const NY: usize>(o: &Observation) -> Packet<f64, NY> {
             v.as_mut_slice()[..n].copy_from_slice(&y[..n]);
             Packet::Delivered(v)
         }
-        None if o.flags & FLAG_IPC_LOST != 0 => Packet::Lost,
+        None if o.flags & FLAGS_LOST != 0 => Packet::Lost,
         None => Packet::Dropped,
     }
 }
@@ -68,6 +70,7 @@ impl<const NY: usize, const L: usize> FromSlots for [Packet<f64, NY>; L] {
 mod tests {
     use super::*;
     use channel_sim::sim::{FLAG_OCCLUDED, FLAG_RANDOM_LOSS};
+    use estpipe_wire::{FLAG_IPC_LOST, FLAG_NET_LOST};
 
     #[test]
     fn delivered_dropped_and_lost() {
@@ -86,6 +89,8 @@ mod tests {
         }
         let lost = Observation::dropped(3, 1, 2, FLAG_IPC_LOST);
         assert_eq!(packet::<2>(&lost), Packet::Lost);
+        let net = Observation::dropped(3, 1, 2, FLAG_NET_LOST);
+        assert_eq!(packet::<2>(&net), Packet::Lost);
         assert_eq!(<Packet<f64, 2>>::from_slots(&[]), Packet::Lost);
         assert_eq!(<Packet<f64, 2>>::from_slots(&[lost, y]), Packet::Lost);
         // Node 2 sent nothing; node 1's slot was lost; node 0's arrived.

@@ -32,7 +32,9 @@
 
 use channel_sim::sim::{MAX_NODES, MAX_NY};
 use channel_sim::Observation;
-use estpipe_wire::{Slot, SlotFault, StreamHeader, FLAG_IPC_LOST, SLOT_ABORT, SLOT_DATA};
+use estpipe_wire::{
+    Slot, SlotFault, StreamHeader, FLAG_IPC_LOST, FLAG_NET_LOST, SLOT_ABORT, SLOT_DATA,
+};
 use serde::Serialize;
 
 /// Pending instants the assembler holds: how far one node may run ahead of the slowest
@@ -201,6 +203,9 @@ pub struct Counts {
     /// Slots lost inside the IPC (gaps in a node's sequence, or before its END/ABORT),
     /// handed on as lost.
     pub lost_in_ipc: u64,
+    /// Slots a bridge wrote for what the network lost (`FLAG_NET_LOST`, docs/bridge.md):
+    /// received, but without information.
+    pub lost_on_network: u64,
     /// Slots before the first one this runner saw of a stream (joined mid-stream).
     pub missed_before_join: u64,
     /// Slots of a node not there when their instant's deadline passed (paced mode), handed
@@ -584,11 +589,16 @@ impl Assembler {
                 if let Some(v) = slot.measurement() {
                     y[..v.len()].copy_from_slice(v);
                 }
-                self.counts.received += 1;
-                if slot.delivered == 1 {
-                    self.counts.delivered += 1;
+                if slot.flags & FLAG_NET_LOST != 0 {
+                    // A bridge's stand-in for a slot the network lost (docs/bridge.md).
+                    self.counts.lost_on_network += 1;
                 } else {
-                    self.counts.dropped_by_channel += 1;
+                    self.counts.received += 1;
+                    if slot.delivered == 1 {
+                        self.counts.delivered += 1;
+                    } else {
+                        self.counts.dropped_by_channel += 1;
+                    }
                 }
                 let o = Observation {
                     k: slot.k,

@@ -1,0 +1,54 @@
+//! `ipc-runner bridge`: a prefix's iceoryx2 services carried over zenoh to another host, and
+//! every message checked against the wire contract on arrival (`docs/bridge.md`).
+//!
+//! ```text
+//! host A: channel-sim ─► [A/slots, A/truth] ─► bridge --side sensor ──┐
+//!                                                                     │ zenoh <key>/slots, <key>/truth
+//! host B: ipc-runner run ◄─ [B/slots, B/truth] ◄─ bridge --side estimator ◄┘
+//!         ipc-runner run ─► [B/estimates] ─► bridge --side estimator ─► zenoh <key>/estimates ─► bridge --side sensor ─► [A/estimates]
+//! ```
+//!
+//! | module | what |
+//! |---|---|
+//! | [`args`] | the command line and the zenoh configuration it makes |
+//! | [`sensor`] | the sensor side: shared memory → zenoh (slots, truth), zenoh → shared memory (estimates) |
+//! | [`estimator`] | the estimator side: zenoh → checked → shared memory (slots, truth), estimates back |
+//! | [`sequence`] | per-node sequence tracking: what the network lost, as lost slots |
+//! | [`report`] | counts by reason and the bridge's latency histograms |
+//!
+//! The message encoding and its checks are the wire crate's (`estpipe_wire::net`): the bridge
+//! never writes into shared memory a message that those checks refused.
+
+pub mod args;
+pub mod estimator;
+pub mod report;
+pub mod sensor;
+pub mod sequence;
+mod stop;
+
+pub use args::{BridgeArgs, Side};
+pub use report::BridgeReport;
+
+/// `ipc-runner bridge`: runs the bridge, prints its one-line summary, writes `--report`.
+pub fn main(args: &BridgeArgs) -> anyhow::Result<i32> {
+    let report = run(args)?;
+    if !args.quiet {
+        eprintln!("bridge: {}", report.summary());
+    }
+    if let Some(p) = &args.report {
+        let json = serde_json::to_string_pretty(&report)?;
+        std::fs::write(p, json + "\n")
+            .map_err(|e| anyhow::anyhow!("--report {}: {e}", p.display()))?;
+    }
+    Ok(0)
+}
+
+/// Runs the bridge until its stream ends (`--once`) or SIGINT/SIGTERM; the report of what
+/// it forwarded and refused.
+pub fn run(args: &BridgeArgs) -> anyhow::Result<BridgeReport> {
+    args.check()?;
+    match args.side {
+        Side::Sensor => sensor::run(args),
+        Side::Estimator => estimator::run(args),
+    }
+}

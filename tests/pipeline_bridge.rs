@@ -1,0 +1,242 @@
+//! The pipeline across a network: the publisher and the runner on separate prefixes, joined
+//! only by two `bridge` processes over zenoh on loopback (docs/bridge.md).
+//!
+//! * Nothing lost: the bridged run's estimates equal the direct run's bit for bit.
+//! * A sensor-side bridge killed mid-stream and started again: the run goes on, what the
+//!   network lost meanwhile arrives as lost slots (counted on the network), the run ends 0.
+//! * A message that fails the far side's checks is counted by reason and never forwarded.
+
+#[path = "pipeline_common.rs"]
+mod common;
+
+use common::{report, scratch, Proc};
+use std::path::Path;
+use std::time::Duration;
+
+/// A loopback TCP port nobody listens on now.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// `bridge --side <side>` on `prefix`, joined to the other side through `endpoint`; its
+/// report is `dir/bridge-<side>.json`, its output `dir/<name>.err`.
+fn bridge(dir: &Path, name: &str, prefix: &str, key: &str, endpoint: &str, extra: &[&str]) -> Proc {
+    let side = name.trim_end_matches(char::is_numeric);
+    let report = dir.join(format!("bridge-{side}.json"));
+    let role = if side == "sensor" {
+        "--listen"
+    } else {
+        "--connect"
+    };
+    let mut args = vec![
+        "bridge",
+        "--side",
+        side,
+        "--prefix",
+        prefix,
+        "--key",
+        key,
+        role,
+        endpoint,
+        "--once",
+        "--connect-timeout",
+        "20",
+        "--report",
+        report.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    Proc::start(dir, &format!("bridge-{name}"), &args)
+}
+
+/// `run` on `prefix` writing estimates and report into `dir/<name>.*`.
+fn runner(dir: &Path, name: &str, prefix: &str, steps: u32, extra: &[&str]) -> Proc {
+    let csv = dir.join(format!("{name}.csv"));
+    let json = dir.join(format!("{name}.json"));
+    let steps = steps.to_string();
+    let mut args = vec![
+        "run",
+        "--scenario",
+        "occlusion",
+        "--prefix",
+        prefix,
+        "--steps",
+        &steps,
+        "--wait",
+        "block",
+        "--buffer",
+        "4096",
+        "--estimates-csv",
+        csv.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    Proc::start(dir, name, &args)
+}
+
+fn publisher(dir: &Path, name: &str, prefix: &str, steps: u32, rate: u32) -> Proc {
+    let (steps, rate) = (steps.to_string(), rate.to_string());
+    Proc::start(
+        dir,
+        name,
+        &[
+            "channel-sim",
+            "--scenario",
+            "occlusion",
+            "--prefix",
+            prefix,
+            "--rate",
+            &rate,
+            "--steps",
+            &steps,
+            "--quiet",
+        ],
+    )
+}
+
+fn assert_ok(p: &mut Proc, secs: u64) {
+    let st = p.wait(secs);
+    assert!(st.success(), "{} exited {st}: {}", p.name, p.err());
+    assert!(!p.err().contains("panicked"), "{}: {}", p.name, p.err());
+}
+
+/// The estimates CSV without its timing columns (those differ between any two runs).
+fn estimates(path: &Path) -> Vec<String> {
+    let s = std::fs::read_to_string(path).unwrap();
+    let mut lines = s.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let keep: Vec<usize> = (0..head.len())
+        .filter(|&i| !head[i].ends_with("_ns") && !head[i].contains("latency"))
+        .collect();
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            keep.iter().map(|&i| f[i]).collect::<Vec<_>>().join(",")
+        })
+        .collect()
+}
+
+#[test]
+fn bridged_run_equals_the_direct_run_bit_for_bit() {
+    const STEPS: u32 = 400;
+    let dir = scratch("bridge-same");
+    // Direct: one prefix.
+    let direct = common::prefix("bridge-direct");
+    let mut run = runner(&dir, "direct", &direct, STEPS, &[]);
+    std::thread::sleep(Duration::from_millis(200));
+    let mut publ = publisher(&dir, "pub-direct", &direct, STEPS, 2000);
+    assert_ok(&mut publ, 60);
+    assert_ok(&mut run, 60);
+
+    // Bridged: publisher on A, runner on B, zenoh between.
+    let (a, b) = (common::prefix("bridge-a"), common::prefix("bridge-b"));
+    let key = format!("estpipe-test/{}", common::prefix("key"));
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, &[]);
+    let mut run = runner(&dir, "bridged", &b, STEPS, &[]);
+    let mut sen = bridge(&dir, "sensor", &a, &key, &endpoint, &[]);
+    let mut publ = publisher(&dir, "pub-bridged", &a, STEPS, 2000);
+    assert_ok(&mut publ, 60);
+    assert_ok(&mut run, 60);
+    assert_ok(&mut est, 30);
+    assert_ok(&mut sen, 30);
+
+    let (d, g) = (
+        estimates(&dir.join("direct.csv")),
+        estimates(&dir.join("bridged.csv")),
+    );
+    // One row per instant, every estimator's estimate in its columns.
+    assert_eq!(d.len(), STEPS as usize);
+    assert_eq!(g.len(), STEPS as usize);
+    for (i, (x, y)) in d.iter().zip(&g).enumerate() {
+        assert_eq!(x, y, "row {i} differs");
+    }
+    let e = report(&dir.join("bridge-estimator.json"));
+    let s = report(&dir.join("bridge-sensor.json"));
+    let nodes = 1; // the occlusion example has one sensor
+    assert_eq!(e["slots"], u64::from(STEPS) * nodes);
+    assert_eq!(s["slots"], u64::from(STEPS) * nodes);
+    assert_eq!(e["lost_on_network"], 0);
+    assert_eq!(e["refused"], serde_json::json!({}));
+    assert!(e["network_hop"]["count"].as_u64().unwrap() > 0);
+    // The estimates came back to the sensor host.
+    assert!(s["estimates"].as_u64().unwrap() > 0);
+    let r = report(&dir.join("bridged.json"));
+    assert_eq!(r["counts"]["lost_on_network"], 0);
+}
+
+#[test]
+fn corrupted_messages_are_counted_and_never_forwarded() {
+    const STEPS: u32 = 300;
+    let dir = scratch("bridge-corrupt");
+    let (a, b) = (common::prefix("bridge-ca"), common::prefix("bridge-cb"));
+    let key = format!("estpipe-test/{}", common::prefix("key"));
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, &[]);
+    let mut run = runner(&dir, "run", &b, STEPS, &[]);
+    // Every 10th slot message leaves the sensor side with a wrong version byte.
+    let mut sen = bridge(
+        &dir,
+        "sensor",
+        &a,
+        &key,
+        &endpoint,
+        &["--debug-corrupt-every", "10"],
+    );
+    let mut publ = publisher(&dir, "pub", &a, STEPS, 2000);
+    assert_ok(&mut publ, 60);
+    assert_ok(&mut run, 60);
+    assert_ok(&mut est, 30);
+    assert_ok(&mut sen, 30);
+    let e = report(&dir.join("bridge-estimator.json"));
+    let corrupted = u64::from(STEPS) / 10;
+    assert_eq!(e["refused"]["version"], corrupted);
+    assert_eq!(e["slots"], u64::from(STEPS) - corrupted);
+    // Each refused slot is a gap the next one reveals: written as lost, never as data.
+    assert_eq!(e["lost_on_network"], corrupted);
+    let r = report(&dir.join("run.json"));
+    assert_eq!(r["counts"]["lost_on_network"], corrupted);
+    assert_eq!(
+        r["counts"]["received"].as_u64().unwrap(),
+        u64::from(STEPS) - corrupted
+    );
+}
+
+#[test]
+fn a_killed_sensor_bridge_is_noticed_and_the_run_resumes_when_it_returns() {
+    const STEPS: u32 = 1500;
+    let dir = scratch("bridge-kill");
+    let (a, b) = (common::prefix("bridge-ka"), common::prefix("bridge-kb"));
+    let key = format!("estpipe-test/{}", common::prefix("key"));
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, &[]);
+    // A stall limit longer than the outage: the runner waits for the bridge to return.
+    let mut run = runner(&dir, "run", &b, STEPS, &["--deadline-ms", "5000"]);
+    let sen = bridge(&dir, "sensor", &a, &key, &endpoint, &[]);
+    let mut publ = publisher(&dir, "pub", &a, STEPS, 500);
+    std::thread::sleep(Duration::from_millis(1000));
+    sen.signal(libc::SIGKILL);
+    drop(sen);
+    est.wait_for_stderr("sensor side gone", 10);
+    std::thread::sleep(Duration::from_millis(300));
+    common::cleanup_dead_nodes();
+    let mut sen = bridge(&dir, "sensor2", &a, &key, &endpoint, &[]);
+    assert_ok(&mut publ, 60);
+    assert_ok(&mut run, 60);
+    assert_ok(&mut est, 30);
+    assert_ok(&mut sen, 30);
+    let e = report(&dir.join("bridge-estimator.json"));
+    let lost = e["lost_on_network"].as_u64().unwrap();
+    // What the publisher sent while no sensor side was there went nowhere (it pauses soon
+    // after its subscriber is gone, so how much is timing); all of it is accounted for.
+    assert!(lost > 0, "lost {lost}");
+    assert_eq!(e["slots"].as_u64().unwrap() + lost, u64::from(STEPS));
+    assert!(e["far_side_lost"].as_u64().unwrap() >= 1);
+    let r = report(&dir.join("run.json"));
+    assert_eq!(r["counts"]["lost_on_network"].as_u64().unwrap(), lost);
+}
