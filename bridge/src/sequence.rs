@@ -87,12 +87,21 @@ mod tests {
         let mut q = Sequence::default();
         assert_eq!(q.arrive(&data(1, 0, 7)), Arrival::NewStream);
         assert_eq!(q.arrive(&data(1, 1, 8)), Arrival::NewStream);
-        assert_eq!(q.arrive(&data(2, 0, 7)), Arrival::InOrder { from: 2, lost: 0 });
+        assert_eq!(
+            q.arrive(&data(2, 0, 7)),
+            Arrival::InOrder { from: 2, lost: 0 }
+        );
         // Node 1 lost instants 2 and 3; node 0 is not affected.
-        assert_eq!(q.arrive(&data(4, 1, 8)), Arrival::InOrder { from: 2, lost: 2 });
+        assert_eq!(
+            q.arrive(&data(4, 1, 8)),
+            Arrival::InOrder { from: 2, lost: 2 }
+        );
         assert_eq!(q.arrive(&data(3, 1, 8)), Arrival::Late);
         assert_eq!(q.arrive(&data(4, 1, 8)), Arrival::Late);
-        assert_eq!(q.arrive(&data(3, 0, 7)), Arrival::InOrder { from: 3, lost: 0 });
+        assert_eq!(
+            q.arrive(&data(3, 0, 7)),
+            Arrival::InOrder { from: 3, lost: 0 }
+        );
         // Node 0's END after instant 5: its instants 4 and 5 were lost.
         let end = Slot::marker(SLOT_END, 5, 0, 2, 7, 0);
         assert_eq!(q.arrive(&end), Arrival::InOrder { from: 4, lost: 2 });
@@ -106,7 +115,10 @@ mod tests {
     fn a_lost_slot_is_a_valid_slot_without_measurement() {
         let like = data(5, 1, 3);
         let s = lost_slot(&like, 4);
-        assert_eq!((s.k, s.node, s.delivered, s.flags), (4, 1, 0, FLAG_NET_LOST));
+        assert_eq!(
+            (s.k, s.node, s.delivered, s.flags),
+            (4, 1, 0, FLAG_NET_LOST)
+        );
         assert!(s.validate().is_ok());
     }
 }
