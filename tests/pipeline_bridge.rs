@@ -240,3 +240,49 @@ fn a_killed_sensor_bridge_is_noticed_and_the_run_resumes_when_it_returns() {
     let r = report(&dir.join("run.json"));
     assert_eq!(r["counts"]["lost_on_network"].as_u64().unwrap(), lost);
 }
+
+/// `demo --via zenoh`: the same seed gives the estimates of `demo` bit for bit, and the
+/// summary shows the network hop.
+#[test]
+fn demo_via_zenoh_equals_demo() {
+    let dir = scratch("bridge-demo");
+    let mut outs = Vec::new();
+    for via in ["shm", "zenoh"] {
+        let out = dir.join(via);
+        let prefix = common::prefix("bridge-demo");
+        let mut p = Proc::start(
+            &dir,
+            &format!("demo-{via}"),
+            &[
+                "demo",
+                "--scenario",
+                "occlusion",
+                "--steps",
+                "300",
+                "--rate",
+                "1000",
+                "--seed",
+                "5",
+                "--wait",
+                "block",
+                "--via",
+                via,
+                "--prefix",
+                &prefix,
+                "--out",
+                out.to_str().unwrap(),
+                "--quiet",
+            ],
+        );
+        assert_ok(&mut p, 90);
+        if via == "zenoh" {
+            assert!(p.out().contains("network (zenoh, loopback)"), "{}", p.out());
+            let e = report(&out.join("bridge-estimator.json"));
+            assert_eq!(e["slots"], 300);
+            assert_eq!(e["lost_on_network"], 0);
+        }
+        outs.push(estimates(&out.join("estimates.csv")));
+    }
+    assert_eq!(outs[0].len(), 300);
+    assert_eq!(outs[0], outs[1]);
+}

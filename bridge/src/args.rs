@@ -61,6 +61,10 @@ pub struct BridgeArgs {
     /// Write the report (counts by reason, latency) as JSON to FILE on exit.
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
+    /// Stop (as on SIGTERM) once the process PID is no longer this bridge's parent, e.g.
+    /// because it died (`ipc-runner demo --via zenoh` passes its own pid).
+    #[arg(long, value_name = "PID")]
+    pub parent_pid: Option<u32>,
     /// Test hook (sensor side): break the version byte of every Nth slot message after this
     /// side's own check, so the far side must refuse it.
     #[arg(long, hide = true, value_name = "N")]

@@ -28,7 +28,7 @@ const BURST: usize = 256;
 
 /// Runs the estimator side.
 pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
-    let stop = Stop::new();
+    let stop = Stop::new(args.parent_pid);
     let key = args.key();
     let mut report = BridgeReport {
         side: Some(args.side),

@@ -23,7 +23,7 @@ pub(crate) const LINGER: Duration = Duration::from_millis(500);
 
 /// Runs the sensor side.
 pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
-    let stop = Stop::new();
+    let stop = Stop::new(args.parent_pid);
     let key = args.key();
     let mut report = BridgeReport {
         side: Some(args.side),

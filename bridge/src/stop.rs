@@ -8,21 +8,33 @@ use std::sync::Arc;
 /// Latches the first termination request (iceoryx2's handler consumes it when asked); shared
 /// with iceoryx2's back-pressure handler, which runs inside a blocked send.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct Stop(Arc<AtomicBool>);
+pub(crate) struct Stop {
+    flag: Arc<AtomicBool>,
+    parent: Option<u32>,
+}
 
 impl Stop {
-    /// Installs iceoryx2's handlers (so the default action never kills us mid-send).
-    pub(crate) fn new() -> Self {
-        let s = Self::default();
+    /// Installs iceoryx2's handlers (so the default action never kills us mid-send); with
+    /// `parent`, a parent that is gone counts as a termination request.
+    pub(crate) fn new(parent: Option<u32>) -> Self {
+        let s = Self {
+            flag: Arc::default(),
+            parent,
+        };
         let _ = s.requested();
         s
     }
 
-    /// Whether SIGINT or SIGTERM arrived.
+    /// Whether SIGINT or SIGTERM arrived, or the parent given is gone.
     pub(crate) fn requested(&self) -> bool {
-        if !self.0.load(Ordering::Relaxed) && SignalHandler::termination_requested() {
-            self.0.store(true, Ordering::Relaxed);
+        if !self.flag.load(Ordering::Relaxed)
+            && (SignalHandler::termination_requested()
+                || self
+                    .parent
+                    .is_some_and(|p| std::os::unix::process::parent_id() != p))
+        {
+            self.flag.store(true, Ordering::Relaxed);
         }
-        self.0.load(Ordering::Relaxed)
+        self.flag.load(Ordering::Relaxed)
     }
 }

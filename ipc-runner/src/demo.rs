@@ -83,6 +83,11 @@ pub struct DemoArgs {
     /// Service-name prefix (default: unique per demo process).
     #[arg(long)]
     pub prefix: Option<String>,
+    /// `shm`: publisher and runner share one prefix. `zenoh`: the publisher on
+    /// `<prefix>-sensor`, the runner on `<prefix>`, joined only by two `ipc-runner bridge`
+    /// processes over zenoh on loopback (docs/bridge.md); the summary adds the network hop.
+    #[arg(long, value_enum, default_value_t = Via::Shm)]
+    pub via: Via,
     /// Publisher executable (default: this executable's hidden `channel-sim` subcommand).
     #[arg(long)]
     pub channel_sim: Option<PathBuf>,
@@ -101,6 +106,15 @@ pub struct DemoArgs {
     #[arg(long, value_name = "MIB", default_value_t = crate::limits::DEFAULT_MAX_MEMORY_MIB,
           value_parser = clap::value_parser!(u64).range(1..))]
     pub max_memory: u64,
+}
+
+/// How the demo's slots reach its runner.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Via {
+    /// Shared memory on one prefix.
+    Shm,
+    /// Two bridges over zenoh (TCP on loopback) between two prefixes.
+    Zenoh,
 }
 
 /// The files `demo` writes into `--out`.
@@ -196,6 +210,66 @@ fn signal_child(c: &mut Child, sig: libc::c_int) {
     }
 }
 
+/// Starts the two bridges of `--via zenoh` (reports in `out/bridge-*.json`): the publisher's
+/// prefix and the bridges' children.
+fn start_bridges(prefix: &str, out: &Path) -> Result<(String, Vec<(&'static str, ChildGuard)>)> {
+    let me = std::env::current_exe()
+        .map_err(|e| anyhow!("cannot locate the running executable for the bridges ({e})"))?;
+    // A loopback port nobody listens on now (the sensor side listens on it).
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .context("no free loopback port for the bridges")?
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let sensor_prefix = format!("{prefix}-sensor");
+    let key = format!("estpipe/{prefix}");
+    let mut bridges = Vec::new();
+    for (side, on, role) in [
+        ("estimator", prefix, "--connect"),
+        ("sensor", sensor_prefix.as_str(), "--listen"),
+    ] {
+        let report = out.join(format!("bridge-{side}.json"));
+        let child = Command::new(&me)
+            .args(["bridge", "--side", side, "--prefix", on, "--key", &key])
+            .args([role, &endpoint])
+            .args(["--once", "--quiet", "--connect-timeout", "30"])
+            .args(["--parent-pid", &std::process::id().to_string()])
+            .arg("--report")
+            .arg(&report)
+            .stdin(Stdio::null())
+            .spawn()
+            .with_context(|| format!("cannot start the {side} bridge"))?;
+        bridges.push((side, ChildGuard(Some(child))));
+    }
+    Ok((sensor_prefix, bridges))
+}
+
+/// The network part of the summary, from the bridges' reports.
+fn bridge_summary(out: &Path) -> String {
+    let read = |side: &str| -> Option<serde_json::Value> {
+        let s = std::fs::read_to_string(out.join(format!("bridge-{side}.json"))).ok()?;
+        serde_json::from_str(&s).ok()
+    };
+    let Some(e) = read("estimator") else {
+        return "network: no report from the estimator-side bridge".into();
+    };
+    let us = |v: &serde_json::Value, q: &str| v[q].as_f64().unwrap_or(f64::NAN);
+    let (hop, own) = (&e["network_hop"], &e["bridge_time"]);
+    let refused: u64 = e["refused"].as_object().map_or(0, |m| {
+        m.values().filter_map(serde_json::Value::as_u64).sum()
+    });
+    format!(
+        "network (zenoh, loopback): slot sent → far bridge p50 {:.1} µs, p99 {:.1} µs; far \
+         bridge's own time p50 {:.1} µs, p99 {:.1} µs; {} slots lost on the network, {refused} \
+         refused",
+        us(hop, "p50_us"),
+        us(hop, "p99_us"),
+        us(own, "p50_us"),
+        us(own, "p99_us"),
+        e["lost_on_network"].as_u64().unwrap_or(0),
+    )
+}
+
 /// The publisher command: `--channel-sim PATH`, else this executable + `channel-sim`.
 fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
     if let Some(p) = explicit {
@@ -268,6 +342,13 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {:?}", args.out))?;
 
+    // With --via zenoh the publisher writes to its own prefix and two bridges carry its slots
+    // to the runner's (the estimator side first: it waits for the runner, the sensor side
+    // for it, and the publisher starts when the sensor side subscribes).
+    let (pub_prefix, mut bridges) = match args.via {
+        Via::Shm => (prefix.clone(), Vec::new()),
+        Via::Zenoh => start_bridges(&prefix, &args.out)?,
+    };
     let mut cmd = publisher_command(args.channel_sim.as_deref())?;
     if let Some(c) = &args.config {
         cmd.arg("--config").arg(c);
@@ -278,7 +359,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         .args(["--run", &args.run.to_string()])
         .args(["--steps", &steps.to_string()])
         .args(["--rate", &args.rate.to_string()])
-        .args(["--prefix", &prefix])
+        .args(["--prefix", &pub_prefix])
         .args(["--parent-pid", &std::process::id().to_string()])
         .arg("--quiet")
         .stdin(Stdio::null());
@@ -388,6 +469,15 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             eprintln!("demo: {publisher} exited with {s}");
         }
     }
+    // The bridges leave by themselves once the stream ended and the estimates went quiet.
+    for (name, g) in &mut bridges {
+        if let Some(mut c) = g.0.take() {
+            let s = end_child(&mut c, !completed, Duration::from_secs(3))?;
+            if !s.success() {
+                eprintln!("demo: the {name} bridge exited with {s}");
+            }
+        }
+    }
     run::finish(&rargs, &report, &traj, scenario.ny())?;
     let plot = args.out.join(&args.plot);
     if let Err(e) = plot_trajectories(&traj, &plot, scenario.name()) {
@@ -428,6 +518,9 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     }
 
     println!("{}", report.summary());
+    if args.via == Via::Zenoh {
+        println!("{}", bridge_summary(&args.out));
+    }
     println!(
         "wrote {} (true vs estimated), latency.svg (percentiles), latency-trace.svg (over \
          time), estimates.csv, latency.csv, slots.csv (replayable), report.json in {:?}",

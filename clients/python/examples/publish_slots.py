@@ -71,6 +71,7 @@ def main() -> int:
     t0 = estpipe.monotonic_ns()
     # Per node, the last instant sent: its END/ABORT marker's k and seq (wire version 3).
     last_sent = [0] * nodes
+    sent = 0
     try:
         for i, (k, obs) in enumerate(instants):
             if period_ns:
@@ -97,6 +98,7 @@ def main() -> int:
                 slot.send_ns = estpipe.monotonic_ns()
                 send(publisher, header, slot)
                 last_sent[m] = k
+                sent += 1
             notifier.notify_with_custom_event_id(ready)
         kind = estpipe.SLOT_END
     except iox2.NodeWaitFailure:
