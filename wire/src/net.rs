@@ -4,7 +4,7 @@
 //! Inside one host a payload is its `#[repr(C)]` memory; between hosts it is this encoding:
 //! every field in declaration order, little-endian, no padding (the payloads have none), so the
 //! bytes do not depend on either host's endianness or compiler. A message is a 4-byte tag
-//! ([`Tag`]: the magic `"ES"`, the message kind, the wire version) followed by the payloads of
+//! (the magic `"ES"`, the message [`Kind`], the wire version) followed by the payloads of
 //! its kind. Decoding never trusts the bytes: a wrong length, magic, kind or version is a
 //! [`NetError`], and the payloads' own checks (`Slot::validate`, `StreamHeader::validate`) run
 //! before anything is written into shared memory.
