@@ -219,10 +219,12 @@ fn a_killed_sensor_bridge_is_noticed_and_the_run_resumes_when_it_returns() {
     let mut run = runner(&dir, "run", &b, STEPS, &["--deadline-ms", "5000"]);
     let sen = bridge(&dir, "sensor", &a, &key, &endpoint, &[]);
     let mut publ = publisher(&dir, "pub", &a, STEPS, 500);
-    std::thread::sleep(Duration::from_millis(1000));
+    // Kill it once it forwards (connected, the far side subscribed), mid-stream.
+    sen.wait_for_stderr("forwarding", 30);
+    std::thread::sleep(Duration::from_millis(500));
     sen.signal(libc::SIGKILL);
     drop(sen);
-    est.wait_for_stderr("sensor side gone", 10);
+    est.wait_for_stderr("sensor side gone", 30);
     std::thread::sleep(Duration::from_millis(300));
     common::cleanup_dead_nodes();
     let mut sen = bridge(&dir, "sensor2", &a, &key, &endpoint, &[]);

@@ -117,6 +117,8 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
     let z_alive = session
         .liveliness()
         .declare_subscriber(format!("{key}/alive/sensor"))
+        // A sensor side that came first is reported too, so that its end is always seen.
+        .history(true)
         .with(FifoChannel::new(64))
         .wait()
         .map_err(|e| anyhow!("zenoh liveliness {key}/alive/sensor: {e}"))?;
