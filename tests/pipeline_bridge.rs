@@ -6,120 +6,14 @@
 //!   network lost meanwhile arrives as lost slots (counted on the network), the run ends 0.
 //! * A message that fails the far side's checks is counted by reason and never forwarded.
 
+#[path = "bridge_common.rs"]
+mod bridge_common;
 #[path = "pipeline_common.rs"]
 mod common;
 
+use bridge_common::{assert_ok, bridge, estimates, free_port, publisher, runner};
 use common::{report, scratch, Proc};
-use std::path::Path;
 use std::time::Duration;
-
-/// A loopback TCP port nobody listens on now.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// `bridge --side <side>` on `prefix`, joined to the other side through `endpoint`; its
-/// report is `dir/bridge-<side>.json`, its output `dir/<name>.err`.
-fn bridge(dir: &Path, name: &str, prefix: &str, key: &str, endpoint: &str, extra: &[&str]) -> Proc {
-    let side = name.trim_end_matches(char::is_numeric);
-    let report = dir.join(format!("bridge-{side}.json"));
-    let role = if side == "sensor" {
-        "--listen"
-    } else {
-        "--connect"
-    };
-    let mut args = vec![
-        "bridge",
-        "--side",
-        side,
-        "--prefix",
-        prefix,
-        "--key",
-        key,
-        role,
-        endpoint,
-        "--once",
-        "--connect-timeout",
-        "20",
-        "--report",
-        report.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    Proc::start(dir, &format!("bridge-{name}"), &args)
-}
-
-/// `run` on `prefix` writing estimates and report into `dir/<name>.*`.
-fn runner(dir: &Path, name: &str, prefix: &str, steps: u32, extra: &[&str]) -> Proc {
-    let csv = dir.join(format!("{name}.csv"));
-    let json = dir.join(format!("{name}.json"));
-    let steps = steps.to_string();
-    let mut args = vec![
-        "run",
-        "--scenario",
-        "occlusion",
-        "--prefix",
-        prefix,
-        "--steps",
-        &steps,
-        "--wait",
-        "block",
-        "--buffer",
-        "4096",
-        "--estimates-csv",
-        csv.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-        "--quiet",
-    ];
-    args.extend_from_slice(extra);
-    Proc::start(dir, name, &args)
-}
-
-fn publisher(dir: &Path, name: &str, prefix: &str, steps: u32, rate: u32) -> Proc {
-    let (steps, rate) = (steps.to_string(), rate.to_string());
-    Proc::start(
-        dir,
-        name,
-        &[
-            "channel-sim",
-            "--scenario",
-            "occlusion",
-            "--prefix",
-            prefix,
-            "--rate",
-            &rate,
-            "--steps",
-            &steps,
-            "--quiet",
-        ],
-    )
-}
-
-fn assert_ok(p: &mut Proc, secs: u64) {
-    let st = p.wait(secs);
-    assert!(st.success(), "{} exited {st}: {}", p.name, p.err());
-    assert!(!p.err().contains("panicked"), "{}: {}", p.name, p.err());
-}
-
-/// The estimates CSV without its timing columns (those differ between any two runs).
-fn estimates(path: &Path) -> Vec<String> {
-    let s = std::fs::read_to_string(path).unwrap();
-    let mut lines = s.lines();
-    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let keep: Vec<usize> = (0..head.len())
-        .filter(|&i| !head[i].ends_with("_ns") && !head[i].contains("latency"))
-        .collect();
-    lines
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            keep.iter().map(|&i| f[i]).collect::<Vec<_>>().join(",")
-        })
-        .collect()
-}
 
 #[test]
 fn bridged_run_equals_the_direct_run_bit_for_bit() {
@@ -137,9 +31,9 @@ fn bridged_run_equals_the_direct_run_bit_for_bit() {
     let (a, b) = (common::prefix("bridge-a"), common::prefix("bridge-b"));
     let key = format!("estpipe-test/{}", common::prefix("key"));
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, &[]);
+    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, true, &[]);
     let mut run = runner(&dir, "bridged", &b, STEPS, &[]);
-    let mut sen = bridge(&dir, "sensor", &a, &key, &endpoint, &[]);
+    let mut sen = bridge(&dir, "sensor", &a, &key, &endpoint, true, &[]);
     let mut publ = publisher(&dir, "pub-bridged", &a, STEPS, 2000);
     assert_ok(&mut publ, 60);
     assert_ok(&mut run, 60);
@@ -177,7 +71,7 @@ fn corrupted_messages_are_counted_and_never_forwarded() {
     let (a, b) = (common::prefix("bridge-ca"), common::prefix("bridge-cb"));
     let key = format!("estpipe-test/{}", common::prefix("key"));
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, &[]);
+    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, true, &[]);
     let mut run = runner(&dir, "run", &b, STEPS, &[]);
     // Every 10th slot message leaves the sensor side with a wrong version byte.
     let mut sen = bridge(
@@ -186,6 +80,7 @@ fn corrupted_messages_are_counted_and_never_forwarded() {
         &a,
         &key,
         &endpoint,
+        true,
         &["--debug-corrupt-every", "10"],
     );
     let mut publ = publisher(&dir, "pub", &a, STEPS, 2000);
@@ -214,10 +109,10 @@ fn a_killed_sensor_bridge_is_noticed_and_the_run_resumes_when_it_returns() {
     let (a, b) = (common::prefix("bridge-ka"), common::prefix("bridge-kb"));
     let key = format!("estpipe-test/{}", common::prefix("key"));
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, &[]);
+    let mut est = bridge(&dir, "estimator", &b, &key, &endpoint, true, &[]);
     // A stall limit longer than the outage: the runner waits for the bridge to return.
     let mut run = runner(&dir, "run", &b, STEPS, &["--deadline-ms", "5000"]);
-    let sen = bridge(&dir, "sensor", &a, &key, &endpoint, &[]);
+    let sen = bridge(&dir, "sensor", &a, &key, &endpoint, true, &[]);
     let mut publ = publisher(&dir, "pub", &a, STEPS, 500);
     // Kill it once it forwards (connected, the far side subscribed), mid-stream.
     sen.wait_for_stderr("forwarding", 30);
@@ -227,7 +122,7 @@ fn a_killed_sensor_bridge_is_noticed_and_the_run_resumes_when_it_returns() {
     est.wait_for_stderr("sensor side gone", 30);
     std::thread::sleep(Duration::from_millis(300));
     common::cleanup_dead_nodes();
-    let mut sen = bridge(&dir, "sensor2", &a, &key, &endpoint, &[]);
+    let mut sen = bridge(&dir, "sensor2", &a, &key, &endpoint, true, &[]);
     assert_ok(&mut publ, 60);
     assert_ok(&mut run, 60);
     assert_ok(&mut est, 30);

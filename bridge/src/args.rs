@@ -18,6 +18,16 @@ pub enum Side {
 /// Default zenoh endpoint: the sensor side listens, the estimator side connects (loopback).
 pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
 
+/// Largest `--max-gap`: the lost slots of one gap are written one by one, each waiting up to
+/// a second for a full runner queue, so a gap is bounded in work and time.
+pub const MAX_GAP_LIMIT: u64 = 1_000_000;
+
+/// Largest `--queue` (messages).
+pub const MAX_QUEUE: usize = 1 << 20;
+
+/// Longest `--connect-timeout` (s), as every seconds-valued flag of the product.
+pub const MAX_CONNECT_TIMEOUT: f64 = 1e9;
+
 /// `ipc-runner bridge`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct BridgeArgs {
@@ -54,8 +64,8 @@ pub struct BridgeArgs {
     /// Messages the zenoh subscriber queues before the network pushes back.
     #[arg(long, default_value_t = 4096, value_name = "N")]
     pub queue: usize,
-    /// A sequence gap longer than this many slots is not filled with lost slots (counted as
-    /// `gap_too_large`; the runner then sees the gap itself).
+    /// A sequence gap longer than this many slots (at most 1 000 000) is not filled with
+    /// lost slots (counted as `gap_too_large`; the runner then sees the gap itself).
     #[arg(long, default_value_t = 100_000, value_name = "SLOTS")]
     pub max_gap: u64,
     /// Write the report (counts by reason, latency) as JSON to FILE on exit.
@@ -75,16 +85,26 @@ pub struct BridgeArgs {
 }
 
 impl BridgeArgs {
-    /// The flags' own ranges (exit 2 on a violation, as every bad flag).
+    /// The flags' own ranges and the files they name (exit 2 on a violation, as every bad
+    /// flag), before anything starts: also the `--zenoh-config` file, read and applied.
     pub fn check(&self) -> Result<()> {
-        if !(self.connect_timeout.is_finite() && self.connect_timeout >= 0.0) {
+        if !(self.connect_timeout.is_finite()
+            && (0.0..=MAX_CONNECT_TIMEOUT).contains(&self.connect_timeout))
+        {
             bail!(
-                "--connect-timeout must be a finite number of seconds ≥ 0, got {}",
+                "--connect-timeout must be a finite number of seconds in [0, {MAX_CONNECT_TIMEOUT:e}], \
+                 got {}",
                 self.connect_timeout
             );
         }
-        if self.queue == 0 || self.queue > 1 << 20 {
-            bail!("--queue must be in 1..=1048576, got {}", self.queue);
+        if self.queue == 0 || self.queue > MAX_QUEUE {
+            bail!("--queue must be in 1..={MAX_QUEUE}, got {}", self.queue);
+        }
+        if self.max_gap > MAX_GAP_LIMIT {
+            bail!(
+                "--max-gap must be in 0..={MAX_GAP_LIMIT} slots, got {}",
+                self.max_gap
+            );
         }
         if let Some(p) = &self.report {
             check_writable(p)?;
@@ -95,6 +115,7 @@ impl BridgeArgs {
         if key.contains(['*', '$', '#', '?']) {
             bail!("--key {key:?} must name one key, without wildcards");
         }
+        self.zenoh_config()?;
         Ok(())
     }
 

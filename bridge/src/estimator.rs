@@ -147,12 +147,22 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
     let mut ended_at: Option<Instant> = None;
     let mut last_estimate = Instant::now();
     let mut far = FarSide::default();
+    let listening = Instant::now();
     loop {
         if stop.requested() {
             fwd.report.ending = "interrupted".into();
             break;
         }
         far.check(&z_alive, fwd.report, args.quiet);
+        if !far.seen
+            && args.connect_timeout > 0.0
+            && listening.elapsed().as_secs_f64() > args.connect_timeout
+        {
+            bail!(
+                "no sensor side on {key} within --connect-timeout {} s",
+                args.connect_timeout
+            );
+        }
         let mut busy = false;
         // Wait for the first slot of a pass (bounded, so estimates and signals are served).
         let first = z_slots

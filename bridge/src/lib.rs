@@ -29,6 +29,11 @@ mod stop;
 pub use args::{BridgeArgs, Side};
 pub use report::BridgeReport;
 
+/// The name of a bridge's iceoryx2 node (both sides). The runner tells by it that its slot
+/// publisher is a bridge's estimator side, a relay that may go away and come back with the
+/// same stream (docs/bridge.md, "A bridge that goes away").
+pub const NODE_NAME: &str = "estpipe-bridge";
+
 /// `ipc-runner bridge`: runs the bridge, prints its one-line summary, writes `--report`.
 pub fn main(args: &BridgeArgs) -> anyhow::Result<i32> {
     let report = run(args)?;

@@ -57,6 +57,14 @@ fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
     }
 }
 
+/// `ipc-runner bridge`: its flags (and the files they name) are checked first; what they
+/// refuse is bad input, exit code 2, before any port or session is opened.
+fn bridge(a: &estpipe_bridge::BridgeArgs) -> anyhow::Result<i32> {
+    a.check()
+        .map_err(|e| anyhow::Error::new(channel_sim::flags::BadInput(format!("{e:#}"))))?;
+    estpipe_bridge::main(a)
+}
+
 /// Parses the command line, runs the subcommand and exits; `name` prefixes the one-line
 /// error messages.
 pub fn main(name: &str) -> ! {
@@ -85,7 +93,7 @@ pub fn main(name: &str) -> ! {
         Command::Demo(a) => pipeline(crate::demo::main(&a)),
         Command::Run(a) => pipeline(crate::run::main(&a)),
         Command::Replay(a) => pipeline(crate::replay::main(&a)),
-        Command::Bridge(a) => pipeline(estpipe_bridge::main(&a)),
+        Command::Bridge(a) => pipeline(bridge(&a)),
         Command::StreamHeader(a) => pipeline(crate::stream_header::main(&a)),
         Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
     };

@@ -7,6 +7,7 @@
 use anyhow::{anyhow, Result};
 use estpipe_wire::services::SlotService;
 use estpipe_wire::{self as wire, Estimate, Slot, StreamHeader, Truth};
+use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -92,5 +93,32 @@ impl Transport {
     /// Publishers currently registered on the slot service.
     pub fn publishers(&self) -> usize {
         self.slots.dynamic_config().number_of_publishers()
+    }
+
+    /// Whether slot publisher `origin` (a sample's [`UniquePublisherId`] value) belongs to
+    /// the estimator side of a bridge (a node named [`estpipe_bridge::NODE_NAME`]): a relay,
+    /// which may go away and come back with the same stream (docs/bridge.md, "A bridge that
+    /// goes away"). Lists the service's publishers and the nodes: a cold path, asked once per
+    /// new publisher.
+    ///
+    /// [`UniquePublisherId`]: iceoryx2::identifiers::UniquePublisherId
+    pub fn is_bridge(&self, origin: u128) -> bool {
+        let mut node = None;
+        self.slots.dynamic_config().list_publishers(|p| {
+            if p.publisher_id.value() == origin {
+                node = Some(p.node_id);
+                CallbackProgression::Stop
+            } else {
+                CallbackProgression::Continue
+            }
+        });
+        let Some(node) = node else { return false };
+        match Node::<ipc::Service>::state_of(self.node.config(), node) {
+            Ok(Some(NodeState::Alive(v))) => v
+                .details()
+                .as_ref()
+                .is_some_and(|d| d.name().as_str() == estpipe_bridge::NODE_NAME),
+            _ => false,
+        }
     }
 }

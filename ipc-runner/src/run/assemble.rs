@@ -204,7 +204,9 @@ pub struct Counts {
     /// handed on as lost.
     pub lost_in_ipc: u64,
     /// Slots a bridge wrote for what the network lost (`FLAG_NET_LOST`, docs/bridge.md):
-    /// received, but without information.
+    /// received, but without information; and the slots missing when a node's stream went on
+    /// from another bridge (one went away and another took over,
+    /// [`Assembler::relay_changed`]).
     pub lost_on_network: u64,
     /// Slots before the first one this runner saw of a stream (joined mid-stream).
     pub missed_before_join: u64,
@@ -305,6 +307,9 @@ pub struct Assembler {
     ring: Box<[Pending]>,
     node: [NodeStream; MAX_NODES],
     first_seen: Option<Reason>,
+    /// Bit m: node m's stream goes on from another publisher (a relay that restarted), so
+    /// the slots missing before its next one were lost while nothing forwarded them.
+    relay_gap: u16,
     /// Running counts (over all sessions).
     pub counts: Counts,
 }
@@ -413,6 +418,7 @@ impl Assembler {
             ring: vec![empty; WINDOW].into_boxed_slice(),
             node: [NodeStream::default(); MAX_NODES],
             first_seen: None,
+            relay_gap: 0,
             counts: Counts::default(),
         };
         a.reset();
@@ -465,6 +471,18 @@ impl Assembler {
         self.session_started = false;
         self.restart_pending = false;
         self.paced = false;
+        self.relay_gap = 0;
+    }
+
+    /// Node `m`'s stream goes on from another publisher than its last slot's: a relay
+    /// between the stream's publisher and this runner (`ipc-runner bridge`, docs/bridge.md)
+    /// went away and another took over. The slots of `m` missing before its next one were
+    /// lost while no relay forwarded them: counted as [`Counts::lost_on_network`], not as lost
+    /// in the IPC.
+    pub fn relay_changed(&mut self, m: u8) {
+        if usize::from(m) < MAX_NODES {
+            self.relay_gap |= 1 << m;
+        }
     }
 
     /// The publishers were lost (`--wait-for-restart`): their streams become stale and the
@@ -687,13 +705,26 @@ impl Assembler {
         Pushed::Marker
     }
 
-    /// Node `m`'s slots of instants `next_k..k` (those still pending) were lost in the IPC.
+    /// Node `m`'s slots of instants `next_k..k` (those still pending) were lost in the IPC,
+    /// or on the network if the node's relay changed since its last slot
+    /// ([`Assembler::relay_changed`]).
     fn fill_gap(&mut self, m: usize, k: u64, recv_ns: u64) {
+        let net = self.relay_gap & (1 << m) != 0;
+        self.relay_gap &= !(1 << m);
+        let flags = if net {
+            FLAG_IPC_LOST | FLAG_NET_LOST
+        } else {
+            FLAG_IPC_LOST
+        };
         let from = self.node[m].next_k.max(self.base);
         for j in from..k {
             if self.ring[(j as usize) % WINDOW].known & (1 << m) == 0 {
-                self.counts.lost_in_ipc += 1;
-                let o = Observation::dropped(j as u32, m as u8, self.ny[m], FLAG_IPC_LOST);
+                if net {
+                    self.counts.lost_on_network += 1;
+                } else {
+                    self.counts.lost_in_ipc += 1;
+                }
+                let o = Observation::dropped(j as u32, m as u8, self.ny[m], flags);
                 self.set(j, m, o, recv_ns);
             }
         }
@@ -771,7 +802,11 @@ impl Assembler {
                 self.counts.lost_after_end += 1;
             } else if gap_of == Some(n) && j >= self.node[n].next_k {
                 // The node whose slot made room: this is a gap of its own sequence.
-                self.counts.lost_in_ipc += 1;
+                if self.relay_gap & (1 << n) != 0 {
+                    self.counts.lost_on_network += 1;
+                } else {
+                    self.counts.lost_in_ipc += 1;
+                }
             } else {
                 match why {
                     GiveUp::Deadline => self.counts.lost_deadline += 1,

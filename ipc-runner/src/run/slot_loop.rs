@@ -8,7 +8,7 @@ use crate::transport::Transport;
 use crate::Estimator;
 use anyhow::{bail, Result};
 use channel_sim::Observation;
-use estpipe_wire::{self as wire, SlotFault, StreamHeader};
+use estpipe_wire::{self as wire, SlotFault, StreamHeader, MAX_NODES};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::time::Duration;
 
@@ -105,6 +105,7 @@ pub fn run_loop(
         last_progress: 0,
         expected,
         last_update_ns: 0,
+        relay: Relay::default(),
     };
 
     // Before announcing the wait: from here on SIGINT/SIGTERM set the flag every wait mode
@@ -207,6 +208,38 @@ struct Loop<'a> {
     expected: StreamHeader,
     /// When the estimate publisher last looked for new subscribers.
     last_update_ns: u64,
+    /// Which publisher forwards each node's stream.
+    relay: Relay,
+}
+
+/// Which publisher each node's slots come from, and whether it is a bridge's estimator side
+/// (a relay that may go away and come back with the same stream: docs/bridge.md, "A bridge
+/// that goes away").
+#[derive(Debug, Default)]
+struct Relay {
+    /// Per node: the publisher (`UniquePublisherId` value) of its last slot.
+    origin: [Option<u128>; MAX_NODES],
+    /// Publishers looked at (id, a bridge?), so that publishers taking turns on a node cost
+    /// one lookup each.
+    seen: [(u128, bool); 4],
+    next: usize,
+    /// The publisher of the last slot that came from a new one is a bridge.
+    bridged: bool,
+    /// "bridge gone" was said (again once a slot came from a new publisher).
+    gone_said: bool,
+}
+
+impl Relay {
+    /// Whether publisher `origin` is a bridge (looked up once per publisher).
+    fn is_bridge(&mut self, t: &Transport, origin: u128) -> bool {
+        if let Some(&(_, b)) = self.seen.iter().find(|(id, _)| *id == origin && *id != 0) {
+            return b;
+        }
+        let b = t.is_bridge(origin);
+        self.seen[self.next] = (origin, b);
+        self.next = (self.next + 1) % self.seen.len();
+        b
+    }
 }
 
 impl Loop<'_> {
@@ -233,6 +266,13 @@ impl Loop<'_> {
             let recv_ns = wire::monotonic_ns();
             let slot = sample.payload();
             let header = sample.user_header();
+            let m = usize::from(slot.node);
+            if m < MAX_NODES {
+                let origin = sample.origin().value();
+                if self.relay.origin[m] != Some(origin) {
+                    self.new_origin(m, origin, slot.stream_id);
+                }
+            }
             // Before any estimator has stepped, a stream of another shape or model is refused
             // (exit 2), never fed to estimators built for this one; later such a slot is
             // counted and skipped (docs/wire.md, What the runner does with a bad slot).
@@ -372,6 +412,26 @@ impl Loop<'_> {
         peer()
     }
 
+    /// Node `m`'s slot came from publisher `origin`, not from the one of its last slot (or
+    /// it is its first): if the node's stream goes on from a bridge, a bridge went away and
+    /// one came back, and the node's slots missing before this one were lost while none
+    /// forwarded them (counted as lost on the network).
+    #[cold]
+    #[inline(never)]
+    fn new_origin(&mut self, m: usize, origin: u128, stream_id: u64) {
+        let before = self.relay.origin[m].replace(origin);
+        self.relay.gone_said = false;
+        let bridge = self.relay.is_bridge(self.t, origin);
+        self.relay.bridged = bridge;
+        if bridge && before.is_some() && self.asm.stream_of(m as u8) == Some(stream_id) {
+            self.asm.relay_changed(m as u8);
+            self.say(&format!(
+                "node {m}'s stream goes on from another bridge: its slots missed meanwhile \
+                 count as lost on the network"
+            ));
+        }
+    }
+
     /// A stall ended with a slot after `silence_ns` without one.
     fn stall_ended(&mut self, silence_ns: u64) {
         self.stalls.record(silence_ns);
@@ -407,6 +467,24 @@ impl Loop<'_> {
         let publishers = self.t.publishers();
         let silence_ns = now - t_last;
         let over_limit = self.deadline.stall_ns > 0 && silence_ns > self.deadline.stall_ns;
+        // A bridge that went away may come back with the stream: waited for as a stall.
+        let relay_gone = publishers == 0 && self.relay.bridged;
+        if relay_gone && !over_limit {
+            if !self.relay.gone_said {
+                self.relay.gone_said = true;
+                self.say(&format!(
+                    "publisher gone: no slot for {:.1} ms after instant {}, and the bridge that \
+                     forwarded the stream is gone (cleaned up {} dead node(s)); waiting for a \
+                     bridge to come back with it (lost after --stall-limit {} s)",
+                    silence_ns as f64 / 1e6,
+                    self.runner.last_k,
+                    cleaned.cleanups,
+                    args.stall_limit
+                ));
+            }
+            self.deadline.recheck_ns = Some(now + self.deadline.deadline_ns.max(1_000_000));
+            return None;
+        }
         if publishers > 0 && !over_limit {
             if self.deadline.recheck_ns.is_none() {
                 self.say(&format!(
@@ -430,6 +508,11 @@ impl Loop<'_> {
         let why = if publishers > 0 {
             format!(
                 "; alive but silent longer than --stall-limit {} s",
+                args.stall_limit
+            )
+        } else if relay_gone {
+            format!(
+                "; the bridge did not come back within --stall-limit {} s",
                 args.stall_limit
             )
         } else {

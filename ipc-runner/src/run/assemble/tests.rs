@@ -111,6 +111,29 @@ fn gaps_become_counted_ipc_losses_at_the_right_instant_and_node() {
 }
 
 #[test]
+fn a_gap_after_the_relay_changed_is_lost_on_the_network_once() {
+    let h = header(2, &[1, 1]);
+    let mut a = Assembler::new(&h, Limits::default());
+    let (_, _) = run(&mut a, &h, &[slot(1, 0, 2, 1), slot(1, 1, 2, 1)]);
+    // A bridge went away after instant 1 and another took over node 0's stream at 4;
+    // node 1's stream came on through the same publisher and lost 2 in the IPC.
+    a.relay_changed(0);
+    let (out, _) = run(
+        &mut a,
+        &h,
+        &[slot(4, 0, 2, 1), slot(3, 1, 2, 1), slot(6, 0, 2, 1)],
+    );
+    assert_eq!(ks(&out), [2, 3]);
+    // Node 0: 2 and 3 on the network (the relay's gap), 5 in the IPC (a later gap).
+    assert_eq!(a.counts.lost_on_network, 2);
+    assert_eq!(a.counts.lost_in_ipc, 2);
+    let o = &out[0].1[0];
+    assert!(!o.delivered && o.flags == FLAG_IPC_LOST | FLAG_NET_LOST);
+    assert_eq!(out[0].1[1].flags, FLAG_IPC_LOST);
+    assert_eq!(a.counts.received, 5);
+}
+
+#[test]
 fn per_node_end_markers_fill_the_tail_and_end_the_stream() {
     let h = header(2, &[1, 1]);
     let mut a = Assembler::new(&h, Limits::default());
