@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Regenerates BENCHMARKS.md at the workspace root: builds the benchmark binaries and
 # ipc-runner in release mode, then runs every part (criterion, callgrind instruction counts,
-# Cortex-M4 counts from .ci/firmware, IPC latency, the pipeline end to end, Monte-Carlo
-# throughput) and writes the tables.
+# Cortex-M4 counts from .ci/firmware, IPC latency, the pipeline end to end, the bridge hop
+# against raw zenoh and the one-host pipeline, Monte-Carlo throughput) and writes the tables.
 #
 #   benches/run.sh                 # full run (~15-20 min on 2 cores; the first also builds
 #                                  # two extra kf_interleaved variants, ~3 min each)
 #   benches/run.sh --quick         # short runs, indicative only
-#   benches/run.sh --skip firmware,eval       # parts: criterion,icount,firmware,ipc,pipeline,idle,eval
+#   benches/run.sh --skip firmware,eval       # parts: criterion,icount,firmware,ipc,pipeline,bridge,eval-baseline,eval
 #
 # Needs valgrind (apt-get install valgrind); the firmware part needs what .ci/firmware needs
 # (qemu-system-arm, the thumbv7em-none-eabihf target) and is reported as not run otherwise.

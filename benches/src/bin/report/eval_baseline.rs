@@ -433,7 +433,7 @@ fn breakdown(file: &Path) -> Result<Vec<(String, u64)>> {
     Ok(rows)
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     if n == 0 {

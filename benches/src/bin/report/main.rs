@@ -13,6 +13,9 @@
 //! - `ipc` ([`raw_transports`]): `ipc_latency` (raw iceoryx2 and Unix socket ping-pong);
 //! - `pipeline` ([`pipeline`]): `ipc-runner demo` end to end (slot sent → estimates
 //!   published), one spinning and one sleeping runner, one table;
+//! - `bridge` ([`bridge`]): the bridge hop over loopback (`demo --via zenoh`) against raw
+//!   zenoh pub/sub of the same payload (`zenoh_latency`) and the one-host pipeline, the three
+//!   alternating over rounds;
 //! - `eval-baseline` ([`eval_baseline`]): issue #23's Monte-Carlo command against commit
 //!   `b7a974e`, CPU time and instructions side by side, the JSON compared, where the
 //!   instructions go;
@@ -25,6 +28,7 @@
 //!
 //! The prose of the report is in `prose/*.md` ([`prose`]).
 
+mod bridge;
 mod command;
 mod criterion;
 mod demo;
@@ -66,6 +70,7 @@ const SECTIONS: &[(&str, &str)] = &[
     ("firmware", "## The Cortex-M4F on QEMU"),
     ("ipc", "## IPC latency: raw transports"),
     ("pipeline", "## IPC latency: the full pipeline end to end"),
+    ("bridge", "## Across hosts: the bridge hop over loopback"),
     // Retired (issue #23): it only ends the section before it in an older file.
     ("idle", "## What idling costs here"),
     (
@@ -93,13 +98,20 @@ fn carried(old: &str, name: &str) -> Option<String> {
     if section.lines().last().is_some_and(|l| l.starts_with(NOTE)) {
         return Some(format!("{section}\n\n"));
     }
-    let commit = old
-        .lines()
-        .find_map(|l| l.strip_prefix("| commit | "))
-        .and_then(|l| l.strip_suffix(" |"))
-        .unwrap_or("?");
+    // The head of this file describes this run: the machine and date the section was
+    // measured on go into its note.
+    let field = |name: &str| {
+        old.lines()
+            .find_map(|l| l.strip_prefix(&format!("| {name} | ")))
+            .and_then(|l| l.strip_suffix(" |"))
+    };
+    let commit = field("commit").unwrap_or("?");
+    let on = match (field("date"), field("CPU")) {
+        (Some(d), Some(c)) => format!(" (run on {d}, CPU {c})"),
+        _ => String::new(),
+    };
     Some(format!(
-        "{section}\n\n{NOTE} carried over from the `BENCHMARKS.md` of commit {commit}.)*\n\n"
+        "{section}\n\n{NOTE} carried over from the `BENCHMARKS.md` of commit {commit}{on}.)*\n\n"
     ))
 }
 
@@ -150,6 +162,7 @@ fn run() -> Result<()> {
     body.part(&o, "firmware", firmware::part);
     body.part(&o, "ipc", raw_transports::part);
     body.part(&o, "pipeline", pipeline::part);
+    body.part(&o, "bridge", bridge::part);
     body.part(&o, "eval-baseline", eval_baseline::part);
     body.part(&o, "eval", eval_throughput::part);
 
@@ -180,12 +193,13 @@ mod tests {
 
     #[test]
     fn a_skipped_part_keeps_its_old_section() {
-        let old = "# B\n\n| commit | abc |\n\n## Instructions per step on the host (x)\n\nt1\n\n### sub\n\nt2\n\n## The Cortex-M4F on QEMU: y\n\nf\n\n## Parts that did not run\n\n- z\n";
+        let old = "# B\n\n| date | d |\n| commit | abc |\n| CPU | c |\n\n## Instructions per step on the host (x)\n\nt1\n\n### sub\n\nt2\n\n## The Cortex-M4F on QEMU: y\n\nf\n\n## Parts that did not run\n\n- z\n";
         let icount = carried(old, "icount").unwrap();
         assert_eq!(
             icount,
             "## Instructions per step on the host (x)\n\nt1\n\n### sub\n\nt2\n\n*(Not rerun in \
-             this regeneration: carried over from the `BENCHMARKS.md` of commit abc.)*\n\n"
+             this regeneration: carried over from the `BENCHMARKS.md` of commit abc (run on d, CPU \
+             c).)*\n\n"
         );
         let fw = carried(old, "firmware").unwrap();
         assert!(fw.starts_with("## The Cortex-M4F on QEMU: y\n\nf\n\n*(Not rerun"));

@@ -4,7 +4,7 @@ use anyhow::{anyhow, bail, Result};
 use std::path::PathBuf;
 
 const USAGE: &str =
-    "report [--quick] [--plain-release] [--skip criterion,icount,firmware,ipc,pipeline,eval-baseline,eval] [--out FILE]";
+    "report [--quick] [--plain-release] [--skip criterion,icount,firmware,ipc,pipeline,bridge,eval-baseline,eval] [--out FILE]";
 
 pub struct Opts {
     pub quick: bool,
