@@ -11,8 +11,8 @@
 //! ```
 //!
 //! (probabilities from `gauss::ln_interval_prob`, so far tails neither underflow nor cancel).
-//! A packet lost in transport (`FLAG_IPC_LOST`, see `slots`) carries no information: the
-//! particles move and keep their weights. `pf-mix` (built beside `pf` with `--loss-rate P`)
+//! A packet lost in transport (`FLAGS_LOST`: in the IPC or on the network, see `slots`)
+//! carries no information: the particles move and keep their weights. `pf-mix` (built beside `pf` with `--loss-rate P`)
 //! weights a dropout by `P + (1 − P) P(u ∈ ∪R_i | x)`, a loss the receiver cannot tell from an
 //! occlusion.
 //! Weights are kept as logarithms; the estimate is the weighted mean, its covariance the
@@ -33,7 +33,7 @@ use channel_sim::sim::{MAX_NX, MAX_NY};
 use channel_sim::{Observation, Scenario};
 use estimator_core::gauss::{ln_interval_prob, log_sum_exp};
 use estimator_core::Error;
-use estpipe_wire::FLAG_IPC_LOST;
+use estpipe_wire::FLAGS_LOST;
 use nalgebra::{DMatrix, DVector};
 
 use super::EvalOptions;
@@ -342,7 +342,7 @@ impl Estimator for ParticleFilter {
         // Lost in transport: no likelihood, the particles only move.
         let lost = obs
             .first()
-            .is_none_or(|o| !o.delivered && o.flags & FLAG_IPC_LOST != 0);
+            .is_none_or(|o| !o.delivered && o.flags & FLAGS_LOST != 0);
         let y = obs.first().and_then(|o| o.measurement()).map(|y| {
             y_buf[..ny].copy_from_slice(&y[..ny]);
             &y_buf[..ny]
@@ -482,6 +482,34 @@ mod tests {
                 assert_eq!(got[i * nx + j], got[j * nx + i]);
             }
         }
+    }
+
+    /// A slot a bridge wrote for what the network lost (`FLAG_NET_LOST`) is a loss, as one
+    /// lost in the IPC: no likelihood, the same estimate bit for bit (it was read as an
+    /// occlusion dropout, information, before).
+    #[test]
+    fn a_slot_lost_on_the_network_is_no_information() {
+        use estpipe_wire::{FLAG_IPC_LOST, FLAG_NET_LOST};
+        let s = channel_sim::scenario::preset("occlusion").unwrap();
+        let options = EvalOptions {
+            particles: 2000,
+            estimators: vec!["pf".into()],
+            ..EvalOptions::default()
+        };
+        let mut out = Vec::new();
+        for flags in [FLAG_IPC_LOST, FLAG_NET_LOST, 0] {
+            let mut ests = build_all(FACTORIES, &*s, &options, 3, 0).unwrap();
+            let o = Observation::dropped(1, 0, s.ny() as u8, flags);
+            ests[0].step(1, &[o]).unwrap();
+            let mut x = [0.0; 3];
+            ests[0].estimate(&mut x);
+            out.push(x);
+        }
+        assert_eq!(out[0], out[1]);
+        assert_ne!(
+            out[0], out[2],
+            "a dropout is information in the occlusion model"
+        );
     }
 
     /// Far from every occlusion region a dropout is impossible and an arrival's likelihood
