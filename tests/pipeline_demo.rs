@@ -76,6 +76,19 @@ fn user_occlusion_model_demo_matches_in_process_eval_exactly() {
     }
 }
 
+/// Sensors of different ny (`two-sensors.toml`: node 0 measures position and velocity, node 1
+/// position only) through real processes: the publisher announces each node's ny in the
+/// stream header, the runner takes it from there, and the estimates are `eval`'s bit for bit
+/// and replay from the slot log (whose rows have each node's own number of `y_` values).
+#[test]
+fn mixed_ny_demo_matches_in_process_eval_exactly() {
+    let cfg = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../channel-sim/scenarios/two-sensors.toml");
+    let scenario = channel_sim::scenario::config::load(&cfg).unwrap();
+    let names = check(&["--config", cfg.to_str().unwrap()], &scenario, 120);
+    assert!(names.iter().any(|n| n == "ikf"), "{names:?}");
+}
+
 /// Runs the demo with `scenario_args` and checks it against `eval`; returns the names of the
 /// estimators the demo ran.
 fn check(scenario_args: &[&str], scenario: &dyn channel_sim::Scenario, steps: u32) -> Vec<String> {

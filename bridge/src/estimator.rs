@@ -36,7 +36,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         ..Default::default()
     };
     let node = NodeBuilder::new()
-        .name(&NodeName::new("estpipe-bridge").map_err(|e| anyhow!("{e:?}"))?)
+        .name(&NodeName::new(crate::NODE_NAME).map_err(|e| anyhow!("{e:?}"))?)
         .create::<ipc::Service>()
         .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
     let _ = node.try_cleanup_dead_nodes();
@@ -301,6 +301,12 @@ impl Forward<'_> {
             _ => self.header = Some((s.stream_id, h)),
         }
         match self.sequence.arrive(&s) {
+            Arrival::RepeatedMarker => {
+                // The sensor side sends every marker more than once (a lost END would hang
+                // the runner); the copies after the first are expected, not refused.
+                self.report.markers_repeated += 1;
+                return Ok(false);
+            }
             Arrival::Late => {
                 self.report.refuse("late");
                 return Ok(false);

@@ -52,6 +52,8 @@ pub fn main(args: &BridgeArgs) -> anyhow::Result<i32> {
 /// it forwarded and refused.
 pub fn run(args: &BridgeArgs) -> anyhow::Result<BridgeReport> {
     args.check()?;
+    // zenoh's own log on stderr when RUST_LOG asks for it (`RUST_LOG=zenoh=debug`).
+    zenoh::try_init_log_from_env();
     match args.side {
         Side::Sensor => sensor::run(args),
         Side::Estimator => estimator::run(args),

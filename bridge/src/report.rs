@@ -57,6 +57,9 @@ pub struct BridgeReport {
     pub slots: u64,
     /// END/ABORT markers forwarded.
     pub markers: u64,
+    /// Estimator side: copies of a marker already forwarded (the sensor side sends each
+    /// marker several times), dropped as expected.
+    pub markers_repeated: u64,
     /// Truth samples forwarded.
     pub truth: u64,
     /// Estimates forwarded.

@@ -18,6 +18,10 @@ use zenoh::Wait;
 /// Slots forwarded per pass before the estimates and the signal are looked at again.
 const BURST: usize = 256;
 
+/// Copies of each END/ABORT marker put on the network: all of them lost on a link losing a
+/// fraction p of its datagrams has probability p³.
+pub(crate) const MARKER_COPIES: usize = 3;
+
 /// After the stream ended (`--once`), estimates are forwarded until none came for this long.
 pub(crate) const LINGER: Duration = Duration::from_millis(500);
 
@@ -31,7 +35,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         ..Default::default()
     };
     let node = NodeBuilder::new()
-        .name(&NodeName::new("estpipe-bridge").map_err(|e| anyhow!("{e:?}"))?)
+        .name(&NodeName::new(crate::NODE_NAME).map_err(|e| anyhow!("{e:?}"))?)
         .create::<ipc::Service>()
         .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
     let _ = node.try_cleanup_dead_nodes();
@@ -148,10 +152,20 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             {
                 msg[3] ^= 0x80;
             }
-            z_slots
-                .put(&msg[..])
-                .wait()
-                .map_err(|e| anyhow!("zenoh put slot: {e}"))?;
+            // A marker is sent MARKER_COPIES times: over UDP a lost END would leave the far
+            // side's runner waiting for an instant that never comes. Copies after the first
+            // that arrive are recognised as repeats there (same node, same k).
+            let copies = if s.kind == SLOT_DATA {
+                1
+            } else {
+                MARKER_COPIES
+            };
+            for _ in 0..copies {
+                z_slots
+                    .put(&msg[..])
+                    .wait()
+                    .map_err(|e| anyhow!("zenoh put slot: {e}"))?;
+            }
             if s.kind == SLOT_DATA {
                 report.slots += 1;
             } else {

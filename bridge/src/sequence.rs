@@ -25,6 +25,9 @@ pub enum Arrival {
     Late,
     /// The first slot of the node's stream (or of a new one: the publisher restarted).
     NewStream,
+    /// A copy of the marker the node's stream already ended with (the sensor side sends
+    /// each marker several times): expected, not forwarded.
+    RepeatedMarker,
 }
 
 /// Follows every node's stream.
@@ -32,6 +35,8 @@ pub enum Arrival {
 pub struct Sequence {
     /// Per node: its stream id and the next instant expected.
     node: [Option<(u64, u32)>; MAX_NODES],
+    /// Per node: the stream id and instant of the last END/ABORT marker taken.
+    marker: [Option<(u64, u32)>; MAX_NODES],
 }
 
 impl Sequence {
@@ -43,6 +48,23 @@ impl Sequence {
         // `upto`.
         let after = s.k.saturating_add(1);
         let upto = if s.kind == SLOT_DATA { s.k } else { after };
+        if self.is_last_marker(s) {
+            return Arrival::RepeatedMarker;
+        }
+        let arrival = self.classify(m, s, upto, after);
+        if s.kind != SLOT_DATA && arrival != Arrival::Late {
+            self.marker[m] = Some((s.stream_id, s.k));
+        }
+        arrival
+    }
+
+    /// Whether `s` is a copy of the marker its node's stream last ended with.
+    pub fn is_last_marker(&self, s: &Slot) -> bool {
+        let m = usize::from(s.node).min(MAX_NODES - 1);
+        s.kind != SLOT_DATA && self.marker[m] == Some((s.stream_id, s.k))
+    }
+
+    fn classify(&mut self, m: usize, s: &Slot, upto: u32, after: u32) -> Arrival {
         match self.node[m] {
             Some((stream, next)) if stream == s.stream_id => {
                 if upto < next {
@@ -109,6 +131,24 @@ mod tests {
         let end = Slot::marker(SLOT_END, 4, 1, 2, 8, 0);
         assert_eq!(q.arrive(&end), Arrival::InOrder { from: 5, lost: 0 });
         assert_eq!(q.arrive(&data(1, 0, 9)), Arrival::NewStream);
+    }
+
+    #[test]
+    fn a_repeated_marker_is_known_as_a_copy() {
+        let mut q = Sequence::default();
+        assert_eq!(q.arrive(&data(1, 0, 7)), Arrival::NewStream);
+        let end = Slot::marker(SLOT_END, 3, 0, 2, 7, 0);
+        assert!(!q.is_last_marker(&end));
+        assert_eq!(q.arrive(&end), Arrival::InOrder { from: 2, lost: 2 });
+        // The second and third copies are known as copies; a late data slot or another
+        // node's marker is not.
+        assert!(q.is_last_marker(&end));
+        assert_eq!(q.arrive(&end), Arrival::RepeatedMarker);
+        assert_eq!(q.arrive(&end), Arrival::RepeatedMarker);
+        assert_eq!(q.arrive(&data(3, 0, 7)), Arrival::Late);
+        assert!(!q.is_last_marker(&data(3, 0, 7)));
+        assert!(!q.is_last_marker(&Slot::marker(SLOT_END, 3, 1, 2, 7, 0)));
+        assert!(!q.is_last_marker(&Slot::marker(SLOT_END, 2, 0, 2, 7, 0)));
     }
 
     #[test]
