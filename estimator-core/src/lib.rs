@@ -27,7 +27,8 @@
 //! * [`linalg`]: validated Cholesky solves, symmetrisation and the small kernels
 //!   ([`linalg::small`], [`linalg::eig`], [`linalg::kron`]); [`gauss`]: normal pdf/cdf,
 //!   tail-accurate inverse Mills ratio, log-sum-exp; [`gsum`]: Gaussian-sum tables;
-//!   [`CovarianceUpdate`]: the Joseph or standard covariance form.
+//!   [`CovarianceUpdate`]: the Joseph or standard covariance form (chosen at run time, or at
+//!   compile time through [`CovarianceForm`]).
 //! * [`papers`]: the papers' numerical examples as ready-made values.
 //! * [`error`], [`real`]: the error type and the scalar trait.
 //!
@@ -110,7 +111,7 @@ pub mod papers;
 pub mod protocol;
 pub mod real;
 
-pub use covariance_update::CovarianceUpdate;
+pub use covariance_update::{CovarianceForm, CovarianceUpdate, JosephForm, StandardForm};
 pub use error::{Error, Result};
 pub use estimate::Estimate;
 pub use estimator::{Estimator, OnModel};

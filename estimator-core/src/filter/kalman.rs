@@ -6,21 +6,28 @@ use nalgebra::{SMatrix, SVector};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::gate::{kalman_innovation, GateCounts, GatedStep, InnovationGate};
-use crate::filter::time_update::{check_predicted, predict_raw};
+use crate::filter::time_update::{check_predicted, predict_raw, predicted_error};
 use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{all_finite, check_finite, symmetrize};
 use crate::model::LinearSystem;
-use crate::CovarianceUpdate;
+use crate::{CovarianceForm, CovarianceUpdate};
 use crate::{Error, Real, Result};
 
 /// Kalman filter on `NX` states.
 ///
 /// The measurement dimension is a parameter of each update, so one filter can take
 /// measurements of different sizes.
+///
+/// `F` is where the covariance form is decided: by default at run time (a
+/// [`CovarianceUpdate`] the filter holds, Joseph unless
+/// [`KalmanFilter::with_covariance_update`] says otherwise); with [`crate::JosephForm`] or
+/// [`crate::StandardForm`] ([`KalmanFilter::with_form`]) at compile time, so that the filter's
+/// code contains that form only (what a microcontroller's flash wants). The same form gives
+/// the same bits either way.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct KalmanFilter<T: Real, const NX: usize> {
+pub struct KalmanFilter<T: Real, const NX: usize, F: CovarianceForm = CovarianceUpdate> {
     est: Estimate<T, NX>,
-    form: CovarianceUpdate,
+    form: F,
     nis: T,
 }
 
@@ -41,6 +48,26 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         self.form = form;
         self
     }
+}
+
+impl<T: Real, const NX: usize, F: CovarianceForm> KalmanFilter<T, NX, F> {
+    /// The same filter with its covariance form decided by `form`'s type: a
+    /// [`CovarianceUpdate`] (run time) or [`crate::JosephForm`] / [`crate::StandardForm`]
+    /// (compile time).
+    #[must_use]
+    pub fn with_form<G: CovarianceForm>(self, form: G) -> KalmanFilter<T, NX, G> {
+        KalmanFilter {
+            est: self.est,
+            form,
+            nis: self.nis,
+        }
+    }
+
+    /// The covariance form the updates use.
+    #[inline]
+    pub fn covariance_update(&self) -> CovarianceUpdate {
+        self.form.form()
+    }
 
     /// Current estimate x̂ and error covariance P.
     #[inline]
@@ -57,7 +84,8 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
 
     /// Overwrites estimate and covariance (validated like [`KalmanFilter::new`]).
     pub fn reset(&mut self, x: SVector<T, NX>, p: SMatrix<T, NX, NX>) -> Result<()> {
-        *self = Self::new(x, p)?.with_covariance_update(self.form);
+        self.est = Estimate::new(x, p)?;
+        self.nis = T::zero();
         Ok(())
     }
 
@@ -122,7 +150,7 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
             c,
             &symmetrize(r),
             y,
-            self.form,
+            self.form.form(),
         )?;
         self.est = Estimate::trusted(x, p);
         self.nis = nis;
@@ -163,7 +191,7 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
             &model.c(k),
             &model.measurement_cov(k),
             y,
-            self.form,
+            self.form.form(),
         );
         #[cfg(not(simd_lanes))]
         let lanes = None;
@@ -250,20 +278,25 @@ impl<T: Real, const NX: usize> KalmanFilter<T, NX> {
         if let Some(gu) = gu {
             x_pred += gu;
         }
-        kalman_update_scalar(
+        let out = kalman_update_scalar(
             &x_pred,
             &p_pred,
             &model.c(k),
             &model.measurement_cov(k),
             y,
-            self.form,
-        )
-        .map_err(|e| check_predicted(&x_pred, &p_pred).err().unwrap_or(e))
+            self.form.form(),
+        );
+        // The prediction's error first (see `step`); inlined, so that a caller that only asks
+        // whether the step succeeded computes neither.
+        match out {
+            Ok(out) => Ok(out),
+            Err(e) => Err(predicted_error(&x_pred, &p_pred).unwrap_or(e)),
+        }
     }
 }
 
-impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Estimator<T, NX>
-    for OnModel<M, KalmanFilter<T, NX>, NY>
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>, F: CovarianceForm>
+    Estimator<T, NX> for OnModel<M, KalmanFilter<T, NX, F>, NY>
 {
     type Measurement = SVector<T, NY>;
 
@@ -280,8 +313,8 @@ impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> Esti
 }
 
 /// The gated step: `y_k` is used iff the gate admits it.
-impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>> GatedStep<T, NX>
-    for OnModel<M, KalmanFilter<T, NX>, NY>
+impl<T: Real, const NX: usize, const NY: usize, M: LinearSystem<T, NX, NY>, F: CovarianceForm>
+    GatedStep<T, NX> for OnModel<M, KalmanFilter<T, NX, F>, NY>
 {
     fn step_gated(
         &mut self,
@@ -330,7 +363,7 @@ pub(crate) fn kalman_update_scalar<T: Real, const NX: usize, const NY: usize>(
     // G = P Cᵀ, S = C G + R. K = G S⁻¹ by an L D Lᵀ solve; S not PD means R or P is broken.
     // One factor serves the gain and the NIS.
     let g = small::mul_t(p, c);
-    let s = small::sym_mul_t_add(c, &g.transpose(), r);
+    let s = small::sym_mul_add(c, &g, r);
     let chol = SmallLdl::new(&s, "innovation covariance")?;
     let k = chol.solve_right(&g);
     let nu = y - small::mul_vec(c, x);
@@ -340,8 +373,8 @@ pub(crate) fn kalman_update_scalar<T: Real, const NX: usize, const NY: usize>(
         // (I − KC) P is formed as P − K (C P) = P − K Gᵀ: the same product, associated so
         // that it costs NX²·NY multiplications instead of NX³.
         CovarianceUpdate::Joseph => {
-            let i_kc = SMatrix::<T, NX, NX>::identity() - small::mul(&k, c);
-            let i_kc_p = p - small::mul_t(&k, &g);
+            let i_kc = small::identity_sub_mul(&k, c);
+            let i_kc_p = small::sub_mul_t(p, &k, &g);
             small::sym_mul_t_add(&i_kc_p, &i_kc, &small::congruence(&k, r))
         }
         // P − K Gᵀ (= (I − KC) P); K Gᵀ = G S⁻¹ Gᵀ is symmetric for the optimal gain.
@@ -349,24 +382,22 @@ pub(crate) fn kalman_update_scalar<T: Real, const NX: usize, const NY: usize>(
     };
     // NIS = νᵀ S⁻¹ ν with the same factor. A validated factor has pivots above the
     // singularity floor, so a non-finite K or NIS can only come from non-finite inputs and is
-    // caught by the checks on x⁺, P⁺ and the NIS.
+    // caught by the checks on x⁺, P⁺ and the NIS. The error names the first that is not
+    // finite, from the same three tests: a caller that only asks whether the update succeeded
+    // computes no name.
     let nis = chol.mahalanobis(&nu);
-    if !(all_finite(&x_new) && all_finite(&p_new) && nis.finite()) {
-        return Err(update_error(&x_new, &p_new));
+    let (x_ok, p_ok) = (all_finite(&x_new), all_finite(&p_new));
+    if !(x_ok && p_ok && nis.finite()) {
+        let what = if !x_ok {
+            "updated state"
+        } else if !p_ok {
+            "updated covariance"
+        } else {
+            "innovation"
+        };
+        return Err(Error::NonFinite { what });
     }
     Ok((x_new, p_new, nis))
-}
-
-#[cold]
-fn update_error<T: Real, const NX: usize>(x: &SVector<T, NX>, p: &SMatrix<T, NX, NX>) -> Error {
-    let what = if !all_finite(x) {
-        "updated state"
-    } else if !all_finite(p) {
-        "updated covariance"
-    } else {
-        "innovation"
-    };
-    Error::NonFinite { what }
 }
 
 #[cfg(test)]

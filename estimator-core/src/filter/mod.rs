@@ -23,7 +23,7 @@ pub mod occlusion;
 pub mod time_update;
 pub mod tobit;
 
-pub use crate::CovarianceUpdate;
+pub use crate::{CovarianceForm, CovarianceUpdate, JosephForm, StandardForm};
 pub use coupled_kf::CoupledNoiseKf;
 pub use gate::{GateCounts, Gated, GatedStep, InnovationGate};
 pub use independent_kf::IndependentNoiseKf;

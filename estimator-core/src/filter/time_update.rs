@@ -5,10 +5,10 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::linalg::all_finite;
 use crate::linalg::small;
-use crate::linalg::{all_finite, check_finite};
 use crate::model::LinearSystem;
-use crate::{Real, Result};
+use crate::{Error, Real, Result};
 
 /// `(A x, A P Aᵀ + Q)`, unchecked. `P⁻` is exactly symmetric (upper triangle computed and
 /// mirrored; `Q`'s upper triangle is read).
@@ -54,8 +54,27 @@ pub fn check_predicted<T: Real, const NX: usize>(
     x: &SVector<T, NX>,
     p: &SMatrix<T, NX, NX>,
 ) -> Result<()> {
-    check_finite(x, "predicted state")?;
-    check_finite(p, "predicted covariance")
+    predicted_error(x, p).map_or(Ok(()), Err)
+}
+
+/// [`check_predicted`]'s error, `None` for a finite prediction. Always inlined: where only the
+/// failure matters (not its name), the tests are dead code and vanish.
+#[inline(always)]
+pub(crate) fn predicted_error<T: Real, const NX: usize>(
+    x: &SVector<T, NX>,
+    p: &SMatrix<T, NX, NX>,
+) -> Option<Error> {
+    if !all_finite(x) {
+        Some(Error::NonFinite {
+            what: "predicted state",
+        })
+    } else if !all_finite(p) {
+        Some(Error::NonFinite {
+            what: "predicted covariance",
+        })
+    } else {
+        None
+    }
 }
 
 #[cfg(test)]

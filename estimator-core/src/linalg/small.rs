@@ -1,17 +1,44 @@
 //! Kernels for the small symmetric products of a Kalman step.
 //!
-//! Plain loops over const dimensions: at the papers' sizes (n ≤ 4) LLVM unrolls them fully
-//! and keeps the operands in registers, which nalgebra's generic products do not manage.
+//! Plain loops over const dimensions: at the papers' sizes (n ≤ 4) a build optimised for speed
+//! unrolls them fully and keeps the operands in registers, which nalgebra's generic products
+//! do not manage; a build optimised for size (the firmware) keeps the loops over the entries
+//! and runs each entry's sum written out (`dot`).
 //! Every symmetric result is computed on its upper triangle once and mirrored, so it is
 //! exactly symmetric by construction: no symmetrisation pass, no asymmetry test afterwards.
 //!
 //! Sums start from their first product rather than from zero: `0 + x` cannot be folded away
-//! (it turns `−0` into `+0`), and at these sizes one add in four is worth saving.
+//! (it turns `−0` into `+0`), and at these sizes one add in four is worth saving. Every entry
+//! is one such sum over `k` ascending (`dot`), whatever the kernel, so a product formed with
+//! a transposed operand read in place has the bits of the product of the transposed copy.
 
 use nalgebra::{SMatrix, SVector};
 
 use super::all_finite;
 use crate::{Error, Real, Result};
+
+/// `Σ_k a(k) b(k)` over `k = 0..K` ascending, starting from the first product: the one sum
+/// every kernel here forms. The first four terms are written out: a build optimised for size
+/// (the firmware's `opt-level = "s"`) keeps a loop of a few iterations as a loop, whose
+/// counting and addressing then cost more instructions than its products; written out, the
+/// same sum is both shorter and faster. Optimised for speed, LLVM unrolls the loop the same.
+#[inline(always)]
+pub(crate) fn dot<T: Real, const K: usize>(a: impl Fn(usize) -> T, b: impl Fn(usize) -> T) -> T {
+    let mut acc = a(0) * b(0);
+    if K > 1 {
+        acc += a(1) * b(1);
+    }
+    if K > 2 {
+        acc += a(2) * b(2);
+    }
+    if K > 3 {
+        acc += a(3) * b(3);
+    }
+    for k in 4..K {
+        acc += a(k) * b(k);
+    }
+    acc
+}
 
 /// `M v`.
 #[inline]
@@ -19,13 +46,7 @@ pub fn mul_vec<T: Real, const R: usize, const C: usize>(
     m: &SMatrix<T, R, C>,
     v: &SVector<T, C>,
 ) -> SVector<T, R> {
-    SVector::from_fn(|i, _| {
-        let mut acc = m[(i, 0)] * v[0];
-        for k in 1..C {
-            acc += m[(i, k)] * v[k];
-        }
-        acc
-    })
+    SVector::from_fn(|i, _| dot::<T, C>(|k| m[(i, k)], |k| v[k]))
 }
 
 /// `A B`.
@@ -34,39 +55,53 @@ pub fn mul<T: Real, const R: usize, const K: usize, const C: usize>(
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, K, C>,
 ) -> SMatrix<T, R, C> {
-    SMatrix::from_fn(|i, j| {
-        let mut acc = a[(i, 0)] * b[(0, j)];
-        for k in 1..K {
-            acc += a[(i, k)] * b[(k, j)];
-        }
-        acc
-    })
+    SMatrix::from_fn(|i, j| dot::<T, K>(|k| a[(i, k)], |k| b[(k, j)]))
 }
 
-/// `A Bᵀ` (the transpose is a register shuffle once inlined; the products are [`mul`]'s).
+/// `A Bᵀ` (`B` read in place; the products and sums are [`mul`]'s with `Bᵀ`).
 #[inline]
 pub fn mul_t<T: Real, const R: usize, const K: usize, const C: usize>(
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, C, K>,
 ) -> SMatrix<T, R, C> {
-    mul(a, &b.transpose())
+    SMatrix::from_fn(|i, j| dot::<T, K>(|k| a[(i, k)], |k| b[(j, k)]))
 }
 
-/// `A Bᵀ (+ Z)` for a product known to be symmetric: the upper triangle computed once and
-/// mirrored, `Z`'s upper triangle added.
+/// `Z − A Bᵀ` (each entry `z_ij − (A Bᵀ)_ij`, the product as [`mul_t`] forms it).
 #[inline]
-fn sym_upper<T: Real, const R: usize, const K: usize>(
+pub fn sub_mul_t<T: Real, const R: usize, const K: usize, const C: usize>(
+    z: &SMatrix<T, R, C>,
     a: &SMatrix<T, R, K>,
-    b: &SMatrix<T, R, K>,
+    b: &SMatrix<T, C, K>,
+) -> SMatrix<T, R, C> {
+    SMatrix::from_fn(|i, j| z[(i, j)] - dot::<T, K>(|k| a[(i, k)], |k| b[(j, k)]))
+}
+
+/// `I − A B` (each entry `δ_ij − (A B)_ij`, with `δ_ij` the identity's 1 or 0 and the product
+/// as [`mul`] forms it).
+#[inline]
+pub fn identity_sub_mul<T: Real, const R: usize, const K: usize>(
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, K, R>,
+) -> SMatrix<T, R, R> {
+    SMatrix::from_fn(|i, j| {
+        let delta = if i == j { T::one() } else { T::zero() };
+        delta - dot::<T, K>(|k| a[(i, k)], |k| b[(k, j)])
+    })
+}
+
+/// `out_ij = Σ_k a(i, k) b(j, k) (+ z_ij)` for a product known to be symmetric: the upper
+/// triangle computed once and mirrored, `Z`'s upper triangle added.
+#[inline(always)]
+fn sym_upper<T: Real, const R: usize, const K: usize>(
+    a: impl Fn(usize, usize) -> T,
+    b: impl Fn(usize, usize) -> T,
     z: Option<&SMatrix<T, R, R>>,
 ) -> SMatrix<T, R, R> {
     let mut out = SMatrix::<T, R, R>::zeros();
     for i in 0..R {
         for j in i..R {
-            let mut acc = a[(i, 0)] * b[(j, 0)];
-            for k in 1..K {
-                acc += a[(i, k)] * b[(j, k)];
-            }
+            let mut acc = dot::<T, K>(|k| a(i, k), |k| b(j, k));
             if let Some(z) = z {
                 acc += z[(i, j)];
             }
@@ -84,7 +119,7 @@ pub fn sym_mul_t<T: Real, const R: usize, const K: usize>(
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, R, K>,
 ) -> SMatrix<T, R, R> {
-    sym_upper(a, b, None)
+    sym_upper::<T, R, K>(|i, k| a[(i, k)], |j, k| b[(j, k)], None)
 }
 
 /// [`sym_mul_t`] plus a symmetric `Z`, of which only the upper triangle is read.
@@ -94,7 +129,18 @@ pub fn sym_mul_t_add<T: Real, const R: usize, const K: usize>(
     b: &SMatrix<T, R, K>,
     z: &SMatrix<T, R, R>,
 ) -> SMatrix<T, R, R> {
-    sym_upper(a, b, Some(z))
+    sym_upper::<T, R, K>(|i, k| a[(i, k)], |j, k| b[(j, k)], Some(z))
+}
+
+/// `A B + Z` for a product known to be symmetric (e.g. `C · P Cᵀ + R`), `B` read in place:
+/// the bits of [`sym_mul_t_add`] with `Bᵀ`.
+#[inline]
+pub fn sym_mul_add<T: Real, const R: usize, const K: usize>(
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, K, R>,
+    z: &SMatrix<T, R, R>,
+) -> SMatrix<T, R, R> {
+    sym_upper::<T, R, K>(|i, k| a[(i, k)], |j, k| b[(k, j)], Some(z))
 }
 
 /// `M Σ Mᵀ` for symmetric `Σ` (exactly symmetric result).
@@ -177,7 +223,9 @@ impl<T: Real, const N: usize> SmallLdl<T, N> {
         Ok(Self { l, d, inv_d })
     }
 
-    #[cold]
+    /// The refusal's error. Inlined (it only reads `s`), so that where the error's kind is not
+    /// looked at, the finiteness test is dead code and vanishes.
+    #[inline(always)]
     fn refusal(s: &SMatrix<T, N, N>, what: &'static str) -> Error {
         if all_finite(s) {
             Error::NotPositiveDefinite { what }

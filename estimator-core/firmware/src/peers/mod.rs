@@ -25,7 +25,7 @@ pub use ads::Ads;
 pub use mk::{mk3x2, mk4x2, Mk};
 pub use tk::Tk;
 
-use estimator_core::filter::{CovarianceUpdate, KalmanFilter};
+use estimator_core::filter::{CovarianceForm, JosephForm, KalmanFilter, StandardForm};
 use estimator_core::model::{LinearModel, LinearSystem};
 use estimator_core::Error;
 use nalgebra::{Matrix2x4, Matrix4, SMatrix, SVector, Vector2};
@@ -122,36 +122,37 @@ pub trait KfStep<const NX: usize> {
     fn p(&self, i: usize, j: usize) -> f32;
 }
 
-/// The core's Kalman filter (Joseph form, every input and result validated) on the problem's
-/// model.
+/// The core's Kalman filter (every input and result validated) on the problem's model, its
+/// covariance form fixed at compile time (`F`: Joseph by default), so that the binary links
+/// that form only.
 #[derive(Clone, Debug)]
-pub struct Ours<const NX: usize> {
+pub struct Ours<const NX: usize, F: CovarianceForm = JosephForm> {
     /// The model.
     pub model: LinearModel<f32, NX, NX, NY, NY>,
     /// The filter.
-    pub kf: KalmanFilter<f32, NX>,
+    pub kf: KalmanFilter<f32, NX, F>,
 }
 
 impl<const NX: usize> Ours<NX> {
-    /// The filter at the problem's prior.
+    /// The filter (Joseph form) at the problem's prior.
     pub fn new(p: &Problem<NX>) -> Result<Self, Error> {
         Ok(Self {
             model: p.model,
-            kf: KalmanFilter::new(p.x0, p.p0)?,
+            kf: KalmanFilter::new(p.x0, p.p0)?.with_form(JosephForm),
         })
     }
 
     /// The same filter with the optimal-gain covariance form P − K Gᵀ
-    /// ([`CovarianceUpdate::Standard`]).
-    pub fn standard(self) -> Self {
-        Self {
-            kf: self.kf.with_covariance_update(CovarianceUpdate::Standard),
-            ..self
+    /// ([`StandardForm`]).
+    pub fn standard(self) -> Ours<NX, StandardForm> {
+        Ours {
+            model: self.model,
+            kf: self.kf.with_form(StandardForm),
         }
     }
 }
 
-impl<const NX: usize> KfStep<NX> for Ours<NX> {
+impl<const NX: usize, F: CovarianceForm> KfStep<NX> for Ours<NX, F> {
     #[inline(never)]
     fn step(&mut self, k: usize, y: &Vector2<f32>) -> bool {
         self.kf.step(&self.model, k, y).is_ok()
