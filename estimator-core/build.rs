@@ -1,13 +1,25 @@
-//! Emits one short cfg, `simd_lanes`, for "the `simd` feature is on and the target has the
-//! SIMD lanes of `linalg::lanes`" (x86-64, AArch64), so that the code says `cfg(simd_lanes)`
-//! instead of repeating the feature-and-architecture condition. The Cortex-M4 (thumbv7em) has
-//! no SIMD floating point: the alias is off there whatever the features.
+//! Emits two short cfgs:
+//!
+//! * `simd_lanes` for "the `simd` feature is on and the target has the SIMD lanes of
+//!   `linalg::lanes`" (x86-64, AArch64), so that the code says `cfg(simd_lanes)` instead of
+//!   repeating the feature-and-architecture condition. The Cortex-M4 (thumbv7em) has no SIMD
+//!   floating point: the alias is off there whatever the features.
+//! * `small_code` for "this build is optimised for size" (the profile's `opt-level` is `"s"`
+//!   or `"z"`, as the firmware's is): a few kernels of `linalg::small` that a Kalman step calls
+//!   twice with the same shapes are then kept out of line, one copy for both calls, instead
+//!   of inlined twice. The code and its results are the same either way.
 
 use std::env;
 
 fn main() {
     println!("cargo:rustc-check-cfg=cfg(simd_lanes)");
+    println!("cargo:rustc-check-cfg=cfg(small_code)");
     println!("cargo:rerun-if-changed=build.rs");
+    // Cargo gives build scripts the opt-level this package is compiled with.
+    let opt = env::var("OPT_LEVEL").unwrap_or_default();
+    if matches!(opt.as_str(), "s" | "z") {
+        println!("cargo:rustc-cfg=small_code");
+    }
     // Cargo sets CARGO_FEATURE_<NAME> for every enabled feature and CARGO_CFG_TARGET_ARCH to
     // the architecture being compiled for (not the host's).
     let simd = env::var_os("CARGO_FEATURE_SIMD").is_some();

@@ -64,17 +64,14 @@ pub(crate) fn predicted_error<T: Real, const NX: usize>(
     x: &SVector<T, NX>,
     p: &SMatrix<T, NX, NX>,
 ) -> Option<Error> {
-    if !all_finite(x) {
-        Some(Error::NonFinite {
-            what: "predicted state",
-        })
-    } else if !all_finite(p) {
-        Some(Error::NonFinite {
-            what: "predicted covariance",
-        })
+    // Both tests without a branch between them: dead together where the error is.
+    let (x_ok, p_ok) = (all_finite(x), all_finite(p));
+    let what = if !x_ok {
+        "predicted state"
     } else {
-        None
-    }
+        "predicted covariance"
+    };
+    (!(x_ok && p_ok)).then_some(Error::NonFinite { what })
 }
 
 #[cfg(test)]

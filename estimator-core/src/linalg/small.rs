@@ -105,8 +105,15 @@ fn sym_upper<T: Real, const R: usize, const K: usize>(
             if let Some(z) = z {
                 acc += z[(i, j)];
             }
-            out[(i, j)] = acc;
-            out[(j, i)] = acc;
+            // (i, j) and (j, i) are in bounds (i ≤ j < R), which the compiler does not see at
+            // opt-level "s": indexing kept a panic (its message and location in the image);
+            // `get_mut` has none.
+            if let Some(e) = out.get_mut((i, j)) {
+                *e = acc;
+            }
+            if let Some(e) = out.get_mut((j, i)) {
+                *e = acc;
+            }
         }
     }
     out
@@ -123,7 +130,12 @@ pub fn sym_mul_t<T: Real, const R: usize, const K: usize>(
 }
 
 /// [`sym_mul_t`] plus a symmetric `Z`, of which only the upper triangle is read.
-#[inline]
+///
+/// A Kalman step calls it twice with the same shapes (`A P · Aᵀ + Q` and the Joseph form's
+/// `(P − K Gᵀ)(I − K C)ᵀ + K R Kᵀ`): built for size (`small_code`, see `build.rs`), one copy
+/// out of line serves both.
+#[cfg_attr(small_code, inline(never))]
+#[cfg_attr(not(small_code), inline)]
 pub fn sym_mul_t_add<T: Real, const R: usize, const K: usize>(
     a: &SMatrix<T, R, K>,
     b: &SMatrix<T, R, K>,
