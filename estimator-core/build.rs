@@ -5,9 +5,10 @@
 //!   repeating the feature-and-architecture condition. The Cortex-M4 (thumbv7em) has no SIMD
 //!   floating point: the alias is off there whatever the features.
 //! * `small_code` for "this build is optimised for size" (the profile's `opt-level` is `"s"`
-//!   or `"z"`, as the firmware's is): a few kernels of `linalg::small` that a Kalman step calls
-//!   twice with the same shapes are then kept out of line, one copy for both calls, instead
-//!   of inlined twice. The code and its results are the same either way.
+//!   or `"z"`, as the firmware's is): a kernel of `linalg::small` that a Kalman step calls
+//!   twice with the same shapes is then one copy out of line instead of inlined twice, an
+//!   error's finiteness test is inlined where nobody may read it, and `linalg::all_finite`
+//!   reads the matrix as a slice. The results are the same either way.
 
 use std::env;
 

@@ -235,9 +235,12 @@ impl<T: Real, const N: usize> SmallLdl<T, N> {
         Ok(Self { l, d, inv_d })
     }
 
-    /// The refusal's error. Inlined (it only reads `s`), so that where the error's kind is not
-    /// looked at, the finiteness test is dead code and vanishes.
-    #[inline(always)]
+    /// The refusal's error. Built for size (`small_code`, see `build.rs`) it is inlined (it
+    /// only reads `s`), so that where the error's kind is not looked at, the finiteness test
+    /// is dead code and vanishes; built for speed it stays cold and out of line (inlined, it
+    /// cost the SIMD lanes' callers a few instructions per step on x86-64).
+    #[cfg_attr(small_code, inline(always))]
+    #[cfg_attr(not(small_code), cold)]
     fn refusal(s: &SMatrix<T, N, N>, what: &'static str) -> Error {
         if all_finite(s) {
             Error::NotPositiveDefinite { what }
