@@ -148,17 +148,37 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         Ok((samples, rows)) => {
             let _ = writeln!(
                 md,
-                "Where this build's CPU time goes: `perf record -e cpu-clock -F {PERF_HZ}` of                  the command with `--runs {runs} --threads 1`, {samples} samples, each function's                  own time (not what it calls), grouped. Sampled, so statistical: a share s is                  known to ±2·√(s(1 − s)/{samples}) (under 1.6 points here). Instructions are                  not time: a chain of dependent divisions costs their latency, and the                  continued fractions of `ln Q` are such chains.\n\n                 | part | share of the CPU time |\n|---|---:|"
+                "Where this build's CPU time goes: `perf record -e cpu-clock -F {PERF_HZ}` of \
+                 the command with `--runs {runs} --threads 1`, {samples} samples, each \
+                 function's own time (not what it calls; what the compiler inlined counts \
+                 where it was inlined), grouped. Sampled, so statistical: a share s is known \
+                 to ±2·√(s(1 − s)/{samples}) (under 2 points here). Instructions are not \
+                 time: a chain of dependent divisions costs their latency, and the continued \
+                 fractions of `ln Q` are such chains.\n\n\
+                 | part | share of the CPU time |\n|---|---:|"
             );
             for (name, share) in &rows {
                 let _ = writeln!(md, "| {name} | {:.1} % |", 100.0 * share);
             }
             let special = rows.first().map_or(0.0, |r| r.1);
+            let rest_cpu = cur_cpu * (1.0 - special);
             let _ = writeln!(
                 md,
-                "\nThe floor this sets: with the same special-function evaluations (which the                  bit-identical JSON requires: the same `erfc`, `exp`, `ln` and continued                  fractions on the same arguments) and everything else taking no time at all,                  the command would take {:.2} CPU s, {:.1}× less than `{BASELINE}`. The 4×                  target needs the special functions themselves evaluated faster (interleaved                  across runs, or to fewer digits, which changes the JSON).\n",
+                "\nWhat this leaves for the target: the special functions alone take {:.2} CPU \
+                 s here; evaluated as they are (the bit-identical JSON needs the same `erfc`, \
+                 `exp`, `ln` and continued fractions on the same arguments), the command \
+                 could at best be {:.1}× faster than `{BASELINE}`, with everything else free. \
+                 4× ({:.2} CPU s) leaves {:.2} CPU s for everything else, which takes {:.2} \
+                 now: {:.0} % of it would have to go. Within the special functions, only \
+                 work that cannot change a bit can go (terms proved not to count, as the \
+                 interval sums already skip; latency hidden by evaluating independent \
+                 arguments side by side, as `gauss::ln_sf_pair` does).\n",
                 cur_cpu * special,
-                base_cpu / (cur_cpu * special)
+                base_cpu / (cur_cpu * special),
+                base_cpu / 4.0,
+                (base_cpu / 4.0 - cur_cpu * special).max(0.0),
+                rest_cpu,
+                100.0 * (1.0 - (base_cpu / 4.0 - cur_cpu * special).max(0.0) / rest_cpu),
             );
         }
         Err(e) => {
@@ -174,12 +194,16 @@ const PERF_HZ: u32 = 4999;
 /// The groups of [`cpu_profile`], by symbol or library; the first is the special functions.
 const TIME_PARTS: &[(&str, &[&str])] = &[
     (
-        "special functions (`estimator_core::gauss`: `ln Q` and its continued fractions, \
-         truncated moments; `libm`: `erfc`, `exp`, `ln`, `ln_1p`)",
-        &["estimator_core::gauss::", "libm::"],
+        "special functions (`estimator_core::gauss`: `ln Q` and its continued fractions; \
+         the truncated normal's moments; `libm`: `erfc`, `exp`, `ln`, `ln_1p`)",
+        &[
+            "estimator_core::gauss::",
+            "libm::",
+            "estimator_core::filter::occlusion::truncnorm",
+        ],
     ),
     (
-        "the estimators' own code (occlusion filters, interval sums, truncations)",
+        "the occlusion estimators' own code (interval sums, mixtures, updates)",
         &["estimator_core::filter::occlusion::"],
     ),
     (
