@@ -7,7 +7,7 @@
 #   benches/run.sh                 # full run (~15-20 min on 2 cores; the first also builds
 #                                  # two extra kf_interleaved variants, ~3 min each)
 #   benches/run.sh --quick         # short runs, indicative only
-#   benches/run.sh --skip firmware,eval       # parts: criterion,icount,firmware,ipc,pipeline,bridge,eval-baseline,eval
+#   benches/run.sh --skip firmware,eval       # parts: criterion,icount,firmware,pipeline,bridge,eval-baseline,eval
 #
 # Needs valgrind (apt-get install valgrind); the firmware part needs what .ci/firmware needs
 # (qemu-system-arm, the thumbv7em-none-eabihf target) and is reported as not run otherwise.

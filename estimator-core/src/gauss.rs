@@ -112,6 +112,46 @@ pub fn ln_sf<T: Real>(x: T) -> T {
     }
 }
 
+/// [`ln_sf`] at two points, bit for bit. Each continued fraction of the upper tail is a
+/// chain of dependent divisions whose latency, not its instruction count, is the cost; two
+/// interleaved overlap.
+#[must_use]
+pub fn ln_sf_pair<T: Real>(a: T, b: T) -> (T, T) {
+    let cf = T::lit(CF_THRESHOLD);
+    if a > cf && b > cf {
+        let (ta, tb) = cf_tail_pair(a, b);
+        (ln_pdf(a) - (a + ta).ln(), ln_pdf(b) - (b + tb).ln())
+    } else {
+        (ln_sf(a), ln_sf(b))
+    }
+}
+
+/// [`cf_tail`] of `a` and of `b`, each with its own number of terms, the two recurrences
+/// side by side: the same operations per point as two calls.
+#[inline]
+fn cf_tail_pair<T: Real>(a: T, b: T) -> (T, T) {
+    let (na, nb) = (cf_terms(a.to_f64()), cf_terms(b.to_f64()));
+    let (mut ta, mut tb) = (T::zero(), T::zero());
+    let mut n = na.max(nb);
+    // The point with more terms goes first, alone, until the other's terms begin.
+    while n > na.min(nb) {
+        let c = T::lit(n as f64);
+        if n <= na {
+            ta = c / (a + ta);
+        } else {
+            tb = c / (b + tb);
+        }
+        n -= 1;
+    }
+    while n >= 2 {
+        let c = T::lit(n as f64);
+        ta = c / (a + ta);
+        tb = c / (b + tb);
+        n -= 1;
+    }
+    (T::one() / (a + ta), T::one() / (b + tb))
+}
+
 /// `ln Φ(x)` without underflow.
 #[inline]
 #[must_use]
@@ -127,8 +167,7 @@ pub fn ln_interval_prob<T: Real>(a: T, b: T) -> T {
         return -T::one() / T::zero();
     }
     if a > T::zero() {
-        let la = ln_sf(a);
-        let lb = ln_sf(b);
+        let (la, lb) = ln_sf_pair(a, b);
         la + (-(lb - la).exp()).ln_1p()
     } else if b < T::zero() {
         ln_interval_prob(-b, -a)
@@ -164,6 +203,16 @@ impl<T: Real> LogSumExp<T> {
         if x == -T::one() / T::zero() || self.top.partial_cmp(&self.top).is_none() {
             return;
         }
+        if x > self.top && x.finite() {
+            // `sum · e^{top − x} + e^0` with `e^0 = 1` exactly, and nothing to rescale
+            // before the first finite term: the same bits without one or two `exp`s.
+            if self.sum != T::zero() {
+                self.sum *= (self.top - x).exp();
+            }
+            self.top = x;
+            self.sum += T::one();
+            return;
+        }
         if x > self.top {
             self.sum *= (self.top - x).exp();
             self.top = x;
@@ -180,6 +229,10 @@ impl<T: Real> LogSumExp<T> {
             } else {
                 -T::one() / T::zero()
             };
+        }
+        // ln 1 = 0 exactly: one term, or every other one too small to count.
+        if self.sum == T::one() {
+            return self.top + T::zero();
         }
         self.top + self.sum.ln()
     }
@@ -212,6 +265,117 @@ pub fn log_sum_exp<T: Real>(xs: &[T]) -> T {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The pair is the two single evaluations bit for bit, on both sides of the continued
+    /// fraction's threshold and of its term counts, at ∞, in f64 and f32.
+    #[test]
+    fn ln_sf_pair_is_two_ln_sf_bit_for_bit() {
+        let pts = [
+            0.0,
+            0.3,
+            2.0,
+            3.999,
+            4.0,
+            4.0001,
+            4.7,
+            5.0,
+            5.5,
+            6.0,
+            7.9,
+            8.0,
+            12.0,
+            38.0,
+            1e3,
+            f64::INFINITY,
+            -1.0,
+            f64::NAN,
+        ];
+        for &a in &pts {
+            for &b in &pts {
+                let (la, lb) = ln_sf_pair(a, b);
+                assert_eq!(la.to_bits(), ln_sf(a).to_bits(), "({a}, {b})");
+                assert_eq!(lb.to_bits(), ln_sf(b).to_bits(), "({a}, {b})");
+                let (fa, fb) = ln_sf_pair(a as f32, b as f32);
+                assert_eq!(fa.to_bits(), ln_sf(a as f32).to_bits(), "f32 ({a}, {b})");
+                assert_eq!(fb.to_bits(), ln_sf(b as f32).to_bits(), "f32 ({a}, {b})");
+            }
+        }
+    }
+
+    /// The push and value shortcuts (`e^0 = 1`, `ln 1 = 0`, nothing to rescale before the
+    /// first term) give the textbook recursion's bits, in f64 and f32, for sequences with
+    /// ties, ±∞, NaN and terms far apart.
+    #[test]
+    fn log_sum_exp_shortcuts_are_bit_identical() {
+        fn textbook<T: Real>(xs: &[T]) -> T {
+            let (mut top, mut sum) = (-T::one() / T::zero(), T::zero());
+            for &x in xs {
+                if x.partial_cmp(&x).is_none() {
+                    top = x;
+                    continue;
+                }
+                if x == -T::one() / T::zero() || top.partial_cmp(&top).is_none() {
+                    continue;
+                }
+                if x > top {
+                    sum *= (top - x).exp();
+                    top = x;
+                }
+                sum += (x - top).exp();
+            }
+            if sum == T::zero() {
+                return if top.partial_cmp(&top).is_none() {
+                    top
+                } else {
+                    -T::one() / T::zero()
+                };
+            }
+            top + sum.ln()
+        }
+        let pool = [
+            -0.5,
+            -3.0,
+            -3.0,
+            -41.0,
+            -800.0,
+            0.0,
+            -0.0,
+            -1e-300,
+            -12.25,
+            -2.0,
+            -39.9,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NAN,
+            -7.0e3,
+            -1.5,
+        ];
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut checked = 0;
+        for len in 0..=7 {
+            for _ in 0..400 {
+                let xs: heapless::Vec<f64, 8> = (0..len)
+                    .map(|_| {
+                        state ^= state << 13;
+                        state ^= state >> 7;
+                        state ^= state << 17;
+                        pool[(state % pool.len() as u64) as usize]
+                    })
+                    .collect();
+                let mut a = LogSumExp::default();
+                let mut b = LogSumExp::<f32>::default();
+                for &x in &xs {
+                    a.push(x);
+                    b.push(x as f32);
+                }
+                let xs32: heapless::Vec<f32, 8> = xs.iter().map(|&x| x as f32).collect();
+                assert_eq!(a.value().to_bits(), textbook(&xs).to_bits(), "{xs:?}");
+                assert_eq!(b.value().to_bits(), textbook(&xs32).to_bits(), "{xs:?} f32");
+                checked += 1;
+            }
+        }
+        assert!(checked > 2000);
+    }
 
     /// Mills ratio R(z) = (1 − Φ(z))/φ(z) = ∫₀^∞ exp(−z s − s²/2) ds for z ≥ 0, by composite
     /// Simpson with Kahan summation: independent of erfc and of the continued fraction.

@@ -309,6 +309,10 @@ pub struct RunEstimator {
 }
 
 impl RunEstimator {
+    /// Records the estimator's diagnostics at `k`. An estimator reports the same names in the
+    /// same order at every k, so the n-th name of this call is looked up at index n first
+    /// (the same `&'static str` compares by address), and searched for only when it is not
+    /// there.
     fn record_diagnostics(
         &mut self,
         e: &dyn crate::Estimator,
@@ -317,13 +321,18 @@ impl RunEstimator {
         truth: &[f64],
     ) {
         let diags = &mut self.diagnostics;
-        // An estimator reports the same names in the same order at every k: the n-th name of
-        // this call is looked up at index n first (the same `&'static str` compares by
-        // address), and searched for only when it is not there.
         let mut next = 0;
         let mut sink = |name: &'static str, value| {
-            let slot = match diags.get(next) {
-                Some((n, _)) if core::ptr::eq(*n, name) || *n == name => next,
+            let slot = match diags.get_mut(next) {
+                Some((n, values)) if core::ptr::eq(*n, name) => {
+                    // The common case: no search, no second bounds check.
+                    if let Some(v) = values.get_mut(k) {
+                        *v = value;
+                    }
+                    next += 1;
+                    return;
+                }
+                Some((n, _)) if *n == name => next,
                 _ => match diags.iter().position(|(n, _)| *n == name) {
                     Some(i) => i,
                     None => {
@@ -370,9 +379,11 @@ pub fn run_one(
 
     // k = 0: the prior against x_0.
     let truth0 = sim.initial_truth();
-    let mut truth_nonfinite = u64::from(truth0[..nx].iter().any(|v| !v.is_finite()));
+    let scored = truth0[..nx].iter().all(|v| v.is_finite());
+    let mut truth_nonfinite = u64::from(!scored);
     for ((e, rec), j) in estimators.iter().zip(&mut records).zip(0..) {
-        record_estimate(&**e, rec, 0, &truth0[..nx], &mut xhat, &mut trajectory, j);
+        let t = &truth0[..nx];
+        record_estimate(&**e, rec, 0, t, scored, &mut xhat, &mut trajectory, j);
     }
     if let Some(t) = &mut trajectory {
         t.truth[..nx].copy_from_slice(&truth0[..nx]);
@@ -383,7 +394,8 @@ pub fn run_one(
     for k in 1..=options.horizon {
         let instant = sim.next_instant();
         let truth = &instant.truth[..nx];
-        truth_nonfinite += u64::from(truth.iter().any(|v| !v.is_finite()));
+        let scored = truth.iter().all(|v| v.is_finite());
+        truth_nonfinite += u64::from(!scored);
         for (o, counts) in instant.obs.iter().zip(&mut channel) {
             counts.count(o);
         }
@@ -430,7 +442,8 @@ pub fn run_one(
             };
             match e.step(k, obs) {
                 Ok(()) => {
-                    record_estimate(&**e, rec, k as usize, truth, &mut xhat, &mut trajectory, j)
+                    let k = k as usize;
+                    record_estimate(&**e, rec, k, truth, scored, &mut xhat, &mut trajectory, j)
                 }
                 Err(err) => {
                     rec.error = Some(format!("k = {k}: {err}"));
@@ -462,19 +475,21 @@ pub fn transport_lost(seed: u64, run: u64, seq: u64, p: f64) -> bool {
 
 /// Reads the estimate at `k`, records its squared error (or marks the run diverged when it is
 /// not finite), its diagnostics and, for the plotted run, the trajectory. A non-finite truth
-/// is no sample of the error: NaN is recorded there, which the reduction leaves out (one
-/// such instant would otherwise make every MSE of the report NaN, issue #20).
+/// is no sample of the error (`scored` false): NaN is recorded there, which the reduction
+/// leaves out (one such instant would otherwise make every MSE of the report NaN, issue #20).
+#[inline]
 fn record_estimate(
     e: &dyn crate::Estimator,
     rec: &mut RunEstimator,
     k: usize,
     truth: &[f64],
+    scored: bool,
     xhat: &mut [f64; MAX_NX],
     trajectory: &mut Option<Trajectory>,
     j: usize,
 ) {
     let nx = truth.len();
-    xhat.fill(f64::NAN);
+    xhat[..nx].fill(f64::NAN);
     e.estimate(&mut xhat[..]);
     let xhat = &xhat[..nx];
     if let Some(t) = trajectory {
@@ -487,13 +502,10 @@ fn record_estimate(
     }
     if let Some(sq) = &mut rec.sq_err {
         let len = sq.len() / nx;
-        let scored = truth.iter().all(|v| v.is_finite());
-        for i in 0..nx {
-            sq[k * nx + i] = if scored {
-                (truth[i] - xhat[i]).powi(2)
-            } else {
-                f64::NAN
-            };
+        if let Some(sq_k) = sq.get_mut(k * nx..(k + 1) * nx) {
+            for ((s, t), x) in sq_k.iter_mut().zip(truth).zip(xhat) {
+                *s = if scored { (t - x).powi(2) } else { f64::NAN };
+            }
         }
         rec.record_diagnostics(e, k, len, truth);
     }

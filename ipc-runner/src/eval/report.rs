@@ -302,15 +302,20 @@ impl Accumulator {
             acc.valid += 1;
             // NaN marks an instant without a sample (non-finite truth, `record_estimate`).
             let (mut run_sum, mut run_n) = (0.0, 0u64);
-            for k in 0..=t {
-                let sq_k = &sq[k * nx..][..nx];
+            let per_k = acc
+                .sum_sq
+                .chunks_exact_mut(nx)
+                .zip(sq.chunks_exact(nx))
+                .zip(&mut acc.n_k)
+                .take(t + 1);
+            for (k, ((sums, sq_k), n)) in per_k.enumerate() {
                 if sq_k[0].is_nan() {
                     continue;
                 }
-                for (s, v) in acc.sum_sq[k * nx..][..nx].iter_mut().zip(sq_k) {
+                for (s, v) in sums.iter_mut().zip(sq_k) {
                     *s += v;
                 }
-                acc.n_k[k] += 1;
+                *n += 1;
                 if k > 0 {
                     // Element by element: the same sum, bit for bit, as over the whole run.
                     for v in sq_k {
@@ -322,19 +327,23 @@ impl Accumulator {
             if run_n > 0 {
                 acc.run_avgs.push(run_sum / run_n as f64);
             }
-            for (name, values) in rec.diagnostics {
-                let slot = match acc.diag.iter().position(|(n, _, _)| *n == name) {
-                    Some(i) => i,
-                    None => {
-                        acc.diag.push((name, vec![0.0; t + 1], vec![0; t + 1]));
-                        acc.diag.len() - 1
-                    }
+            for (j, (name, values)) in rec.diagnostics.into_iter().enumerate() {
+                // The same names in the same order run after run: index j first.
+                let slot = match acc.diag.get(j) {
+                    Some((n, _, _)) if *n == name => j,
+                    _ => match acc.diag.iter().position(|(n, _, _)| *n == name) {
+                        Some(i) => i,
+                        None => {
+                            acc.diag.push((name, vec![0.0; t + 1], vec![0; t + 1]));
+                            acc.diag.len() - 1
+                        }
+                    },
                 };
                 let (_, sums, counts) = &mut acc.diag[slot];
-                for k in 0..=t {
-                    if values[k].is_finite() {
-                        sums[k] += values[k];
-                        counts[k] += 1;
+                for ((s, c), v) in sums.iter_mut().zip(counts.iter_mut()).zip(&values) {
+                    if v.is_finite() {
+                        *s += v;
+                        *c += 1;
                     }
                 }
             }

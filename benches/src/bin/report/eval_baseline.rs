@@ -66,6 +66,10 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         }
     }
     let split = breakdown(&tmp.join("cg.1.0"))?;
+    say(&format!(
+        "perf cpu-clock eval --runs {runs} --threads 1: this build"
+    ));
+    let time_split = cpu_profile(&cur, runs, &tmp);
     let _ = std::fs::remove_dir_all(&tmp);
 
     let cmd = format!(
@@ -138,7 +142,178 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         );
     }
     md.push('\n');
+    let cur_cpu = med(&cpu[1], |c| c.0);
+    let base_cpu = med(&cpu[0], |c| c.0);
+    match time_split {
+        Ok((samples, rows)) => {
+            let _ = writeln!(
+                md,
+                "Where this build's CPU time goes: `perf record -e cpu-clock -F {PERF_HZ}` of \
+                 the command with `--runs {runs} --threads 1`, {samples} samples, each \
+                 function's own time (not what it calls; what the compiler inlined counts \
+                 where it was inlined), grouped. Sampled, so statistical: a share s is known \
+                 to ±2·√(s(1 − s)/{samples}) (under 2 points here). Instructions are not \
+                 time: a chain of dependent divisions costs their latency, and the continued \
+                 fractions of `ln Q` are such chains.\n\n\
+                 | part | share of the CPU time |\n|---|---:|"
+            );
+            for (name, share) in &rows {
+                let _ = writeln!(md, "| {name} | {:.1} % |", 100.0 * share);
+            }
+            let special = rows.first().map_or(0.0, |r| r.1);
+            let rest_cpu = cur_cpu * (1.0 - special);
+            let _ = writeln!(
+                md,
+                "\nWhat this leaves for the target: the special functions alone take {:.2} CPU \
+                 s here; evaluated as they are (the bit-identical JSON needs the same `erfc`, \
+                 `exp`, `ln` and continued fractions on the same arguments), the command \
+                 could at best be {:.1}× faster than `{BASELINE}`, with everything else free. \
+                 4× ({:.2} CPU s) leaves {:.2} CPU s for everything else, which takes {:.2} \
+                 now: {:.0} % of it would have to go. Within the special functions, only \
+                 work that cannot change a bit can go (terms proved not to count, as the \
+                 interval sums already skip; latency hidden by evaluating independent \
+                 arguments side by side, as `gauss::ln_sf_pair` does).\n",
+                cur_cpu * special,
+                base_cpu / (cur_cpu * special),
+                base_cpu / 4.0,
+                (base_cpu / 4.0 - cur_cpu * special).max(0.0),
+                rest_cpu,
+                100.0 * (1.0 - (base_cpu / 4.0 - cur_cpu * special).max(0.0) / rest_cpu),
+            );
+        }
+        Err(e) => {
+            let _ = writeln!(md, "Where the CPU time goes: not measured ({e:#}).\n");
+        }
+    }
     Ok(())
+}
+
+/// Sampling rate of [`cpu_profile`].
+const PERF_HZ: u32 = 4999;
+
+/// The groups of [`cpu_profile`], by symbol or library; the first is the special functions.
+const TIME_PARTS: &[(&str, &[&str])] = &[
+    (
+        "special functions (`estimator_core::gauss`: `ln Q` and its continued fractions; \
+         the truncated normal's moments; `libm`: `erfc`, `exp`, `ln`, `ln_1p`)",
+        &[
+            "estimator_core::gauss::",
+            "libm::",
+            "estimator_core::filter::occlusion::truncnorm",
+        ],
+    ),
+    (
+        "the occlusion estimators' own code (interval sums, mixtures, updates)",
+        &["estimator_core::filter::occlusion::"],
+    ),
+    (
+        "Kalman steps and linear algebra",
+        &[
+            "estimator_core::filter::kalman",
+            "estimator_core::linalg",
+            "nalgebra::",
+            "estimator_core::filter::time_update",
+        ],
+    ),
+    (
+        "simulation (plant, sensor, channel, random numbers)",
+        &["channel_sim::", "rand"],
+    ),
+    (
+        "eval's bookkeeping and the adapters",
+        &["ipc_runner::", "<ipc_runner::"],
+    ),
+    ("allocation and copies (libc)", &["libc.so"]),
+];
+
+/// The CPU time of `bin`'s eval by [`TIME_PARTS`] (and the rest): `(samples, shares)`.
+fn cpu_profile(bin: &Path, runs: u64, tmp: &Path) -> Result<(u64, Vec<(String, f64)>)> {
+    let data = tmp.join("perf.data");
+    let st = Command::new("perf")
+        .args([
+            "record",
+            "-q",
+            "-e",
+            "cpu-clock",
+            "-F",
+            &PERF_HZ.to_string(),
+            "-o",
+        ])
+        .arg(&data)
+        .arg(bin)
+        .args(["eval", "--scenario", SCENARIO, "--quiet", "--threads", "1"])
+        .args([
+            "--runs",
+            &runs.to_string(),
+            "--horizon",
+            &HORIZON.to_string(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .context("perf (apt-get install linux-perf)")?;
+    if !st.success() {
+        bail!("perf record failed ({st}); kernel.perf_event_paranoid may forbid it");
+    }
+    let out = Command::new("perf")
+        .args([
+            "report",
+            "--stdio",
+            "--no-children",
+            "--sort",
+            "dso,symbol",
+            "--percent-limit",
+            "0",
+            "-i",
+        ])
+        .arg(&data)
+        .output()
+        .context("perf report")?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let samples = text
+        .lines()
+        .find_map(|l| l.strip_prefix("# Samples: "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|n| {
+            let (num, mult) = match n.strip_suffix('K') {
+                Some(k) => (k, 1000.0),
+                None => (n, 1.0),
+            };
+            num.parse::<f64>().ok().map(|v| (v * mult) as u64)
+        })
+        .ok_or_else(|| anyhow!("perf report: no sample count"))?;
+    Ok((samples, time_shares(&text)))
+}
+
+/// [`TIME_PARTS`]' shares of a `perf report --sort dso,symbol` listing, and the rest.
+fn time_shares(text: &str) -> Vec<(String, f64)> {
+    let mut shares = vec![0.0; TIME_PARTS.len()];
+    let mut total = 0.0;
+    for line in text.lines().filter(|l| !l.starts_with('#')) {
+        let Some((pct, rest)) = line.trim_start().split_once('%') else {
+            continue;
+        };
+        let Ok(pct) = pct.parse::<f64>() else {
+            continue;
+        };
+        total += pct;
+        // `dso  [.] symbol`: the symbol for the first groups, the library for libc.
+        let sym = rest.split_once("] ").map_or("", |(_, s)| s.trim());
+        if let Some(g) = TIME_PARTS.iter().position(|(_, pre)| {
+            pre.iter()
+                .any(|p| sym.starts_with(p) || (p.ends_with(".so") && rest.contains(p)))
+        }) {
+            shares[g] += pct;
+        }
+    }
+    let seen: f64 = shares.iter().sum();
+    let mut rows: Vec<(String, f64)> = TIME_PARTS
+        .iter()
+        .zip(&shares)
+        .map(|((name, _), s)| (name.to_string(), s / 100.0))
+        .collect();
+    rows.push(("the rest".into(), (total - seen).max(0.0) / 100.0));
+    rows
 }
 
 fn label(which: usize) -> String {
@@ -456,6 +631,21 @@ mod tests {
         assert!(t.contains(BASELINE) && t.contains("`A`") && t.contains("`B`"));
         assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
+    }
+
+    #[test]
+    fn cpu_time_groups_by_symbol_and_library() {
+        let text = "# Samples: 3K of event 'cpu-clock'\n\
+            \x20   20.00%  ipc-runner  [.] estimator_core::gauss::ln_sf\n\
+            \x20   10.00%  ipc-runner  [.] libm::math::exp::exp\n\
+            \x20   30.00%  ipc-runner  [.] estimator_core::filter::occlusion::adf::x\n\
+            \x20    5.00%  libc.so.6   [.] __memmove_avx512_unaligned_erms\n\
+            \x20   35.00%  ipc-runner  [.] main\n";
+        let rows = time_shares(text);
+        assert!((rows[0].1 - 0.30).abs() < 1e-12, "{rows:?}");
+        assert!((rows[1].1 - 0.30).abs() < 1e-12);
+        assert!((rows[5].1 - 0.05).abs() < 1e-12);
+        assert!((rows.last().unwrap().1 - 0.35).abs() < 1e-12);
     }
 
     #[test]

@@ -10,7 +10,6 @@
 //!   `(I(2N) − I(N)) / N`, each 2N run done twice to show the count is deterministic;
 //! - `firmware` ([`firmware`]): Cortex-M4 instructions per step from `.ci/firmware` (QEMU TCG
 //!   plugin);
-//! - `ipc` ([`raw_transports`]): `ipc_latency` (raw iceoryx2 and Unix socket ping-pong);
 //! - `pipeline` ([`pipeline`]): `ipc-runner demo` end to end (slot sent → estimates
 //!   published), one spinning and one sleeping runner, one table;
 //! - `bridge` ([`bridge`]): the bridge hop over loopback (`demo --via zenoh`) against raw
@@ -21,6 +20,10 @@
 //!   instructions go;
 //! - `eval` ([`eval_throughput`]): Monte-Carlo throughput of `ipc-runner eval` per scenario
 //!   preset.
+//!
+//! Retired (issue #23): the raw transports' ping-pong (`ipc`, with its `ipc_latency` binary)
+//! and the idling penalty (`idle_penalty`), which measured the p99 tails of a shared 2-core
+//! VM more than the transports; their last figures are in the git history of `BENCHMARKS.md`.
 //!
 //! `--quick` shortens every part (for trying the script; the committed file uses the full run).
 //! A part that is skipped keeps its section of the existing output file, if it has one, marked
@@ -38,7 +41,6 @@ mod firmware;
 mod format;
 mod header;
 mod icount;
-mod ipc_latency;
 mod kf_comparison;
 mod kf_forms;
 mod kf_interleaved;
@@ -47,7 +49,6 @@ mod pct;
 mod pipeline;
 mod prose;
 mod rate;
-mod raw_transports;
 
 use anyhow::{Context, Result};
 use command::say;
@@ -68,6 +69,7 @@ const SECTIONS: &[(&str, &str)] = &[
     ("criterion", "## Kalman step: ours against `adskalman`"),
     ("icount", "## Instructions per step on the host"),
     ("firmware", "## The Cortex-M4F on QEMU"),
+    // Retired (issue #23), like "idle" below.
     ("ipc", "## IPC latency: raw transports"),
     ("pipeline", "## IPC latency: the full pipeline end to end"),
     ("bridge", "## Across hosts: the bridge hop over loopback"),
@@ -160,7 +162,6 @@ fn run() -> Result<()> {
     body.part(&o, "criterion", kf_comparison::part);
     body.part(&o, "icount", icount::part);
     body.part(&o, "firmware", firmware::part);
-    body.part(&o, "ipc", raw_transports::part);
     body.part(&o, "pipeline", pipeline::part);
     body.part(&o, "bridge", bridge::part);
     body.part(&o, "eval-baseline", eval_baseline::part);

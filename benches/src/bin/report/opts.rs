@@ -4,7 +4,18 @@ use anyhow::{anyhow, bail, Result};
 use std::path::PathBuf;
 
 const USAGE: &str =
-    "report [--quick] [--plain-release] [--skip criterion,icount,firmware,ipc,pipeline,bridge,eval-baseline,eval] [--out FILE]";
+    "report [--quick] [--plain-release] [--skip criterion,icount,firmware,pipeline,bridge,eval-baseline,eval] [--out FILE]";
+
+/// The parts, in the order they run (`--skip` takes these names).
+pub const PARTS: &[&str] = &[
+    "criterion",
+    "icount",
+    "firmware",
+    "pipeline",
+    "bridge",
+    "eval-baseline",
+    "eval",
+];
 
 pub struct Opts {
     pub quick: bool,
@@ -45,7 +56,10 @@ impl Opts {
                         .ok_or_else(|| anyhow!("--skip needs a list"))?
                         .split(',')
                         .map(str::to_string)
-                        .collect()
+                        .collect();
+                    if let Some(bad) = o.skip.iter().find(|p| !PARTS.contains(&p.as_str())) {
+                        bail!("--skip: no part {bad:?} (parts: {})", PARTS.join(","));
+                    }
                 }
                 "--out" => o.out = PathBuf::from(args.next().ok_or_else(|| anyhow!("--out FILE"))?),
                 "-h" | "--help" => {

@@ -1,4 +1,4 @@
-//! Latency percentiles as the runner and `ipc_latency` write them, and their table rows.
+//! Latency percentiles as the runner writes them, and their table rows.
 
 use anyhow::{Context, Result};
 use serde_json::Value;
@@ -18,8 +18,7 @@ pub struct Pct {
 }
 
 impl Pct {
-    /// Reads `ipc_runner::latency::Percentiles` as serialised (`report.json`, `ipc_latency
-    /// --json`). A missing or non-numeric field is an error, not a NaN in a table.
+    /// Reads `ipc_runner::latency::Percentiles` as serialised (`report.json`). A missing or non-numeric field is an error, not a NaN in a table.
     pub fn from_json(v: &Value) -> Result<Self> {
         let f = |k: &str| {
             v[k].as_f64()
@@ -65,7 +64,7 @@ mod tests {
     use ipc_runner::latency::Percentiles;
 
     #[test]
-    fn reads_what_the_runner_and_ipc_latency_write() {
+    fn reads_what_the_runner_writes() {
         let p = Percentiles {
             count: 30_000,
             p50_us: 0.5,

@@ -116,14 +116,30 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         let neg_inf = -T::one() / T::zero();
         let margin = T::lit(40.0);
         let lead_margin = T::lit(41.0 + S as f64);
+        // Every end in standard units of `u ~ N(m, s²)`, once: gap j (`0..=S`: below the
+        // first region, between regions, above the last) is (`upper[j − 1]`, `lower[j]`),
+        // the infinite ends as `(±∞ − m)/s` (NaN for a NaN m or s, as every end).
+        let mut lower = [T::zero(); S];
+        let mut upper = [T::zero(); S];
+        for (i, &(lo, hi, _)) in self.sorted.iter().enumerate() {
+            lower[i] = (lo - m) / s;
+            upper[i] = (hi - m) / s;
+        }
+        let (below, above) = ((neg_inf - m) / s, (-neg_inf - m) / s);
+        let gap = |j: usize| {
+            (
+                if j == 0 { below } else { upper[j - 1] },
+                if j == S { above } else { lower[j] },
+            )
+        };
         let mut anchor = (0, neg_inf);
         for j in 0..=S {
-            let u = Self::gap_bound(self.gap(j, m, s));
+            let u = Self::gap_bound(gap(j));
             if u > anchor.1 {
                 anchor = (j, u);
             }
         }
-        let (lo, hi) = self.gap(anchor.0, m, s);
+        let (lo, hi) = gap(anchor.0);
         let at_anchor = ln_gap_prob(lo, hi);
         let mut total = LogSumExp::default();
         let mut top = neg_inf;
@@ -132,7 +148,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             let x = if j == anchor.0 {
                 at_anchor
             } else {
-                let (lo, hi) = self.gap(j, m, s);
+                let (lo, hi) = gap(j);
                 let u = Self::gap_bound((lo, hi));
                 if top.finite() {
                     if u < top - margin {
@@ -153,7 +169,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
                 // The leading gaps were skipped against the anchor, but this term is not
                 // far enough above them: push them as the plain sum would have.
                 for i in 0..j {
-                    let (lo, hi) = self.gap(i, m, s);
+                    let (lo, hi) = gap(i);
                     let l = ln_gap_prob(lo, hi);
                     total.push(l);
                     if raises(l, top) {
@@ -168,16 +184,6 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             }
         }
         total.value().exp().min(T::one())
-    }
-
-    /// Gap `j` (`0..=S`: below the first region, between regions, above the last) in
-    /// standard units of `u ~ N(m, s²)`.
-    #[inline]
-    fn gap(&self, j: usize, m: T, s: T) -> (T, T) {
-        let inf = T::one() / T::zero();
-        let lo = if j == 0 { -inf } else { self.sorted[j - 1].1 };
-        let hi = if j == S { inf } else { self.sorted[j].0 };
-        ((lo - m) / s, (hi - m) / s)
     }
 
     /// An upper bound of `ln P(a < Z < b)`: `−a²/2` for `a > 0`, `−b²/2` for `b < 0`, else
