@@ -387,6 +387,12 @@ fn a_lossy_link_is_seen_as_losses_and_costs_only_their_information() {
         ],
     );
     assert_ok(&mut rp, 120);
+    // Replay counts the network's losses apart from the channel's dropouts.
+    let said = std::fs::read_to_string(&rp.stdout).unwrap();
+    assert!(
+        said.contains(&format!(", {lost} lost on the network")),
+        "replay said: {said}"
+    );
     let live = mse(&csv, &csv, &names);
     let again = mse(&csv, &replayed, &names);
     for (i, name) in names.iter().enumerate() {

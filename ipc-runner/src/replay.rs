@@ -9,7 +9,7 @@ use crate::Estimator;
 use anyhow::{Context, Result};
 use channel_sim::sim::MAX_NX;
 use channel_sim::Observation;
-use estpipe_wire::FLAG_IPC_LOST;
+use estpipe_wire::{FLAG_IPC_LOST, FLAG_NET_LOST};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -124,13 +124,18 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             .sum()
     };
     let delivered = count(&|o| o.delivered);
-    let lost = count(&|o| !o.delivered && o.flags & FLAG_IPC_LOST != 0);
+    // Lost on the network (a bridge's FLAG_NET_LOST) apart from lost in the IPC: both are
+    // stepped as losses, neither is the channel's dropout.
+    let net_lost = count(&|o| !o.delivered && o.flags & FLAG_NET_LOST != 0);
+    let ipc_lost =
+        count(&|o| !o.delivered && o.flags & FLAG_IPC_LOST != 0 && o.flags & FLAG_NET_LOST == 0);
     println!(
         "replayed {} instants × {nodes} node(s) from {:?}: {delivered} measurements delivered, \
-         {} dropped by the channel, {lost} lost (flagged or missing)",
+         {} dropped by the channel, {ipc_lost} lost in the IPC (flagged or missing), \
+         {net_lost} lost on the network",
         instants.len(),
         args.input,
-        instants.len() * nodes - delivered - lost
+        instants.len() * nodes - delivered - ipc_lost - net_lost
     );
     let ne = estimators.len();
     for (e, est_e) in estimators.iter().enumerate() {
