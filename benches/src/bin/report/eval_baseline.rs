@@ -560,44 +560,38 @@ fn annotate(file: &Path) -> Result<String> {
 
 /// The inclusive instructions of the functions whose symbols start with one of `syms`.
 fn inclusive(file: &Path, syms: &[&str]) -> Result<u64> {
-    let text = annotate(file)?;
-    Ok(text
-        .lines()
-        .filter_map(|line| {
-            let (count, rest) = line.trim_start().split_once(' ')?;
-            let count = count.replace(',', "").parse::<u64>().ok()?;
+    Ok(matching(&annotate(file)?, syms))
+}
+
+/// The counts of an annotation's lines: `(count, rest of the line)`.
+fn counted(text: &str) -> impl Iterator<Item = (u64, &str)> {
+    text.lines().filter_map(|line| {
+        let (count, rest) = line.trim_start().split_once(' ')?;
+        Some((count.replace(',', "").parse::<u64>().ok()?, rest))
+    })
+}
+
+/// The summed counts of the functions whose symbols (`???:symbol [binary]`) start with one
+/// of `syms`.
+fn matching(text: &str, syms: &[&str]) -> u64 {
+    counted(text)
+        .filter_map(|(count, rest)| {
             let sym = rest.split_once("???:")?.1;
             syms.iter().any(|p| sym.starts_with(p)).then_some(count)
         })
-        .sum())
+        .sum()
 }
 
 /// `PARTS` of a callgrind file, and the rest.
 fn breakdown(file: &Path) -> Result<Vec<(String, u64)>> {
     let text = annotate(file)?;
-    let mut total = 0u64;
+    let total = counted(&text)
+        .find(|(_, rest)| rest.contains("PROGRAM TOTALS"))
+        .map_or(0, |(c, _)| c);
     let mut rows = Vec::new();
     let mut seen = 0u64;
     for (name, syms) in PARTS {
-        let mut sum = 0u64;
-        for line in text.lines() {
-            let Some((count, rest)) = line.trim_start().split_once(' ') else {
-                continue;
-            };
-            let Ok(count) = count.replace(',', "").parse::<u64>() else {
-                continue;
-            };
-            if rest.contains("PROGRAM TOTALS") {
-                total = count;
-            }
-            // `???:symbol [binary]`: the symbol must start with one of the part's prefixes.
-            let Some(sym) = rest.split_once("???:").map(|(_, s)| s) else {
-                continue;
-            };
-            if syms.iter().any(|p| sym.starts_with(p)) {
-                sum += count;
-            }
-        }
+        let sum = matching(&text, syms);
         seen += sum;
         rows.push((name.to_string(), sum));
     }
@@ -631,6 +625,22 @@ mod tests {
         assert!(t.contains(BASELINE) && t.contains("`A`") && t.contains("`B`"));
         assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
+    }
+
+    #[test]
+    fn callgrind_lines_are_summed_by_symbol_prefix() {
+        let text = "272,664,025 (100.0%)  PROGRAM TOTALS\n\
+            \x20 1,000 ( 1.00%)  ???:ipc_runner::eval::run_one [bin]\n\
+            \x20   250 ( 0.10%)  ???:ipc_runner::eval::record_estimate [bin]\n\
+            \x20    25 ( 0.01%)  ./x.c:libc_thing [libc]\n";
+        assert_eq!(matching(text, &["ipc_runner::eval::"]), 1250);
+        assert_eq!(matching(text, &["ipc_runner::eval::run_one ["]), 1000);
+        assert_eq!(
+            counted(text)
+                .find(|(_, r)| r.contains("PROGRAM TOTALS"))
+                .map(|c| c.0),
+            Some(272_664_025)
+        );
     }
 
     #[test]
