@@ -175,7 +175,7 @@ fn run_and_collect(
 fn expected_kind(name: &str) -> ipc_runner::CovarianceKind {
     use ipc_runner::CovarianceKind::*;
     match name {
-        "nn" | "fused" => Bound,
+        "nn" | "fused" | "fused-predict" => Bound,
         n if n.starts_with("tobit-") => Bound,
         _ => Estimate,
     }

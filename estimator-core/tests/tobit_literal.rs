@@ -28,7 +28,7 @@
 #![allow(clippy::needless_range_loop)] // (i, j) indices as the paper writes them
 
 use estimator_core::filter::tobit::{
-    federated_fuse, BoundScalars, TobitFilter, TobitFilterConfig, TobitFusion,
+    federated_fuse, BoundScalars, Silence, TobitFilter, TobitFilterConfig, TobitFusion,
 };
 use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
 use estimator_core::protocol::shared_token_bucket::{SharedTokenBucket, TriggeredBucketScheduler};
@@ -808,9 +808,11 @@ impl LitFtkff {
     }
 }
 
-/// The product's fusion filter of the example.
-fn product_fusion() -> TobitFusion<f64, 2, 2, L> {
-    let cfgs = core::array::from_fn(|m| product_cfg(&example_node(m), &[0.0, 0.0], &example_eps()));
+/// The product's fusion filter of the example whose local filters do `silence` at θ = 1.
+fn product_fusion_with(silence: Silence) -> TobitFusion<f64, 2, 2, L> {
+    let cfgs = core::array::from_fn(|m| {
+        product_cfg(&example_node(m), &[0.0, 0.0], &example_eps()).with_silence(silence)
+    });
     TobitFusion::new(cfgs, na_v(&[5.0, 0.0]), na_m(&eye())).unwrap()
 }
 
@@ -1500,6 +1502,25 @@ fn algorithm1_end_to_end_matches_the_literal_transcription() {
     // 1.1e-14). Stated tolerance 1e-11 relative: 1000× the rounding seen, and 3000× below the
     // smallest change any alternative reading of `alternative_readings_of_the_example` makes
     // at the first instant it acts (Ω₁ by (26): 3.5e-8).
+    end_to_end_against_the_transcription(Reading::default(), Silence::HeldMeasurement);
+}
+
+#[test]
+fn predict_on_silence_matches_the_transcriptions_predict_only_reading() {
+    // The product's option `Silence::Predict` against the transcription's `Hold::PredictOnly`
+    // (written independently, in this file, for the audit table), with the same tolerance
+    // and for the same reason as the paper's filter above.
+    let rd = Reading {
+        hold: Hold::PredictOnly,
+        ..Reading::default()
+    };
+    end_to_end_against_the_transcription(rd, Silence::Predict);
+}
+
+/// The product's fusion filter with `silence` and the transcription with `rd` on the same
+/// 200 runs × T = 200 of the example: every local and fused estimate and bound within 1e-11
+/// relative, and the same MSEs.
+fn end_to_end_against_the_transcription(rd: Reading, silence: Silence) {
     let (runs, horizon) = (200u64, 200usize);
     let tol = 1e-11;
     let mut worst = 0.0f64;
@@ -1507,8 +1528,8 @@ fn algorithm1_end_to_end_matches_the_literal_transcription() {
     let (mut mse_p, mut mse_l) = (RunMse::default(), RunMse::default());
     for run in 0..runs {
         let inst = simulate(2026, run, horizon);
-        let mut prod = product_fusion();
-        let mut lit = LitFtkff::new(Reading::default());
+        let mut prod = product_fusion_with(silence);
+        let mut lit = LitFtkff::new(rd);
         for (k, i) in inst.iter().enumerate() {
             product_step(&mut prod, i);
             lit.step(i);
@@ -1540,7 +1561,7 @@ fn algorithm1_end_to_end_matches_the_literal_transcription() {
             );
         }
         // MSE of both over the same run.
-        let mut prod = product_fusion();
+        let mut prod = product_fusion_with(silence);
         let r = mse_of(&inst, 1, &mut |i| {
             product_step(&mut prod, i);
             (
@@ -1548,7 +1569,7 @@ fn algorithm1_end_to_end_matches_the_literal_transcription() {
                 v_na(prod.estimate().state()),
             )
         });
-        let mut lit = LitFtkff::new(Reading::default());
+        let mut lit = LitFtkff::new(rd);
         let s = mse_of(&inst, 1, &mut |i| {
             lit.step(i);
             (lit.x_loc, lit.xg)

@@ -7,6 +7,11 @@
 //! Figs. 5-10. The views share one filter (it steps once per instant, whichever view asks
 //! first), so they are always consistent with each other.
 //!
+//! Beside them, `tobit-1-predict` … `tobit-l-predict` and `fused-predict` are the same views
+//! of a second fusion filter whose local filters only predict at an instant without a
+//! measurement ([`Silence::Predict`], the product's option; docs/tobit-fusion.md, "Predict
+//! on silence"), where the paper updates with the held measurement.
+//!
 //! Applies to a composed scenario with a linear plant, a [`TobitCensoring`] stage (τ_m) and a
 //! [`TriggeredTokenBucket`] stage (σ_m, χ_m, λ_m, η_{m,0} enter Ξ). A node whose packet was not
 //! delivered has θ = 1 (the filter holds its last received measurement, eq. 19). The filter's
@@ -27,7 +32,7 @@ use channel_sim::plant::Plant;
 use channel_sim::scenario::ComposedScenario;
 use channel_sim::{Observation, Scenario};
 use estimator_core::filter::gate::GateState;
-use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
+use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
 use estimator_core::filter::{GatedStep as _, InnovationGate, TobitFusion};
 use estimator_core::{Error, Estimator as _, OnModel};
 use nalgebra::{DMatrix, SVector};
@@ -44,6 +49,19 @@ pub const LOCAL_NAMES: [&str; 8] = [
 ];
 /// The name of the fused view.
 pub const FUSED_NAME: &str = "fused";
+/// The local views of the filter with [`Silence::Predict`], node 1 first.
+pub const LOCAL_PREDICT_NAMES: [&str; 8] = [
+    "tobit-1-predict",
+    "tobit-2-predict",
+    "tobit-3-predict",
+    "tobit-4-predict",
+    "tobit-5-predict",
+    "tobit-6-predict",
+    "tobit-7-predict",
+    "tobit-8-predict",
+];
+/// The fused view of the filter with [`Silence::Predict`].
+pub const FUSED_PREDICT_NAME: &str = "fused-predict";
 /// χ²_n(0.95) for n = 1, 2, 3 degrees of freedom.
 pub const CHI2_95: [f64; 3] = [
     3.841_458_820_694_124,
@@ -127,9 +145,11 @@ impl Parts {
     }
 }
 
-/// A fresh fusion filter for the scenario.
+/// A fresh fusion filter for the scenario whose local filters do `silence` at an instant
+/// without a measurement.
 pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
+    silence: Silence,
 ) -> anyhow::Result<TobitFusion<f64, NX, NY, L>> {
     anyhow::ensure!(
         parts.censoring.nodes() == L && parts.trigger.nodes() == L,
@@ -150,7 +170,8 @@ pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
                 XI_D,
                 XI_E,
             )
-            .map_err(|e| anyhow::anyhow!("tobit: node {m}: {e}"))?,
+            .map_err(|e| anyhow::anyhow!("tobit: node {m}: {e}"))?
+            .with_silence(silence),
         );
     }
     let cfgs: [TobitFilterConfig<f64, NY>; L] = core::array::from_fn(|m| cfgs[m]);
@@ -170,9 +191,10 @@ type OnNodes<const NX: usize, const NY: usize, const L: usize> =
 /// every instant when the plant is time varying).
 fn fed_fusion<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
+    silence: Silence,
 ) -> anyhow::Result<Fed<OnNodes<NX, NY, L>>> {
     let model = Snapshot::nodes(super::linear_of(&*parts.plant)?, L, 1);
-    let on = OnModel::new(model, fusion_for::<NX, NY, L>(parts)?);
+    let on = OnModel::new(model, fusion_for::<NX, NY, L>(parts, silence)?);
     Ok(Fed::on_plant(
         on,
         Arc::clone(&parts.plant),
@@ -205,38 +227,43 @@ struct View<const NX: usize, const NY: usize, const L: usize> {
     shared: Arc<Mutex<Shared<NX, NY, L>>>,
 }
 
+/// Two fusion filters, the paper's and the one with [`Silence::Predict`], each with its
+/// local views and its fused view: `tobit-1` … `tobit-l`, `fused`, then `tobit-1-predict` …
+/// `tobit-l-predict`, `fused-predict`.
 fn views<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
     gate: Option<f64>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let gate = match gate {
-        Some(p) => Some((
-            InnovationGate::chi2(p).map_err(|e| anyhow::anyhow!("tobit: {e}"))?,
-            GateState::default(),
-        )),
+        Some(p) => Some(InnovationGate::chi2(p).map_err(|e| anyhow::anyhow!("tobit: {e}"))?),
         None => None,
     };
     // Gated views are named `<name>+gate` (docs/gate.md).
     let named = |n: &'static str| if gate.is_some() { gated_name(n) } else { n };
-    let shared = Arc::new(Mutex::new(Shared {
-        fed: fed_fusion::<NX, NY, L>(parts)?,
-        done_k: 0,
-        last: Ok(()),
-        gate,
-    }));
-    let mut out: Vec<Box<dyn Estimator>> = Vec::with_capacity(L + 1);
-    for m in 0..L {
+    let mut out: Vec<Box<dyn Estimator>> = Vec::with_capacity(2 * (L + 1));
+    for (silence, locals, fused) in [
+        (Silence::HeldMeasurement, &LOCAL_NAMES, FUSED_NAME),
+        (Silence::Predict, &LOCAL_PREDICT_NAMES, FUSED_PREDICT_NAME),
+    ] {
+        let shared = Arc::new(Mutex::new(Shared {
+            fed: fed_fusion::<NX, NY, L>(parts, silence)?,
+            done_k: 0,
+            last: Ok(()),
+            gate: gate.map(|g| (g, GateState::default())),
+        }));
+        for m in 0..L {
+            out.push(Box::new(View {
+                name: named(locals[m]),
+                node: Some(m),
+                shared: Arc::clone(&shared),
+            }));
+        }
         out.push(Box::new(View {
-            name: named(LOCAL_NAMES[m]),
-            node: Some(m),
-            shared: Arc::clone(&shared),
+            name: named(fused),
+            node: None,
+            shared,
         }));
     }
-    out.push(Box::new(View {
-        name: named(FUSED_NAME),
-        node: None,
-        shared,
-    }));
     Ok(out)
 }
 
@@ -347,7 +374,19 @@ mod tests {
         let s = channel_sim::scenario::preset("tobit-fusion").unwrap();
         let v = build(&*s, &EvalOptions::default(), 0, 0).unwrap();
         let names: Vec<_> = v.iter().map(|e| e.name()).collect();
-        assert_eq!(names, ["tobit-1", "tobit-2", "tobit-3", "fused"]);
+        assert_eq!(
+            names,
+            [
+                "tobit-1",
+                "tobit-2",
+                "tobit-3",
+                "fused",
+                "tobit-1-predict",
+                "tobit-2-predict",
+                "tobit-3-predict",
+                "fused-predict"
+            ]
+        );
         let lin = channel_sim::scenario::preset("linear").unwrap();
         assert!(build(&*lin, &EvalOptions::default(), 0, 0)
             .unwrap()
@@ -359,7 +398,8 @@ mod tests {
         let s = channel_sim::scenario::preset("tobit-fusion").unwrap();
         let parts = Parts::of(&*s).unwrap();
         let mut v = build(&*s, &EvalOptions::default(), 0, 0).unwrap();
-        let mut alone = fusion_for::<2, 2, 3>(&parts).unwrap();
+        let mut alone = fusion_for::<2, 2, 3>(&parts, Silence::HeldMeasurement).unwrap();
+        let mut predict = fusion_for::<2, 2, 3>(&parts, Silence::Predict).unwrap();
         let mut sim = s.start(3, 0);
         for k in 1..=50u32 {
             let inst = sim.next_instant();
@@ -373,8 +413,10 @@ mod tests {
                 .iter()
                 .map(|o| o.measurement().map(SVector::<f64, 2>::from_column_slice))
                 .collect();
-            alone
-                .step_models(&models, k as usize, core::array::from_fn(|m| y[m].as_ref()))
+            let received = || core::array::from_fn(|m| y[m].as_ref());
+            alone.step_models(&models, k as usize, received()).unwrap();
+            predict
+                .step_models(&models, k as usize, received())
                 .unwrap();
             let mut out = [0.0; 2];
             v[3].estimate(&mut out);
@@ -384,6 +426,12 @@ mod tests {
             );
             v[1].estimate(&mut out);
             let l1 = alone.local_estimate(1).unwrap().state();
+            assert_eq!(out, [l1[0], l1[1]]);
+            v[7].estimate(&mut out);
+            let g = predict.estimate().state();
+            assert_eq!(out, [g[0], g[1]]);
+            v[5].estimate(&mut out);
+            let l1 = predict.local_estimate(1).unwrap().state();
             assert_eq!(out, [l1[0], l1[1]]);
         }
     }

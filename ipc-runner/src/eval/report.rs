@@ -527,15 +527,19 @@ impl EvalResult {
                 self.truth_nonfinite
             );
         }
+        // The name column fits the longest name (`fused-predict+gate`), 12 at least.
+        let w = (self.estimators.iter())
+            .map(|(n, _)| n.chars().count())
+            .fold(12, usize::max);
         let _ = writeln!(
             s,
-            "{:<12} {:>12} {:>10} {:>14} {:>9}",
+            "{:<w$} {:>12} {:>10} {:>14} {:>9}",
             "estimator", "avg_mse", "± s.e.", "median_run_avg", "diverged"
         );
         for (name, r) in &self.estimators {
             let _ = writeln!(
                 s,
-                "{:<12} {:>12.6} {:>10.6} {:>14.6} {:>9}",
+                "{:<w$} {:>12.6} {:>10.6} {:>14.6} {:>9}",
                 name, r.avg_mse, r.avg_mse_se, r.median_run_avg, r.diverged_runs
             );
         }

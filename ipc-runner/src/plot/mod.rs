@@ -136,7 +136,8 @@ pub(crate) fn color(j: usize) -> RGBColor {
         RGBColor(230, 159, 0),
         RGBColor(86, 180, 233),
         RGBColor(120, 120, 120),
-        RGBColor(0, 0, 0),
+        // Not black: the truth is drawn in black.
+        RGBColor(150, 120, 0),
         RGBColor(0, 70, 110),
         RGBColor(140, 60, 0),
         RGBColor(0, 100, 70),

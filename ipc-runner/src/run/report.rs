@@ -193,10 +193,17 @@ impl RunReport {
                 st.count, st.longest_ms, st.total_ms
             ));
         }
-        s.push_str("estimator         MSE vs truth   instants   rejected\n");
+        // The name column fits the longest name (`fused-predict+gate`), 16 at least.
+        let w = (self.estimators.iter())
+            .map(|e| e.name.chars().count())
+            .fold(16, usize::max);
+        s.push_str(&format!(
+            "{:<w$} {:>13} {:>10} {:>10}\n",
+            "estimator", "MSE vs truth", "instants", "rejected"
+        ));
         for e in &self.estimators {
             s.push_str(&format!(
-                "{:<16} {:>13.6} {:>10} {:>10}\n",
+                "{:<w$} {:>13.6} {:>10} {:>10}\n",
                 e.name, e.mse, e.mse_instants, e.rejected
             ));
         }

@@ -4,7 +4,9 @@
 //!
 //! The placement decision (docs/design.md, "Seed 004"): `C(Υ∘Ω₁)Cᵀ` is read as written (it
 //! needs `n_x = n_y`); the product also offers the dimensionally general `Υ∘(CΩ₁Cᵀ)` — what
-//! the proof's `E{Q̃ C x xᵀ Cᵀ Q̃ᵀ}` is — as [`UpsilonPlacement::OutsideC`].
+//! the proof's `E{Q̃ C x xᵀ Cᵀ Q̃ᵀ}` is — as [`UpsilonPlacement::OutsideC`]. What an instant
+//! without a measurement does is [`Silence`]: the paper's update with the held measurement
+//! (the default), or the product's prediction only.
 
 use nalgebra::SVector;
 
@@ -82,6 +84,21 @@ pub enum UpsilonPlacement {
     OutsideC,
 }
 
+/// What a local filter does at an instant its node delivered nothing (θ = 1: the trigger did
+/// not fire, the bucket blocked the packet, or it was lost).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Silence {
+    /// The paper's: (22) and (30) with the held ȳ and the θ² terms of M (Algorithm 1 line 12,
+    /// Remark 3: "the filter gain can be calculated under two cases, θ = 1 and θ = 0").
+    #[default]
+    HeldMeasurement,
+    /// The product's option (docs/tobit-fusion.md, "Predict on silence"): no update at all,
+    /// `x̂_{t|t} = x̂_{t|t−1}` and `P̄_{t|t} = P̄_{t|t−1}` of (29). The error is then the
+    /// prediction error, which (29) already bounds, so Theorem 1's bound still holds; Ḡ
+    /// still advances by Ξ, the held ȳ stays.
+    Predict,
+}
+
 /// Configuration of one node's local Tobit filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TobitFilterConfig<T: Real, const NY: usize> {
@@ -97,6 +114,8 @@ pub struct TobitFilterConfig<T: Real, const NY: usize> {
     pub e: T,
     /// Placement of Υ in the κ₃ term.
     pub placement: UpsilonPlacement,
+    /// What an instant without a measurement (θ = 1) does.
+    pub silence: Silence,
 }
 
 impl<T: Real, const NY: usize> TobitFilterConfig<T, NY> {
@@ -127,6 +146,7 @@ impl<T: Real, const NY: usize> TobitFilterConfig<T, NY> {
             d,
             e,
             placement: UpsilonPlacement::AsWritten,
+            silence: Silence::HeldMeasurement,
         })
     }
 
@@ -134,6 +154,13 @@ impl<T: Real, const NY: usize> TobitFilterConfig<T, NY> {
     #[must_use]
     pub fn with_placement(mut self, placement: UpsilonPlacement) -> Self {
         self.placement = placement;
+        self
+    }
+
+    /// Selects what an instant without a measurement does ([`Silence`]).
+    #[must_use]
+    pub fn with_silence(mut self, silence: Silence) -> Self {
+        self.silence = silence;
         self
     }
 
@@ -161,6 +188,7 @@ impl<T: Real, const NY: usize> TobitFilterConfig<T, NY> {
             f(self.d),
             f(self.e),
         )?
-        .with_placement(self.placement))
+        .with_placement(self.placement)
+        .with_silence(self.silence))
     }
 }

@@ -29,10 +29,13 @@
 //! Ξ(Ḡ₀), as the trigger's first instant uses η₀. The paper's `P_{t|t−1}` in Ω₁ is the bound
 //! `P̄_{t|t−1}` (the true covariance is unknown to the filter). Only the variances `R_j` enter
 //! (eqs. 5-7 are per component), so a model's measurement covariance must be diagonal.
+//!
+//! With [`Silence::Predict`] (the product's option, not the paper's) an instant without a
+//! measurement is the prediction (21), (29) alone: no gain, no (22), no (30).
 
 use nalgebra::{SMatrix, SVector};
 
-use super::config::{Kappas, TobitFilterConfig, UpsilonPlacement};
+use super::config::{Kappas, Silence, TobitFilterConfig, UpsilonPlacement};
 use super::gain::GainProblem;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
@@ -242,7 +245,8 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
     }
 
     /// One instant with explicit matrices (see [`TobitFilter::plan`]): gain (37), estimate
-    /// (22), bound (30), then Ḡ ← Ξ(Ḡ). Nothing changes on error.
+    /// (22), bound (30), then Ḡ ← Ξ(Ḡ); with [`Silence::Predict`] and no measurement, the
+    /// prediction (21), (29) instead of (37), (22), (30). Nothing changes on error.
     pub fn step(
         &mut self,
         a: &SMatrix<T, NX, NX>,
@@ -265,9 +269,16 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         received: Option<&SVector<T, NY>>,
     ) -> Result<()> {
         let plan = self.plan_with_input(a, bqb, gu, c, r, received)?;
-        let k = plan.problem.gain()?;
-        let x = plan.x_prior + k * (plan.y_bar - plan.stats.mean);
-        let p = plan.problem.bound(&k);
+        let (x, p) = if received.is_none() && self.cfg.silence == Silence::Predict {
+            // Silence::Predict: the prediction (21), (29) is the estimate and its bound.
+            (plan.x_prior, plan.problem.p_prior)
+        } else {
+            let k = plan.problem.gain()?;
+            (
+                plan.x_prior + k * (plan.y_bar - plan.stats.mean),
+                plan.problem.bound(&k),
+            )
+        };
         check_finite(&x, "local estimate")?;
         check_spd(&p, "local bound")?;
         let g = plan.xi;
@@ -438,6 +449,38 @@ mod tests {
         f.step(&a, &bqb, &SMatrix::identity(), &vector![0.5, 0.5], None)
             .unwrap();
         assert!((f.g_bar() - (0.475 * 2.25 + 0.0575)).abs() < 1e-14);
+    }
+
+    #[test]
+    fn predict_on_silence_is_the_prediction_and_changes_nothing_else() {
+        let (a, bqb) = oscillator();
+        let c = SMatrix::<f64, 2, 2>::identity();
+        let r = vector![0.5, 0.5];
+        let (x0, p0) = (vector![5.0, -1.0], SMatrix::identity() * 3.0);
+        let held = TobitFilter::new(paper_cfg(0.1, 0.1), x0, p0).unwrap();
+        let cfg = paper_cfg(0.1, 0.1).with_silence(Silence::Predict);
+        assert_eq!(cfg.cast::<f32>().unwrap().silence, Silence::Predict);
+        let mut f = TobitFilter::new(cfg, x0, p0).unwrap();
+        let mut paper = held;
+        // An arrival: the same update bit for bit as the paper's filter.
+        let y = vector![4.0, -2.0];
+        f.step(&a, &bqb, &c, &r, Some(&y)).unwrap();
+        paper.step(&a, &bqb, &c, &r, Some(&y)).unwrap();
+        assert_eq!(f.estimate(), paper.estimate());
+        // Silence: x̂ = A x̂, P̄ = A P̄ Aᵀ + BQBᵀ (written out here), where the paper updates.
+        let (x1, p1) = f.estimate().into_parts();
+        let (g1, y_held) = (f.g_bar(), *f.held_measurement());
+        f.step(&a, &bqb, &c, &r, None).unwrap();
+        paper.step(&a, &bqb, &c, &r, None).unwrap();
+        let x_pred = a * x1;
+        let p_pred = a * p1 * a.transpose() + bqb;
+        assert_eq!(*f.estimate().state(), x_pred);
+        assert!((f.estimate().covariance() - p_pred).abs().max() < 1e-14);
+        assert_ne!(paper.estimate().state(), f.estimate().state());
+        assert_eq!(f.last_theta(), 1.0);
+        assert_eq!(*f.held_measurement(), y_held);
+        assert_eq!(f.g_bar(), f.config().xi(g1));
+        assert_eq!(f.g_bar(), paper.g_bar());
     }
 
     /// Eq. (30) assembled term by term from the plan's ingredients, written out as printed

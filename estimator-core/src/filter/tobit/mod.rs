@@ -14,7 +14,7 @@ pub mod fusion;
 pub mod gain;
 pub mod local;
 
-pub use config::{BoundScalars, Kappas, TobitFilterConfig, UpsilonPlacement};
+pub use config::{BoundScalars, Kappas, Silence, TobitFilterConfig, UpsilonPlacement};
 pub use fusion::{federated_fuse, TobitFusion};
 pub use gain::GainProblem;
 pub use local::{diagonal_variances, LocalStepPlan, TobitFilter};
