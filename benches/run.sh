@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Regenerates BENCHMARKS.md at the workspace root: builds the benchmark binaries and
 # ipc-runner in release mode, then runs every part (criterion, callgrind instruction counts,
-# Cortex-M4 counts from .ci/firmware, IPC latency, the pipeline end to end, the bridge hop
-# against raw zenoh and the one-host pipeline, Monte-Carlo throughput) and writes the tables.
+# Cortex-M4 counts from .ci/firmware, the pipeline end to end, the bridge hop against raw
+# zenoh and the one-host pipeline, Monte-Carlo throughput against b7a974e and per preset) and
+# writes the tables.
 #
-#   benches/run.sh                 # full run (~15-20 min on 2 cores; the first also builds
-#                                  # two extra kf_interleaved variants, ~3 min each)
+#   benches/run.sh                 # full run (~21 min on 2 cores once built; the first also
+#                                  # builds two extra kf_interleaved variants and b7a974e's
+#                                  # ipc-runner, a few minutes each)
 #   benches/run.sh --quick         # short runs, indicative only
 #   benches/run.sh --skip firmware,eval       # parts: criterion,icount,firmware,pipeline,bridge,eval-baseline,eval
 #

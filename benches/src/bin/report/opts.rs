@@ -31,7 +31,11 @@ pub struct Opts {
 impl Opts {
     /// Reads the command line; `None` if it asked for the usage (printed here).
     pub fn from_args() -> Result<Option<Self>> {
-        let mut args = std::env::args().skip(1);
+        Self::parse(std::env::args().skip(1))
+    }
+
+    /// Reads `args` (the command line without the program's name).
+    fn parse(mut args: impl Iterator<Item = String>) -> Result<Option<Self>> {
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
             .parent()
             .ok_or_else(|| anyhow!("no workspace root"))?
@@ -75,5 +79,32 @@ impl Opts {
     /// Whether `part` is to run (not in `--skip`).
     pub fn runs(&self, part: &str) -> bool {
         !self.skip.iter().any(|s| s == part)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(args: &[&str]) -> Result<Option<Opts>> {
+        Opts::parse(args.iter().map(|a| a.to_string()))
+    }
+
+    #[test]
+    fn skip_takes_only_part_names() {
+        let o = parse(&["--skip", "criterion,eval-baseline"])
+            .unwrap()
+            .unwrap();
+        assert!(!o.runs("criterion") && !o.runs("eval-baseline"));
+        assert!(o.runs("firmware") && o.runs("eval"));
+        // A retired part (`ipc`) or a typo is refused with one line naming the parts.
+        for bad in ["ipc", "criterion,firmwre", ""] {
+            let e = parse(&["--skip", bad]).err().unwrap().to_string();
+            assert!(e.starts_with("--skip: no part"), "{e}");
+            assert!(e.contains(&PARTS.join(",")) && !e.contains('\n'), "{e}");
+        }
+        assert!(parse(&["--skip"]).is_err());
+        assert!(parse(&["--bogus"]).is_err());
+        assert!(parse(&["--help"]).unwrap().is_none());
     }
 }
