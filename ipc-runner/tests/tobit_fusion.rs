@@ -50,15 +50,18 @@ fn paper_example_what_holds() {
         ..EvalOptions::default()
     };
     let factories: &[ipc_runner::estimators::Factory] = &[tobit::build];
+    // The paper's views, then the same with `Silence::Predict` (the order `tobit::build` has;
+    // `run_one` checks it).
+    let (l, p) = (&tobit::LOCAL_NAMES, &tobit::LOCAL_PREDICT_NAMES);
     let names = [
-        "tobit-1",
-        "tobit-2",
-        "tobit-3",
-        "fused",
-        "tobit-1-predict",
-        "tobit-2-predict",
-        "tobit-3-predict",
-        "fused-predict",
+        l[0],
+        l[1],
+        l[2],
+        tobit::FUSED_NAME,
+        p[0],
+        p[1],
+        p[2],
+        tobit::FUSED_PREDICT_NAME,
     ];
     let t = T as usize;
     let mut run_avg = vec![Vec::new(); 8];
