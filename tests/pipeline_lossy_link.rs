@@ -21,87 +21,41 @@
 mod bridge_common;
 #[path = "pipeline_common.rs"]
 mod common;
+#[path = "netns_common.rs"]
+mod netns;
 
 use bridge_common::assert_ok;
 
 use common::{report, scratch, Proc};
+use netns::{Netns, ADDR_A};
 use std::path::Path;
-use std::process::Command;
 
 const LOSS: f64 = 0.1;
 const STEPS: u32 = 2000;
 const PORT: u16 = 7449;
-const ADDR_A: &str = "10.77.0.1";
-const ADDR_B: &str = "10.77.0.2";
 
-/// Two network namespaces joined by a veth pair, the link from A to B losing [`LOSS`] of its
-/// datagrams; removed on drop (and, from runs that crashed, at the next start).
+/// Two network namespaces ([`Netns`]), the link from A to B losing [`LOSS`] of its
+/// datagrams.
 struct Link {
-    a: String,
-    b: String,
+    ns: Netns,
     /// How the kernel drops: "netem" or "nftables".
     how: &'static str,
 }
 
-fn sh(args: &[&str]) -> Result<String, String> {
-    let out = Command::new(args[0])
-        .args(&args[1..])
-        .output()
-        .map_err(|e| format!("{}: {e}", args.join(" ")))?;
-    if out.status.success() {
-        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
-    } else {
-        Err(format!(
-            "{}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ))
+impl std::ops::Deref for Link {
+    type Target = Netns;
+    fn deref(&self) -> &Netns {
+        &self.ns
     }
 }
 
 impl Link {
     fn new() -> Result<Self, String> {
-        // Namespaces of earlier runs whose process is gone (a crash skips Drop).
-        if let Ok(list) = sh(&["ip", "netns", "list"]) {
-            for name in list.split_whitespace().filter(|n| n.starts_with("estp-")) {
-                let pid = name.split('-').nth(1).unwrap_or("");
-                if !Path::new(&format!("/proc/{pid}")).exists() {
-                    let _ = sh(&["ip", "netns", "del", name]);
-                }
-            }
-        }
-        let id = std::process::id();
-        let mut link = Self {
-            a: format!("estp-{id}-a"),
-            b: format!("estp-{id}-b"),
-            how: "",
-        };
-        sh(&["ip", "netns", "add", &link.a])?;
-        sh(&["ip", "netns", "add", &link.b])?;
-        let (va, vb) = (format!("ev{id}a"), format!("ev{id}b"));
-        let (va, vb) = (&va[..va.len().min(15)], &vb[..vb.len().min(15)]);
-        let ex_a = ["ip", "netns", "exec", &link.a];
-        let ex_b = ["ip", "netns", "exec", &link.b];
-        let run = |ns: &[&str; 4], rest: &[&str]| {
-            let mut v: Vec<&str> = ns.to_vec();
-            v.extend_from_slice(rest);
-            sh(&v)
-        };
-        sh(&[
-            "ip", "link", "add", va, "netns", &link.a, "type", "veth", "peer", "name", vb, "netns",
-            &link.b,
-        ])?;
-        let a24 = format!("{ADDR_A}/24");
-        let b24 = format!("{ADDR_B}/24");
-        run(&ex_a, &["ip", "addr", "add", &a24, "dev", va])?;
-        run(&ex_b, &["ip", "addr", "add", &b24, "dev", vb])?;
-        for (ex, v) in [(&ex_a, va), (&ex_b, vb)] {
-            run(ex, &["ip", "link", "set", v, "up"])?;
-            run(ex, &["ip", "link", "set", "lo", "up"])?;
-        }
+        let ns = Netns::pair('l')?;
         let pct = format!("{}%", LOSS * 100.0);
-        let how = match run(
-            &ex_a,
+        let (va, vb) = (&ns.va, &ns.vb);
+        let how = match ns.exec(
+            &ns.a,
             &[
                 "tc", "qdisc", "add", "dev", va, "root", "netem", "loss", &pct,
             ],
@@ -116,31 +70,30 @@ impl Link {
                      counter drop"
                 );
                 let chain = "{ type filter hook input priority 0; }";
-                run(&ex_b, &["nft", "add", "table", "inet", "estp"])
+                ns.exec(&ns.b, &["nft", "add", "table", "inet", "estp"])
                     .and_then(|_| {
-                        run(
-                            &ex_b,
+                        ns.exec(
+                            &ns.b,
                             &["nft", "add", "chain", "inet", "estp", "inp", chain],
                         )
                     })
-                    .and_then(|_| run(&ex_b, &["nft", "add", "rule", "inet", "estp", "inp", &rule]))
+                    .and_then(|_| {
+                        ns.exec(&ns.b, &["nft", "add", "rule", "inet", "estp", "inp", &rule])
+                    })
                     .map_err(|nft| format!("no way to drop: {netem}; {nft}"))?;
                 "nftables"
             }
         };
-        link.how = how;
-        Ok(link)
+        Ok(Self { ns, how })
     }
 
     /// Datagrams the kernel dropped on the A → B link so far.
     fn dropped(&self) -> u64 {
         let out = if self.how == "netem" {
-            sh(&["ip", "netns", "exec", &self.a, "tc", "-s", "qdisc", "show"]).unwrap()
+            self.exec(&self.a, &["tc", "-s", "qdisc", "show"]).unwrap()
         } else {
-            sh(&[
-                "ip", "netns", "exec", &self.b, "nft", "list", "table", "inet", "estp",
-            ])
-            .unwrap()
+            self.exec(&self.b, &["nft", "list", "table", "inet", "estp"])
+                .unwrap()
         };
         let word = if self.how == "netem" {
             "dropped"
@@ -157,21 +110,6 @@ impl Link {
             .unwrap_or_else(|| panic!("no {word} in {out}"));
         // netem prints "dropped N", nftables "packets N".
         w[i + 1].parse().unwrap()
-    }
-
-    /// `ip netns exec <ns> pipeline-node <args>`.
-    fn start(&self, ns: &str, dir: &Path, name: &str, args: &[&str]) -> Proc {
-        let exe = common::node_exe();
-        let mut v = vec!["netns", "exec", ns, exe.to_str().unwrap()];
-        v.extend_from_slice(args);
-        Proc::start_program(dir, name, Path::new("/usr/sbin/ip"), &v)
-    }
-}
-
-impl Drop for Link {
-    fn drop(&mut self) {
-        let _ = sh(&["ip", "netns", "del", &self.a]);
-        let _ = sh(&["ip", "netns", "del", &self.b]);
     }
 }
 
@@ -253,29 +191,15 @@ fn a_lossy_link_is_seen_as_losses_and_costs_only_their_information() {
     let (a, b) = (common::prefix("lossy-a"), common::prefix("lossy-b"));
     let key = format!("estpipe-test/{}", common::prefix("key"));
     let endpoint = format!("udp/{ADDR_A}:{PORT}");
-    let bridge = |ns: &str, side: &str, role: &str, prefix: &str| {
-        let report = dir.join(format!("bridge-{side}.json"));
-        link.start(
-            ns,
-            &dir,
-            &format!("bridge-{side}"),
-            &[
-                "bridge",
-                "--side",
-                side,
-                "--prefix",
-                prefix,
-                "--key",
-                &key,
-                role,
-                &endpoint,
-                "--once",
-                "--connect-timeout",
-                "30",
-                "--report",
-                report.to_str().unwrap(),
-            ],
-        )
+    let bridge = |nsn: &str, side, role, prefix| {
+        let b = netns::BridgeArgs {
+            side,
+            role,
+            prefix,
+            key: &key,
+            endpoint: &endpoint,
+        };
+        link.bridge(nsn, &dir, &b, &["--once"])
     };
     let (csv, json, log) = (
         dir.join("run.csv"),

@@ -24,6 +24,7 @@ pub mod estimator;
 pub mod report;
 pub mod sensor;
 pub mod sequence;
+mod session;
 mod stop;
 
 pub use args::{BridgeArgs, Side};

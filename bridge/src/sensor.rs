@@ -6,6 +6,7 @@
 
 use crate::args::BridgeArgs;
 use crate::report::BridgeReport;
+use crate::session::{close_within, CloseOnStop, CLOSE_WAIT};
 use crate::stop::Stop;
 use anyhow::{anyhow, bail, Result};
 use estpipe_wire::{self as wire, net, SLOT_DATA};
@@ -118,6 +119,8 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
     if !args.quiet {
         eprintln!("bridge: sensor side of {}: forwarding", args.prefix);
     }
+    // A put blocked on a congested link returns when a stop closes the session.
+    let close_on_stop = CloseOnStop::new(&session, &stop);
 
     let mut ended_at: Option<Instant> = None;
     let mut last_estimate = Instant::now();
@@ -128,7 +131,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             break;
         }
         let mut busy = false;
-        busy |= forward_truth(&truth_sub, &z_slots, &mut report)?;
+        busy |= forward_truth(&truth_sub, &z_slots, &stop, &mut report)?;
         for _ in 0..BURST {
             let Some(sample) = slot_sub.receive().map_err(|e| anyhow!("slots: {e:?}"))? else {
                 break;
@@ -138,7 +141,10 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             drop(sample);
             // The publisher sends an instant's truth before its slots: whatever truth came
             // meanwhile goes first, so the far side sees the same order.
-            forward_truth(&truth_sub, &z_slots, &mut report)?;
+            forward_truth(&truth_sub, &z_slots, &stop, &mut report)?;
+            if stop.requested() {
+                break;
+            }
             // The same checks the far side makes: a bad slot never costs network bandwidth.
             let mut msg = net::encode_slot(&h, &s);
             if let Err(e) = net::decode_slot(&msg) {
@@ -160,11 +166,12 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             } else {
                 MARKER_COPIES
             };
+            let mut put_all = true;
             for _ in 0..copies {
-                z_slots
-                    .put(&msg[..])
-                    .wait()
-                    .map_err(|e| anyhow!("zenoh put slot: {e}"))?;
+                put_all = put_all && put(&z_slots, &msg, &stop, "slot")?;
+            }
+            if !put_all {
+                break;
             }
             if s.kind == SLOT_DATA {
                 report.slots += 1;
@@ -200,15 +207,28 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             let _ = listener.timed_wait(|_| {}, Duration::from_micros(500));
         }
     }
-    drop(session);
+    drop(close_on_stop);
+    close_within(session, CLOSE_WAIT);
     Ok(report)
 }
 
+/// Puts `msg` on `z`; `Ok(false)` when it failed because a stop closed the session
+/// ([`CloseOnStop`]): the message is not sent and the caller stops.
+fn put(z: &zenoh::pubsub::Publisher<'_>, msg: &[u8], stop: &Stop, what: &str) -> Result<bool> {
+    match z.put(msg).wait() {
+        Ok(()) => Ok(true),
+        Err(_) if stop.requested() => Ok(false),
+        Err(e) => Err(anyhow!("zenoh put {what}: {e}")),
+    }
+}
+
 /// Forwards every truth sample waiting in shared memory (on the slots key: one zenoh
-/// publisher keeps the order); `Ok(true)` if there was one.
+/// publisher keeps the order); `Ok(true)` if there was one. Returns early when a stop closed
+/// the session.
 fn forward_truth(
     truth_sub: &iceoryx2::port::subscriber::Subscriber<ipc::Service, wire::Truth, ()>,
     z_slots: &zenoh::pubsub::Publisher<'_>,
+    stop: &Stop,
     report: &mut BridgeReport,
 ) -> Result<bool> {
     let mut any = false;
@@ -219,10 +239,9 @@ fn forward_truth(
             report.refuse("truth");
             continue;
         }
-        z_slots
-            .put(&net::encode_truth(&t)[..])
-            .wait()
-            .map_err(|e| anyhow!("zenoh put truth: {e}"))?;
+        if !put(z_slots, &net::encode_truth(&t), stop, "truth")? {
+            break;
+        }
         report.truth += 1;
     }
     Ok(any)
