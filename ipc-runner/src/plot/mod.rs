@@ -125,6 +125,9 @@ where
     Ok(())
 }
 
+/// Most estimators a state panel names in its own legend.
+const STATE_LEGEND_MAX: usize = 6;
+
 /// Line colour `j`: the colour-blind-safe Okabe–Ito palette, then darker variants, so that up
 /// to 12 lines are told apart.
 pub(crate) fn color(j: usize) -> RGBColor {
@@ -260,7 +263,14 @@ where
     };
     let mut chart = ChartBuilder::on(area)
         .caption(
-            format!("run 0: state x{} — truth and estimates", i + 1),
+            if tr.names.len() <= STATE_LEGEND_MAX {
+                format!("run 0: state x{} — truth and estimates", i + 1)
+            } else {
+                format!(
+                    "run 0: state x{} — truth (black) and estimates (colours as above)",
+                    i + 1
+                )
+            },
             (FONT, 18),
         )
         .margin(12)
@@ -279,12 +289,16 @@ where
         .draw_series(LineSeries::new(truth, BLACK.stroke_width(2)))?
         .label("truth")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(3)));
+    // Many estimators: their legend would cover the panel; the MSE panel's names the colours.
+    let labelled = tr.names.len() <= STATE_LEGEND_MAX;
     for (j, (points, name)) in estimates.into_iter().zip(&tr.names).enumerate() {
         let c = color(j);
-        chart
-            .draw_series(LineSeries::new(points, c.stroke_width(1)))?
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
+        let series = chart.draw_series(LineSeries::new(points, c.stroke_width(1)))?;
+        if labelled {
+            series.label(*name).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3))
+            });
+        }
     }
     draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 14)
 }
