@@ -332,7 +332,7 @@ mod tests {
     use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap, Tanh};
     use crate::papers::{Seed003Example, Seed003Nn};
     use crate::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
-    use std::format;
+    use core::fmt::Write as _;
 
     fn example_verdict<T: Real>() -> PreRunVerdict<T> {
         let e0 = Seed003Example::x0::<T>() - Seed003Example::xhat0::<T>();
@@ -369,7 +369,8 @@ mod tests {
                 Violation::InitialCovarianceAboveBound,
             ]
         );
-        let text = format!("{v}");
+        let mut text = heapless::String::<4096>::new();
+        write!(text, "{v}").unwrap();
         assert!(text.contains("4 condition(s) fail"), "{text}");
     }
 

@@ -3,6 +3,10 @@
 use super::*;
 use crate::gauss::{inv_mills, inv_mills_delta, ln_sf};
 
+/// Most intervals a test mixture has (fixed-capacity vectors: the crate stays allocation-free,
+/// its tests too).
+const MAX_IV: usize = 16;
+
 /// Moments of a truncated standard normal by brute-force Simpson quadrature.
 fn quad_moments(a: f64, b: f64) -> (f64, f64, f64) {
     let n = 200_000;
@@ -143,16 +147,12 @@ fn old_truncated_std_normal<T: Real>(a: T, b: T) -> (T, T, T) {
 
 /// Interval ends from −60 to 60 (and ±∞), densest near 0 and near the shortcuts' edges.
 fn ends() -> impl Iterator<Item = f64> + Clone {
-    let mut v: std::vec::Vec<f64> = (-240..=240).map(|i| i as f64 * 0.25).collect();
-    for x in [
+    let grid = (-240..=240).map(|i| i as f64 * 0.25);
+    let special = [
         1e-9, 0.01, 3.99, 4.0, 4.01, 6.5, 7.0, 7.01, 9.99, 10.0, 10.01, 37.5, 38.5,
-    ] {
-        v.push(x);
-        v.push(-x);
-    }
-    v.push(f64::INFINITY);
-    v.push(f64::NEG_INFINITY);
-    v.into_iter()
+    ];
+    grid.chain(special.into_iter().flat_map(|x| [x, -x]))
+        .chain([f64::INFINITY, f64::NEG_INFINITY])
 }
 
 #[test]
@@ -252,7 +252,7 @@ fn the_bounds_behind_the_skips_hold() {
 /// comes first (the mean is then formed as μ_far + (μ − μ_far)) or when components far
 /// apart both count.
 fn full_mixture(iv: &[(f64, f64)], two_pass: bool) -> Option<(f64, f64, usize)> {
-    let c: std::vec::Vec<(f64, f64, f64)> = iv
+    let c: heapless::Vec<(f64, f64, f64), MAX_IV> = iv
         .iter()
         .map(|&(lo, hi)| old_truncated_std_normal(lo, hi))
         .collect();
@@ -270,7 +270,7 @@ fn full_mixture(iv: &[(f64, f64)], two_pass: bool) -> Option<(f64, f64, usize)> 
     if !two_pass {
         return Some((mix.mean, mix.variance(), best));
     }
-    let w: std::vec::Vec<f64> = c.iter().map(|c| (c.0 - top).exp()).collect();
+    let w: heapless::Vec<f64, MAX_IV> = c.iter().map(|c| (c.0 - top).exp()).collect();
     let wt: f64 = w.iter().sum();
     let mean = c.iter().zip(&w).map(|(c, w)| w * c.1).sum::<f64>() / wt;
     let var = c
@@ -286,7 +286,7 @@ fn full_mixture(iv: &[(f64, f64)], two_pass: bool) -> Option<(f64, f64, usize)> 
 /// to the two-pass sums as the old one-pass sum, to 1e-14 (the mean relative to
 /// `√v̄ + |μ̄|`, the variance relative). Returns the two distances.
 fn union(iv: &[(f64, f64)]) -> Option<(f64, f64, usize)> {
-    let sorted: std::vec::Vec<(f64, f64, usize)> =
+    let sorted: heapless::Vec<(f64, f64, usize), MAX_IV> =
         iv.iter().enumerate().map(|(j, i)| (i.0, i.1, j)).collect();
     union_moments(&Intervals {
         sorted: &sorted,
@@ -294,7 +294,10 @@ fn union(iv: &[(f64, f64)]) -> Option<(f64, f64, usize)> {
     })
 }
 
-fn check_union(iv: &[(f64, f64)], tag: &str) -> Option<((f64, f64), (f64, f64))> {
+fn check_union(
+    iv: &[(f64, f64)],
+    tag: core::fmt::Arguments<'_>,
+) -> Option<((f64, f64), (f64, f64))> {
     let got = union(iv);
     let (old, exact) = (full_mixture(iv, false), full_mixture(iv, true));
     let (Some(g), Some(o), Some(e)) = (got, old, exact) else {
@@ -324,11 +327,11 @@ fn union_moments_match_the_full_mixture() {
     for scale in [1e-3, 0.1, 0.5, 1.0, 2.0, 5.0, 30.0] {
         for shift in -400..=400 {
             let c = shift as f64 * 0.37;
-            let iv: std::vec::Vec<(f64, f64)> = [-20.0, -10.0, 0.0, 10.0, 20.0]
+            let iv: heapless::Vec<(f64, f64), MAX_IV> = [-20.0, -10.0, 0.0, 10.0, 20.0]
                 .iter()
                 .map(|&z| ((z - 5.0 - c) / scale, (z - 5.0 - c + 1.0) / scale))
                 .collect();
-            if let Some((n, o)) = check_union(&iv, &std::format!("scale {scale} shift {c}")) {
+            if let Some((n, o)) = check_union(&iv, format_args!("scale {scale} shift {c}")) {
                 worst_new = (worst_new.0.max(n.0), worst_new.1.max(n.1));
                 worst_old = (worst_old.0.max(o.0), worst_old.1.max(o.1));
             }
@@ -347,13 +350,13 @@ fn a_failed_recheck_evaluates_every_interval() {
     // kept it may be; whatever the re-check decides, the result is the full mixture's.
     for far in [8.0, 9.0, 10.0, 11.0, 12.0, 14.0, 20.0, 40.0] {
         let iv = [(-0.001, 0.001), (1.5, 6.0), (far, far + 1.0)];
-        check_union(&iv, &std::format!("far {far}")).unwrap();
+        check_union(&iv, format_args!("far {far}")).unwrap();
         let iv = [(far, far + 1.0), (-0.001, 0.001), (-6.0, -2.5)];
-        check_union(&iv, &std::format!("far {far}, reversed")).unwrap();
+        check_union(&iv, format_args!("far {far}, reversed")).unwrap();
     }
     // Nothing finite: None, as the full mixture; NaN bounds likewise.
     let inf = f64::INFINITY;
     assert_eq!(union(&[(inf, inf), (1.0, 1.0)]), None);
-    check_union(&[(f64::NAN, 1.0), (2.0, 3.0)], "NaN");
+    check_union(&[(f64::NAN, 1.0), (2.0, 3.0)], format_args!("NaN"));
     assert!(union(&[(f64::NAN, f64::NAN)]).is_none());
 }
