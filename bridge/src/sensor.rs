@@ -141,10 +141,8 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             drop(sample);
             // The publisher sends an instant's truth before its slots: whatever truth came
             // meanwhile goes first, so the far side sees the same order.
+            // A put the stop cut short ends this pass at the slot's own put below.
             forward_truth(&truth_sub, &z_slots, &stop, &mut report)?;
-            if stop.requested() {
-                break;
-            }
             // The same checks the far side makes: a bad slot never costs network bandwidth.
             let mut msg = net::encode_slot(&h, &s);
             if let Err(e) = net::decode_slot(&msg) {

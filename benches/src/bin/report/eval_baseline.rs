@@ -241,13 +241,7 @@ fn cpu_profile(bin: &Path, runs: u64, tmp: &Path) -> Result<(u64, Vec<(String, f
         ])
         .arg(&data)
         .arg(bin)
-        .args(["eval", "--scenario", SCENARIO, "--quiet", "--threads", "1"])
-        .args([
-            "--runs",
-            &runs.to_string(),
-            "--horizon",
-            &HORIZON.to_string(),
-        ])
+        .args(profiled_eval_args(runs))
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .status()
@@ -415,19 +409,21 @@ fn timed(bin: &Path, runs: u64, json: &Path, out: &Path) -> Result<(f64, f64)> {
     Ok((v[2] + v[1], v[0]))
 }
 
+/// The eval's arguments under a profiler (perf, callgrind): one worker thread, `runs` runs.
+fn profiled_eval_args(runs: u64) -> Vec<String> {
+    let (runs, horizon) = (runs.to_string(), HORIZON.to_string());
+    let args = ["eval", "--scenario", SCENARIO, "--quiet", "--threads", "1"];
+    let sizes = ["--runs", &runs, "--horizon", &horizon];
+    args.iter().chain(&sizes).map(|a| a.to_string()).collect()
+}
+
 /// Total instructions of the command under callgrind, `--threads 1`.
 fn callgrind(bin: &Path, runs: u64, out: &Path) -> Result<u64> {
     let st = Command::new("valgrind")
         .arg("--tool=callgrind")
         .arg(format!("--callgrind-out-file={}", out.display()))
         .arg(bin)
-        .args(["eval", "--scenario", SCENARIO, "--quiet", "--threads", "1"])
-        .args([
-            "--runs",
-            &runs.to_string(),
-            "--horizon",
-            &HORIZON.to_string(),
-        ])
+        .args(profiled_eval_args(runs))
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .status()
