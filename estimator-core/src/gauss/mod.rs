@@ -9,11 +9,16 @@
 //!   cancellation in `λ − ζ` never happens.
 //! * [`ln_interval_prob`] `ln P(a < Z < b)` without underflow, and [`log_sum_exp`] for mixture
 //!   weights kept in the log domain.
+//! * [`ln_sf_each`] and [`ln_interval_prob_each`]: many of them at once, bit for bit the
+//!   single ones, with their continued fractions side by side ([`side_by_side`]).
 //!
 //! (Here φ in λ's definition is the normal density, as in the paper; the paper reuses the
 //! letter for the variance factor, which this crate names `inv_mills_delta`.)
 
 use crate::Real;
+
+pub mod side_by_side;
+pub use side_by_side::{ln_interval_prob_each, ln_sf_each};
 
 /// `1/√(2π)`.
 pub const FRAC_1_SQRT_2PI: f64 = 0.398_942_280_401_432_677_94;
