@@ -247,7 +247,11 @@ mod tests {
                 }
                 ln_sf_each(&mut got32);
                 for (i, &x) in long[start..end].iter().enumerate() {
-                    assert_eq!(got[i].to_bits(), ln_sf(x).to_bits(), "{x} in {start}..{end}");
+                    assert_eq!(
+                        got[i].to_bits(),
+                        ln_sf(x).to_bits(),
+                        "{x} in {start}..{end}"
+                    );
                     assert_eq!(got32[i].to_bits(), ln_sf(x as f32).to_bits(), "f32 {x}");
                 }
             }
@@ -309,9 +313,8 @@ mod tests {
                     let want32 = ln_interval_prob(a as f32, b as f32);
                     assert_eq!(got32[i].to_bits(), want32.to_bits(), "f32 ({a}, {b})");
                     let (lo, hi) = if b < 0.0 && a < b { (-b, -a) } else { (a, b) };
-                    shortcut += usize::from(
-                        run == 1 && lo > 0.0 && lo < hi && far_end_negligible(lo, hi),
-                    );
+                    shortcut +=
+                        usize::from(run == 1 && lo > 0.0 && lo < hi && far_end_negligible(lo, hi));
                 }
             }
         }

@@ -117,58 +117,27 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
     /// does not, they are evaluated after all, in order, before it. The gap with the
     /// largest bound is the reference for the leading gaps.
     ///
-    /// Every gap's `ln P` is evaluated first, together ([`ln_interval_prob_each`]: their
-    /// continued fractions run side by side, so the step waits for the longest one instead
-    /// of their sum), and the sum above then picks the ones it needs: the same bits as
-    /// evaluating each when it is needed, for some extra work on gaps it skips.
+    /// The gaps whose bound is near the anchor's are evaluated first, together
+    /// ([`GapLogProbs::ahead`]: their continued fractions run side by side, so the step
+    /// waits for the longest one instead of their sum), any other the sum needs when it
+    /// needs it: the same bits either way.
     fn prob_outside(&self, m: T, s: T) -> T {
         let neg_inf = -T::one() / T::zero();
         let margin = T::lit(40.0);
         let lead_margin = T::lit(41.0 + S as f64);
-        // Every end in standard units of `u ~ N(m, s²)`, once: gap j (`0..=S`: below the
-        // first region, between regions, above the last) is (`upper[j − 1]`, `lower[j]`),
-        // the infinite ends as `(±∞ − m)/s` (NaN for a NaN m or s, as every end).
-        let mut lower = [T::zero(); S];
-        let mut upper = [T::zero(); S];
-        for (i, &(lo, hi, _)) in self.sorted.iter().enumerate() {
-            lower[i] = (lo - m) / s;
-            upper[i] = (hi - m) / s;
-        }
-        let (below, above) = ((neg_inf - m) / s, (-neg_inf - m) / s);
-        let gap = |j: usize| {
-            (
-                if j == 0 { below } else { upper[j - 1] },
-                if j == S { above } else { lower[j] },
-            )
-        };
+        let mut gaps = GapLogProbs::new(&self.sorted, m, s);
         let mut anchor = (0, neg_inf);
         for j in 0..=S {
-            let u = Self::gap_bound(gap(j));
+            let u = Self::gap_bound(gaps.gap(j));
             if u > anchor.1 {
                 anchor = (j, u);
             }
         }
-        // `ln P` of gap j: `inner[j]` for j < S, `last` for the gap above the last region,
-        // in blocks of `GAPS` gaps evaluated together.
-        let mut inner = [T::zero(); S];
-        let mut last = neg_inf;
-        let mut block = [(T::zero(), T::zero()); GAPS];
-        let mut ln_p = [T::zero(); GAPS];
-        for first in (0..=S).step_by(GAPS) {
-            let n = (S + 1 - first).min(GAPS);
-            for (i, e) in block.iter_mut().enumerate().take(n) {
-                *e = gap(first + i);
-            }
-            ln_interval_prob_each(&block[..n], &mut ln_p[..n]);
-            for (i, &l) in ln_p.iter().enumerate().take(n) {
-                match inner.get_mut(first + i) {
-                    Some(v) => *v = l,
-                    None => last = l,
-                }
-            }
-        }
-        let ln_gap = |j: usize| inner.get(j).copied().unwrap_or(last);
-        let at_anchor = ln_gap(anchor.0);
+        // The gaps the sum is likely to need, together: within the skip margin of the
+        // anchor's bound, and some slack for how loose the bounds are.
+        let likely = anchor.1 - margin - T::lit(SPECULATION_SLACK);
+        gaps.ahead(|gap| Self::gap_bound(gap) >= likely);
+        let at_anchor = gaps.get(anchor.0);
         let mut total = LogSumExp::default();
         let mut top = neg_inf;
         let mut skipped_lead = neg_inf;
@@ -176,7 +145,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             let x = if j == anchor.0 {
                 at_anchor
             } else {
-                let u = Self::gap_bound(gap(j));
+                let u = Self::gap_bound(gaps.gap(j));
                 if top.finite() {
                     if u < top - margin {
                         continue;
@@ -187,7 +156,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
                     }
                     continue;
                 }
-                ln_gap(j)
+                gaps.get(j)
             };
             if top == neg_inf
                 && skipped_lead > neg_inf
@@ -196,7 +165,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
                 // The leading gaps were skipped against the anchor, but this term is not
                 // far enough above them: push them as the plain sum would have.
                 for i in 0..j {
-                    let l = ln_gap(i);
+                    let l = gaps.get(i);
                     total.push(l);
                     if raises(l, top) {
                         top = l;
@@ -358,6 +327,98 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
     }
 }
 
+/// How far below the skip margin of the anchor's bound [`KfIo::prob_outside`] still
+/// evaluates a gap ahead: the bounds overstate `ln P` by about `ln(a √(2π))` for a tail gap
+/// from `a`, a few units here. Only the speed depends on it.
+const SPECULATION_SLACK: f64 = 8.0;
+
+/// The `ln P` of the gaps of one [`KfIo::prob_outside`] call, in standard units of
+/// `u ~ N(m, s²)`: gap j (`0..=S`: below the first region, between regions, above the last)
+/// is (`upper[j − 1]`, `lower[j]`), the infinite ends `(±∞ − m)/s` (NaN for a NaN m or s,
+/// as every end). Each is evaluated once: ahead, with others, or when first asked for.
+struct GapLogProbs<T: Real, const S: usize> {
+    lower: [T; S],
+    upper: [T; S],
+    below: T,
+    above: T,
+    /// Gap j < S at j; the gap above the last region in `last`.
+    ln_p: [Option<T>; S],
+    last: Option<T>,
+}
+
+impl<T: Real, const S: usize> GapLogProbs<T, S> {
+    fn new(sorted: &[(T, T, usize); S], m: T, s: T) -> Self {
+        let neg_inf = -T::one() / T::zero();
+        let mut lower = [T::zero(); S];
+        let mut upper = [T::zero(); S];
+        for ((l, u), &(lo, hi, _)) in lower.iter_mut().zip(&mut upper).zip(sorted) {
+            *l = (lo - m) / s;
+            *u = (hi - m) / s;
+        }
+        Self {
+            lower,
+            upper,
+            below: (neg_inf - m) / s,
+            above: (-neg_inf - m) / s,
+            ln_p: [None; S],
+            last: None,
+        }
+    }
+
+    /// Gap j's ends.
+    #[inline]
+    fn gap(&self, j: usize) -> (T, T) {
+        let lo = match j.checked_sub(1) {
+            Some(i) => self.upper.get(i).copied().unwrap_or(self.above),
+            None => self.below,
+        };
+        (lo, self.lower.get(j).copied().unwrap_or(self.above))
+    }
+
+    #[inline]
+    fn slot(&mut self, j: usize) -> &mut Option<T> {
+        match self.ln_p.get_mut(j) {
+            Some(v) => v,
+            None => &mut self.last,
+        }
+    }
+
+    /// Evaluates every gap whose ends `wanted` accepts, [`GAPS`] at a time together.
+    fn ahead(&mut self, wanted: impl Fn((T, T)) -> bool) {
+        let mut block = [(T::zero(), T::zero()); GAPS];
+        let mut which = [0usize; GAPS];
+        let mut ln_p = [T::zero(); GAPS];
+        let mut n = 0;
+        for j in 0..=S {
+            let g = self.gap(j);
+            if wanted(g) {
+                if let (Some(b), Some(w)) = (block.get_mut(n), which.get_mut(n)) {
+                    (*b, *w) = (g, j);
+                    n += 1;
+                }
+            }
+            if n == GAPS || (j == S && n > 0) {
+                ln_interval_prob_each(&block[..n], &mut ln_p[..n]);
+                for (&j, &l) in which.iter().zip(&ln_p).take(n) {
+                    *self.slot(j) = Some(l);
+                }
+                n = 0;
+            }
+        }
+    }
+
+    /// Gap j's `ln P`, evaluated now if it was not ahead.
+    fn get(&mut self, j: usize) -> T {
+        if let Some(l) = *self.slot(j) {
+            return l;
+        }
+        let mut l = [T::zero()];
+        ln_interval_prob_each(&[self.gap(j)], &mut l);
+        *self.slot(j) = Some(l[0]);
+        l[0]
+    }
+}
+
 /// Whether the term `x` becomes [`LogSumExp`]'s top after `top`: a larger one, or NaN, which
 /// then stays.
 #[inline]
@@ -418,6 +479,127 @@ mod tests {
     use crate::model::LinearModel;
     use crate::papers::Seed001Example;
     use nalgebra::{matrix, vector};
+
+    /// `P(u in no region)` as the module docs define it: every gap's
+    /// `gauss::ln_interval_prob`, summed in gap order in the log domain.
+    fn plain_prob_outside<T: Real, const S: usize>(f: &KfIo<T, 1, S>, m: T, s: T) -> T {
+        let neg_inf = -T::one() / T::zero();
+        let mut ends = [(T::zero(), T::zero()); 9];
+        let mut lo = neg_inf;
+        for (e, &(a, b, _)) in ends.iter_mut().zip(&f.sorted) {
+            *e = (lo, a);
+            lo = b;
+        }
+        ends[S] = (lo, -neg_inf);
+        let mut total = LogSumExp::default();
+        for &(a, b) in &ends[..=S] {
+            total.push(crate::gauss::ln_interval_prob((a - m) / s, (b - m) / s));
+        }
+        total.value().exp().min(T::one())
+    }
+
+    /// The skips, the gaps evaluated ahead and those evaluated on demand give the plain
+    /// sum's bits: means inside, between, beside and far from the regions, spreads from
+    /// tiny (every gap but one vanishes) to huge (every gap counts), NaN and ∞, in f64 and
+    /// f32, with the regions of the example and with regions of very different widths.
+    #[test]
+    fn arrival_probability_is_the_plain_sum_bit_for_bit() {
+        use crate::protocol::occlusion::OcclusionRegions;
+        let example = KfIo::<f64, 1, 4>::new(
+            vector![0.0],
+            SMatrix::identity(),
+            Occlusion::new(
+                matrix![1.0],
+                matrix![0.1],
+                OcclusionRegions::new(
+                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
+                    [5.0; 4],
+                )
+                .unwrap(),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let uneven = KfIo::<f64, 1, 3>::new(
+            vector![0.0],
+            SMatrix::identity(),
+            Occlusion::new(
+                matrix![1.0],
+                matrix![0.1],
+                OcclusionRegions::new(
+                    [vector![-3.0], vector![0.5], vector![30.0]],
+                    [0.01, 2.0, 20.0],
+                )
+                .unwrap(),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let spreads = [
+            1e-3,
+            0.05,
+            0.3,
+            1.0,
+            2.5,
+            7.0,
+            30.0,
+            1e3,
+            1e6,
+            f64::INFINITY,
+            f64::NAN,
+        ];
+        let mut cases = 0;
+        for i in -60..=260 {
+            let m = f64::from(i) * 0.5 - 20.0;
+            for &s in &spreads {
+                for (got, want) in [
+                    (
+                        example.prob_outside(m, s),
+                        plain_prob_outside(&example, m, s),
+                    ),
+                    (uneven.prob_outside(m, s), plain_prob_outside(&uneven, m, s)),
+                ] {
+                    assert_eq!(
+                        got.to_bits(),
+                        want.to_bits(),
+                        "m {m}, s {s}: {got} vs {want}"
+                    );
+                    cases += 1;
+                }
+            }
+        }
+        for m in [f64::NAN, f64::INFINITY, -f64::INFINITY, 1e300] {
+            let (got, want) = (
+                example.prob_outside(m, 1.0),
+                plain_prob_outside(&example, m, 1.0),
+            );
+            assert_eq!(got.to_bits(), want.to_bits(), "m {m}");
+        }
+        let narrow = KfIo::<f32, 1, 4>::new(
+            vector![0.0],
+            SMatrix::identity(),
+            Occlusion::new(
+                matrix![1.0],
+                matrix![0.1],
+                OcclusionRegions::new(
+                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
+                    [5.0; 4],
+                )
+                .unwrap(),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        for i in -60..=260 {
+            let m = i as f32 * 0.5 - 20.0;
+            for &s in &spreads {
+                let s = s as f32;
+                let (got, want) = (narrow.prob_outside(m, s), plain_prob_outside(&narrow, m, s));
+                assert_eq!(got.to_bits(), want.to_bits(), "f32 m {m}, s {s}");
+            }
+        }
+        assert!(cases > 7000);
+    }
 
     fn setup() -> (LinearModel<f64, 3, 3, 2, 2>, Occlusion<f64, 3, 1, 4>) {
         (
