@@ -18,7 +18,7 @@
 use crate::Real;
 
 pub mod side_by_side;
-pub use side_by_side::{ln_interval_prob_each, ln_sf_each};
+pub use side_by_side::{ln_interval_prob_each, ln_interval_prob_one, ln_sf_each};
 
 /// `1/√(2π)`.
 pub const FRAC_1_SQRT_2PI: f64 = 0.398_942_280_401_432_677_94;

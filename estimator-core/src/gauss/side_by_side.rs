@@ -6,7 +6,9 @@
 //! gap between occlusion regions) pays the sum of its chains when it evaluates them one after
 //! another, and about the longest one when they run side by side, because independent
 //! divisions overlap in the divider. Every point still goes through exactly the operations of
-//! its single evaluation, so the results are the same bits.
+//! its single evaluation, so the results are the same bits. A size-optimised build
+//! (`small_code`, the firmware's: an in-order Cortex-M4 has no latency to hide) evaluates the
+//! intervals one at a time ([`ln_interval_prob_one`]), with the same results.
 
 use super::{cf_terms, ln_interval_prob, ln_pdf, ln_sf, CF_THRESHOLD};
 use crate::Real;
@@ -133,6 +135,14 @@ enum Finish<T> {
 ///
 /// `out` shorter than `ends` gets the first `out.len()` results.
 pub fn ln_interval_prob_each<T: Real>(ends: &[(T, T)], out: &mut [T]) {
+    if cfg!(small_code) {
+        // A size-optimised build (the firmware's): on an in-order core there is no latency
+        // to hide, and the lanes would only add instructions and code.
+        for (&(a, b), o) in ends.iter().zip(out) {
+            *o = ln_interval_prob_one(a, b);
+        }
+        return;
+    }
     for (ends, out) in ends.chunks(INTERVALS).zip(out.chunks_mut(INTERVALS)) {
         ln_interval_prob_chunk(ends, out);
     }
@@ -184,6 +194,22 @@ fn ln_interval_prob_chunk<T: Real>(ends: &[(T, T)], out: &mut [T]) {
         };
         *o = la + (-(lb - la).exp()).ln_1p();
     }
+}
+
+/// [`ln_interval_prob_each`] of one interval: the same bits, and the same shortcut, with the
+/// (at most two) continued fractions of [`ln_interval_prob`] side by side.
+pub fn ln_interval_prob_one<T: Real>(a: T, b: T) -> T {
+    if a > T::zero() && a < b {
+        if far_end_negligible(a, b) {
+            let la = ln_sf(a);
+            if la.finite() {
+                return la;
+            }
+        }
+    } else if b < T::zero() && a < b {
+        return ln_interval_prob_one(-b, -a);
+    }
+    ln_interval_prob(a, b)
 }
 
 /// Whether a bound proves `ln Q(b) − ln Q(a) < −40` for `0 < a < b`
@@ -310,6 +336,13 @@ mod tests {
                 for (i, &(a, b)) in group.iter().enumerate() {
                     let want = ln_interval_prob(a, b);
                     assert_eq!(got[i].to_bits(), want.to_bits(), "({a}, {b}): {}", got[i]);
+                    let one = ln_interval_prob_one(a, b);
+                    assert_eq!(one.to_bits(), want.to_bits(), "one ({a}, {b})");
+                    let one32 = ln_interval_prob_one(a as f32, b as f32);
+                    assert_eq!(
+                        one32.to_bits(),
+                        ln_interval_prob(a as f32, b as f32).to_bits()
+                    );
                     let want32 = ln_interval_prob(a as f32, b as f32);
                     assert_eq!(got32[i].to_bits(), want32.to_bits(), "f32 ({a}, {b})");
                     let (lo, hi) = if b < 0.0 && a < b { (-b, -a) } else { (a, b) };

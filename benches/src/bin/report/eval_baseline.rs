@@ -165,14 +165,15 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
             let _ = writeln!(
                 md,
                 "\nWhat this leaves for the target: the special functions alone take {:.2} CPU \
-                 s here; evaluated as they are (the bit-identical JSON needs the same `erfc`, \
-                 `exp`, `ln` and continued fractions on the same arguments), the command \
-                 could at best be {:.1}× faster than `{BASELINE}`, with everything else free. \
-                 4× ({:.2} CPU s) leaves {:.2} CPU s for everything else, which takes {:.2} \
+                 s here; at this cost (the bit-identical JSON needs the same `erfc`, `exp`, \
+                 `ln` and continued fractions on the same arguments), the command could at \
+                 best be {:.1}× faster than `{BASELINE}`, with everything else free. 4× \
+                 ({:.2} CPU s) leaves {:.2} CPU s for everything else, which takes {:.2} \
                  now: {:.0} % of it would have to go. Within the special functions, only \
-                 work that cannot change a bit can go (terms proved not to count, as the \
-                 interval sums already skip; latency hidden by evaluating independent \
-                 arguments side by side, as `gauss::ln_sf_pair` does).\n",
+                 work that cannot change a bit can go: terms proved not to count, as the \
+                 interval sums already skip, and latency hidden by evaluating independent \
+                 arguments side by side, as `gauss::side_by_side` does for the gaps of one \
+                 `kf-io` step; more of it needs several runs' steps side by side.\n",
                 cur_cpu * special,
                 base_cpu / (cur_cpu * special),
                 base_cpu / 4.0,

@@ -39,7 +39,7 @@ use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::time_update::predict;
-use crate::gauss::{ln_interval_prob_each, LogSumExp};
+use crate::gauss::{ln_interval_prob_each, ln_interval_prob_one, LogSumExp};
 use crate::linalg::{all_finite, check_finite, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::{check_loss_rate, Packet};
@@ -135,8 +135,12 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         }
         // The gaps the sum is likely to need, together: within the skip margin of the
         // anchor's bound, and some slack for how loose the bounds are.
+        // (Not on a size-optimised build: there nothing runs side by side, so every gap is
+        // evaluated only when the sum needs it.)
         let likely = anchor.1 - margin - T::lit(SPECULATION_SLACK);
-        gaps.ahead(|gap| Self::gap_bound(gap) >= likely);
+        if !cfg!(small_code) {
+            gaps.ahead(|gap| Self::gap_bound(gap) >= likely);
+        }
         let at_anchor = gaps.get(anchor.0);
         let mut total = LogSumExp::default();
         let mut top = neg_inf;
@@ -412,10 +416,10 @@ impl<T: Real, const S: usize> GapLogProbs<T, S> {
         if let Some(l) = *self.slot(j) {
             return l;
         }
-        let mut l = [T::zero()];
-        ln_interval_prob_each(&[self.gap(j)], &mut l);
-        *self.slot(j) = Some(l[0]);
-        l[0]
+        let (a, b) = self.gap(j);
+        let l = ln_interval_prob_one(a, b);
+        *self.slot(j) = Some(l);
+        l
     }
 }
 
