@@ -728,3 +728,107 @@ fn a_nan_truth_is_counted_and_left_out_of_every_mse() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `pipeline-node <args>` with stdout (and with `both`, stderr too) a pipe whose reader is
+/// already gone, as `eval … | head` leaves it: `(exit code, stderr)` (stderr empty when it
+/// is the broken pipe too). Killed and failed after 60 s.
+fn with_reader_gone(dir: &Path, args: &[&str], both: bool) -> (Option<i32>, String) {
+    use std::process::{Command, Stdio};
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let err_file = dir.join("gone.err");
+    let stderr = if both {
+        Stdio::from(writer.try_clone().unwrap())
+    } else {
+        Stdio::from(std::fs::File::create(&err_file).unwrap())
+    };
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pipeline-node"))
+        .args(args)
+        .env("IOX2_LOG_LEVEL", "Error")
+        .stdin(Stdio::null())
+        .stdout(Stdio::from(writer))
+        .stderr(stderr)
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            break st;
+        }
+        if t0.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("{args:?} did not end with its reader gone");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let err = std::fs::read_to_string(&err_file).unwrap_or_default();
+    (status.code(), err)
+}
+
+/// `eval … | head`: a reader that leaves before the summary costs it the summary, not the
+/// run: no panic, exit 0, the JSON and CSV written and byte-identical to those of the same
+/// run printed to a file; with stderr gone too, the same. A refused flag keeps its exit
+/// code 2 with nobody to read the line.
+#[test]
+fn eval_whose_reader_is_gone_still_writes_its_files() {
+    let dir = scratch("hostile-eval-pipe");
+    let files = |tag: &str| {
+        (
+            dir.join(format!("{tag}.json")),
+            dir.join(format!("{tag}.csv")),
+        )
+    };
+    let args = |json: &Path, csv: &Path| -> Vec<String> {
+        [
+            "eval",
+            "--scenario",
+            "occlusion",
+            "--runs",
+            "40",
+            "--horizon",
+            "30",
+            "--threads",
+            "1",
+            "--json",
+            json.to_str().unwrap(),
+            "--csv",
+            csv.to_str().unwrap(),
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let (want_json, want_csv) = files("printed");
+    let a = args(&want_json, &want_csv);
+    let printed = node(
+        &dir,
+        "printed",
+        &a.iter().map(String::as_str).collect::<Vec<_>>(),
+        60,
+    );
+    assert_eq!(printed.code, Some(0), "{}", printed.err);
+    assert!(printed.out.contains("avg_mse"), "{}", printed.out);
+    for (tag, both) in [("stdout-gone", false), ("both-gone", true)] {
+        let (json, csv) = files(tag);
+        let a = args(&json, &csv);
+        let (code, err) = with_reader_gone(
+            &dir,
+            &a.iter().map(String::as_str).collect::<Vec<_>>(),
+            both,
+        );
+        assert!(!err.contains("panicked"), "{tag}: {err}");
+        assert_eq!(code, Some(0), "{tag}: {err}");
+        assert_eq!(
+            std::fs::read(&json).unwrap(),
+            std::fs::read(&want_json).unwrap(),
+            "{tag}"
+        );
+        assert_eq!(
+            std::fs::read(&csv).unwrap(),
+            std::fs::read(&want_csv).unwrap(),
+            "{tag}"
+        );
+    }
+    let (code, _) = with_reader_gone(&dir, &["eval", "--runs", "0"], true);
+    assert_eq!(code, Some(2));
+    let _ = std::fs::remove_dir_all(&dir);
+}

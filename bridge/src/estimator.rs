@@ -75,7 +75,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .map_err(|e| anyhow!("cannot notify on {}/slots-ready: {e:?}", args.prefix))?;
 
     if !args.quiet {
-        eprintln!(
+        errln!(
             "bridge: estimator side of {}: waiting for a runner",
             args.prefix
         );
@@ -129,7 +129,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .wait()
         .map_err(|e| anyhow!("zenoh subscriber {key}/slots: {e}"))?;
     if !args.quiet {
-        eprintln!(
+        errln!(
             "bridge: estimator side of {}: listening on {key}",
             args.prefix
         );
@@ -229,14 +229,14 @@ impl FarSide {
             match s.kind() {
                 zenoh::sample::SampleKind::Put => {
                     if self.seen && !quiet {
-                        eprintln!("bridge: sensor side back");
+                        errln!("bridge: sensor side back");
                     }
                     self.seen = true;
                 }
                 zenoh::sample::SampleKind::Delete => {
                     report.far_side_lost += 1;
                     if !quiet {
-                        eprintln!(
+                        errln!(
                             "bridge: sensor side gone (its slots count as lost on the network \
                              until it returns)"
                         );

@@ -19,6 +19,15 @@
 //! The message encoding and its checks are the wire crate's (`estpipe_wire::net`): the bridge
 //! never writes into shared memory a message that those checks refused.
 
+/// `eprintln!` that drops the line when stderr cannot take it (a pipe whose reader went
+/// away): the bridge goes on, where `eprintln!` would panic (as `channel_sim::errln!`).
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use ::std::io::Write as _;
+        let _ = ::std::writeln!(::std::io::stderr().lock(), $($arg)*);
+    }};
+}
+
 pub mod args;
 pub mod estimator;
 pub mod report;
@@ -39,7 +48,7 @@ pub const NODE_NAME: &str = "estpipe-bridge";
 pub fn main(args: &BridgeArgs) -> anyhow::Result<i32> {
     let report = run(args)?;
     if !args.quiet {
-        eprintln!("bridge: {}", report.summary());
+        errln!("bridge: {}", report.summary());
     }
     if let Some(p) = &args.report {
         let json = serde_json::to_string_pretty(&report)?;

@@ -75,7 +75,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .map_err(|e| anyhow!("zenoh subscriber {key}/estimates: {e}"))?;
 
     if !args.quiet {
-        eprintln!(
+        errln!(
             "bridge: sensor side of {}: waiting for the estimator side on {key}",
             args.prefix
         );
@@ -117,7 +117,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .create()
         .map_err(|e| anyhow!("cannot subscribe to {}/slots: {e:?}", args.prefix))?;
     if !args.quiet {
-        eprintln!("bridge: sensor side of {}: forwarding", args.prefix);
+        errln!("bridge: sensor side of {}: forwarding", args.prefix);
     }
     // A put blocked on a congested link returns when a stop closes the session.
     let close_on_stop = CloseOnStop::new(&session, &stop);

@@ -21,6 +21,7 @@
 
 pub mod backpressure;
 pub mod channel;
+pub mod console;
 pub mod error;
 pub mod flags;
 pub mod node;

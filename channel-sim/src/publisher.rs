@@ -306,7 +306,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let nx = scenario.nx();
     let say = |m: &str| {
         if !args.quiet {
-            eprintln!("channel-sim: {m}");
+            crate::errln!("channel-sim: {m}");
         }
     };
 

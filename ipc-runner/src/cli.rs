@@ -81,7 +81,7 @@ pub fn main(name: &str) -> ! {
             ) {
                 e.exit();
             }
-            eprintln!(
+            channel_sim::errln!(
                 "{name}: error: {} (see --help)",
                 channel_sim::flags::one_line(&e)
             );
@@ -102,7 +102,7 @@ pub fn main(name: &str) -> ! {
         Err(CommandError { code, message }) => {
             // One line, whatever a message quoted from a file contained.
             let message = message.replace(['\n', '\r'], " ");
-            eprintln!("{name}: error: {message}");
+            channel_sim::errln!("{name}: error: {message}");
             std::process::exit(code);
         }
     }

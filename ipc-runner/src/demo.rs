@@ -304,7 +304,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             Ok(s) => (DEFAULT_SCENARIO.to_string(), s),
             Err(e) => {
                 let fallback = FALLBACK_SCENARIO;
-                eprintln!(
+                channel_sim::errln!(
                     "demo: the default scenario {DEFAULT_SCENARIO:?} is not available in this \
                      build ({e:#}); running {fallback:?} instead"
                 );
@@ -393,7 +393,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.latency_csv = Some(args.out.join("latency.csv"));
     rargs.json = Some(args.out.join("report.json"));
 
-    eprintln!(
+    channel_sim::errln!(
         "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
          (prefix {prefix}, publisher pid {child_pid})",
         if args.rate > 0.0 {
@@ -445,7 +445,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         // The publisher ended before its first slot: a `--channel-sim` that is no publisher,
         // or one that refused its arguments or its environment (its own error came first).
         Err(e) if exited.is_some() => {
-            eprintln!("demo: error: {e:#}");
+            channel_sim::errln!("demo: error: {e:#}");
             return Ok(2);
         }
         Err(e) => return Err(e),
@@ -466,7 +466,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     };
     if let Some(s) = status {
         if !s.success() {
-            eprintln!("demo: {publisher} exited with {s}");
+            channel_sim::errln!("demo: {publisher} exited with {s}");
         }
     }
     // The bridges leave by themselves once the stream ended and the estimates went quiet.
@@ -474,14 +474,14 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         if let Some(mut c) = g.0.take() {
             let s = end_child(&mut c, !completed, Duration::from_secs(3))?;
             if !s.success() {
-                eprintln!("demo: the {name} bridge exited with {s}");
+                channel_sim::errln!("demo: the {name} bridge exited with {s}");
             }
         }
     }
     run::finish(&rargs, &report, &traj, scenario.ny())?;
     let plot = args.out.join(&args.plot);
     if let Err(e) = plot_trajectories(&traj, &plot, scenario.name()) {
-        eprintln!("demo: no plot ({e:#})");
+        channel_sim::errln!("demo: no plot ({e:#})");
     }
     let lat = &report.latency;
     let ladder = args.out.join("latency.svg");
@@ -503,7 +503,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         ],
         &ladder,
     ) {
-        eprintln!("demo: no latency plot ({e:#})");
+        channel_sim::errln!("demo: no latency plot ({e:#})");
     }
     let points: Vec<_> = traj.timing.iter().map(|t| traj.latency_point(t)).collect();
     if let Err(e) = crate::plot::trace::plot_trace(
@@ -514,14 +514,14 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         &points,
         &args.out.join("latency-trace.svg"),
     ) {
-        eprintln!("demo: no latency trace ({e:#})");
+        channel_sim::errln!("demo: no latency trace ({e:#})");
     }
 
-    println!("{}", report.summary());
+    channel_sim::outln!("{}", report.summary());
     if args.via == Via::Zenoh {
-        println!("{}", bridge_summary(&args.out));
+        channel_sim::outln!("{}", bridge_summary(&args.out));
     }
-    println!(
+    channel_sim::outln!(
         "wrote {} (true vs estimated), latency.svg (percentiles), latency-trace.svg (over \
          time), estimates.csv, latency.csv, slots.csv (replayable), report.json in {:?}",
         plot.file_name().and_then(|f| f.to_str()).unwrap_or(""),

@@ -271,7 +271,7 @@ impl Progress {
             } else {
                 f64::NAN
             };
-            eprintln!(
+            channel_sim::errln!(
                 "{}: {done}/{} {} ({:.1} %), {secs:.0} s elapsed, ETA {eta:.0} s",
                 l.what,
                 l.total,

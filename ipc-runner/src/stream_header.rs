@@ -33,6 +33,6 @@ pub fn to_json(h: &StreamHeader) -> serde_json::Value {
 /// Prints the header of `--scenario`/`--config`.
 pub fn main(args: &StreamHeaderArgs) -> Result<i32> {
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
-    println!("{}", to_json(&channel_sim::wire::stream_header(&*scenario)));
+    channel_sim::outln!("{}", to_json(&channel_sim::wire::stream_header(&*scenario)));
     Ok(0)
 }

@@ -247,7 +247,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     if let Err(e) = bound {
         failures.push(format!("{e:#}"));
     }
-    print!("{}", result.summary());
+    channel_sim::out!("{}", result.summary());
     let mut wrote = Vec::new();
     if let Some(path) = &args.json {
         match write(path, &result.to_json()) {
@@ -274,7 +274,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         }
     }
     for path in &wrote {
-        println!("wrote {}", path.display());
+        channel_sim::outln!("wrote {}", path.display());
     }
     match result.ending {
         EvalEnding::Interrupted => {

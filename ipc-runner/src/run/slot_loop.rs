@@ -245,7 +245,7 @@ impl Relay {
 impl Loop<'_> {
     fn say(&self, m: &str) {
         if !self.args.quiet {
-            eprintln!("ipc-runner: {m}");
+            channel_sim::errln!("ipc-runner: {m}");
         }
     }
 
@@ -676,7 +676,7 @@ impl Machine {
         });
         if !args.quiet {
             for m in cpu_pinning.iter().chain(memory_lock.iter()) {
-                eprintln!("ipc-runner: {m}");
+                channel_sim::errln!("ipc-runner: {m}");
             }
         }
         // After pinning: a warning, not a refusal (a machine with throttling off passes).
@@ -686,7 +686,7 @@ impl Machine {
             .into_iter()
             .collect();
         for w in &warnings {
-            eprintln!("ipc-runner: {w}");
+            channel_sim::errln!("ipc-runner: {w}");
         }
         Self {
             cpu_pinning,
