@@ -128,7 +128,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         let mut gaps = GapLogProbs::new(&self.sorted, m, s);
         let mut anchor = (0, neg_inf);
         for j in 0..=S {
-            let u = Self::gap_bound(gaps.gap(j));
+            let u = gaps.bound(j);
             if u > anchor.1 {
                 anchor = (j, u);
             }
@@ -139,7 +139,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         // evaluated only when the sum needs it.)
         let likely = anchor.1 - margin - T::lit(SPECULATION_SLACK);
         if !cfg!(small_code) {
-            gaps.ahead(|gap| Self::gap_bound(gap) >= likely);
+            gaps.ahead(likely);
         }
         let at_anchor = gaps.get(anchor.0);
         let mut total = LogSumExp::default();
@@ -149,7 +149,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             let x = if j == anchor.0 {
                 at_anchor
             } else {
-                let u = Self::gap_bound(gaps.gap(j));
+                let u = gaps.bound(j);
                 if top.finite() {
                     if u < top - margin {
                         continue;
@@ -183,22 +183,6 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             }
         }
         total.value().exp().min(T::one())
-    }
-
-    /// An upper bound of `ln P(a < Z < b)`: `−a²/2` for `a > 0`, `−b²/2` for `b < 0`, else
-    /// 0 (NaN for NaN ends, which compares false and so is never skipped).
-    #[inline]
-    fn gap_bound((a, b): (T, T)) -> T {
-        let half = T::lit(0.5);
-        if a > T::zero() {
-            -half * a * a
-        } else if b < T::zero() {
-            -half * b * b
-        } else if a.partial_cmp(&b).is_none() {
-            a + b
-        } else {
-            T::zero()
-        }
     }
 
     /// One instant `k ≥ 1`: predict, then the linear MMSE update with `ỹ = z_k` (arrival) or
@@ -345,6 +329,9 @@ struct GapLogProbs<T: Real, const S: usize> {
     upper: [T; S],
     below: T,
     above: T,
+    /// [`gap_bound`] of gap j < S at j, of the gap above the last region in `bound_last`.
+    bounds: [T; S],
+    bound_last: T,
     /// Gap j < S at j; the gap above the last region in `last`.
     ln_p: [Option<T>; S],
     last: Option<T>,
@@ -359,14 +346,27 @@ impl<T: Real, const S: usize> GapLogProbs<T, S> {
             *l = (lo - m) / s;
             *u = (hi - m) / s;
         }
-        Self {
+        let mut g = Self {
             lower,
             upper,
             below: (neg_inf - m) / s,
             above: (-neg_inf - m) / s,
+            bounds: [T::zero(); S],
+            bound_last: T::zero(),
             ln_p: [None; S],
             last: None,
+        };
+        for j in 0..S {
+            g.bounds[j] = gap_bound(g.gap(j));
         }
+        g.bound_last = gap_bound(g.gap(S));
+        g
+    }
+
+    /// [`gap_bound`] of gap j.
+    #[inline]
+    fn bound(&self, j: usize) -> T {
+        self.bounds.get(j).copied().unwrap_or(self.bound_last)
     }
 
     /// Gap j's ends.
@@ -387,15 +387,23 @@ impl<T: Real, const S: usize> GapLogProbs<T, S> {
         }
     }
 
-    /// Evaluates every gap whose ends `wanted` accepts, [`GAPS`] at a time together.
-    fn ahead(&mut self, wanted: impl Fn((T, T)) -> bool) {
+    /// Evaluates every gap whose bound is at least `likely`, [`GAPS`] at a time together
+    /// (a lone one is left to [`GapLogProbs::get`]: nothing to run beside it).
+    fn ahead(&mut self, likely: T) {
+        if (0..=S)
+            .filter(|&j| self.bound(j) >= likely)
+            .nth(1)
+            .is_none()
+        {
+            return;
+        }
         let mut block = [(T::zero(), T::zero()); GAPS];
         let mut which = [0usize; GAPS];
         let mut ln_p = [T::zero(); GAPS];
         let mut n = 0;
         for j in 0..=S {
             let g = self.gap(j);
-            if wanted(g) {
+            if self.bound(j) >= likely {
                 if let (Some(b), Some(w)) = (block.get_mut(n), which.get_mut(n)) {
                     (*b, *w) = (g, j);
                     n += 1;
@@ -420,6 +428,22 @@ impl<T: Real, const S: usize> GapLogProbs<T, S> {
         let l = ln_interval_prob_one(a, b);
         *self.slot(j) = Some(l);
         l
+    }
+}
+
+/// An upper bound of `ln P(a < Z < b)`: `−a²/2` for `a > 0`, `−b²/2` for `b < 0`, else
+/// 0 (NaN for NaN ends, which compares false and so is never skipped).
+#[inline]
+fn gap_bound<T: Real>((a, b): (T, T)) -> T {
+    let half = T::lit(0.5);
+    if a > T::zero() {
+        -half * a * a
+    } else if b < T::zero() {
+        -half * b * b
+    } else if a.partial_cmp(&b).is_none() {
+        a + b
+    } else {
+        T::zero()
     }
 }
 
