@@ -530,39 +530,18 @@ mod tests {
     /// sum's bits: means inside, between, beside and far from the regions, spreads from
     /// tiny (every gap but one vanishes) to huge (every gap counts), NaN and ∞, in f64 and
     /// f32, with the regions of the example and with regions of very different widths.
+    /// A one-state `KfIo` (`u = x + n`, `Ψ = 0.1`) with regions `centres ± radii`.
+    fn on_regions<T: Real, const S: usize>(centres: [T; S], radii: [T; S]) -> KfIo<T, 1, S> {
+        use crate::protocol::occlusion::OcclusionRegions;
+        let regions = OcclusionRegions::new(centres.map(|c| vector![c]), radii).unwrap();
+        let occ = Occlusion::new(matrix![T::one()], matrix![T::lit(0.1)], regions).unwrap();
+        KfIo::new(vector![T::zero()], SMatrix::identity(), occ).unwrap()
+    }
+
     #[test]
     fn arrival_probability_is_the_plain_sum_bit_for_bit() {
-        use crate::protocol::occlusion::OcclusionRegions;
-        let example = KfIo::<f64, 1, 4>::new(
-            vector![0.0],
-            SMatrix::identity(),
-            Occlusion::new(
-                matrix![1.0],
-                matrix![0.1],
-                OcclusionRegions::new(
-                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
-                    [5.0; 4],
-                )
-                .unwrap(),
-            )
-            .unwrap(),
-        )
-        .unwrap();
-        let uneven = KfIo::<f64, 1, 3>::new(
-            vector![0.0],
-            SMatrix::identity(),
-            Occlusion::new(
-                matrix![1.0],
-                matrix![0.1],
-                OcclusionRegions::new(
-                    [vector![-3.0], vector![0.5], vector![30.0]],
-                    [0.01, 2.0, 20.0],
-                )
-                .unwrap(),
-            )
-            .unwrap(),
-        )
-        .unwrap();
+        let example = on_regions([20.0, 40.0, 60.0, 80.0], [5.0; 4]);
+        let uneven = on_regions([-3.0, 0.5, 30.0], [0.01, 2.0, 20.0]);
         let spreads = [
             1e-3,
             0.05,
@@ -603,21 +582,7 @@ mod tests {
             );
             assert_eq!(got.to_bits(), want.to_bits(), "m {m}");
         }
-        let narrow = KfIo::<f32, 1, 4>::new(
-            vector![0.0],
-            SMatrix::identity(),
-            Occlusion::new(
-                matrix![1.0],
-                matrix![0.1],
-                OcclusionRegions::new(
-                    [vector![20.0], vector![40.0], vector![60.0], vector![80.0]],
-                    [5.0; 4],
-                )
-                .unwrap(),
-            )
-            .unwrap(),
-        )
-        .unwrap();
+        let narrow = on_regions([20.0f32, 40.0, 60.0, 80.0], [5.0; 4]);
         for i in -60..=260 {
             let m = i as f32 * 0.5 - 20.0;
             for &s in &spreads {
