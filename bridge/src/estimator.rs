@@ -313,7 +313,12 @@ impl Forward<'_> {
                 self.report.refuse("late");
                 return Ok(false);
             }
-            Arrival::NewStream => {}
+            Arrival::NewStream { lost } => {
+                for k in 1..=lost {
+                    self.send(&h, lost_slot(&s, k))?;
+                    self.report.lost_on_network += 1;
+                }
+            }
             Arrival::InOrder { lost: 0, .. } => {}
             Arrival::InOrder { lost, .. } if u64::from(lost) > self.max_gap => {
                 self.report.refuse("gap_too_large");

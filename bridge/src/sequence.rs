@@ -23,12 +23,24 @@ pub enum Arrival {
     },
     /// An instant of this node already passed (duplicate or reordered): not forwarded.
     Late,
-    /// The first slot of the node's stream (or of a new one: the publisher restarted).
-    NewStream,
+    /// The first slot of the node's stream (or of a new one: the publisher restarted), after
+    /// `lost` missing instants `1..=lost` when it is not instant 1 (see [`LEADING_LOSS_MAX`]).
+    NewStream {
+        /// Instants `1..=lost` of the stream missing before this slot.
+        lost: u32,
+    },
     /// A copy of the marker the node's stream already ended with (the sensor side sends
     /// each marker several times): expected, not forwarded.
     RepeatedMarker,
 }
+
+/// The most leading instants a new stream's first slot may be missing and still have them
+/// counted as lost on the network. A stream starts at instant 1 (`docs/wire.md`, Stream
+/// rules) and the sensor side forwards from the first slot once this side is there, so a
+/// first slot at instant k > 1 means 1..k − 1 were lost on the way. Beyond this many, the
+/// likelier cause is a bridge that started mid-stream (a restart), whose runner already had
+/// those instants: they are not filled (a run of 16 losses at p = 0.1 has probability 1e-16).
+pub const LEADING_LOSS_MAX: u32 = 16;
 
 /// Follows every node's stream.
 #[derive(Debug, Default)]
@@ -78,7 +90,14 @@ impl Sequence {
             }
             _ => {
                 self.node[m] = Some((s.stream_id, after));
-                Arrival::NewStream
+                let missing = upto.saturating_sub(1);
+                Arrival::NewStream {
+                    lost: if missing <= LEADING_LOSS_MAX {
+                        missing
+                    } else {
+                        0
+                    },
+                }
             }
         }
     }
@@ -107,8 +126,8 @@ mod tests {
     #[test]
     fn gaps_are_per_node_and_late_slots_refused() {
         let mut q = Sequence::default();
-        assert_eq!(q.arrive(&data(1, 0, 7)), Arrival::NewStream);
-        assert_eq!(q.arrive(&data(1, 1, 8)), Arrival::NewStream);
+        assert_eq!(q.arrive(&data(1, 0, 7)), Arrival::NewStream { lost: 0 });
+        assert_eq!(q.arrive(&data(1, 1, 8)), Arrival::NewStream { lost: 0 });
         assert_eq!(
             q.arrive(&data(2, 0, 7)),
             Arrival::InOrder { from: 2, lost: 0 }
@@ -130,13 +149,37 @@ mod tests {
         // Node 1's END right after its last slot: nothing lost.
         let end = Slot::marker(SLOT_END, 4, 1, 2, 8, 0);
         assert_eq!(q.arrive(&end), Arrival::InOrder { from: 5, lost: 0 });
-        assert_eq!(q.arrive(&data(1, 0, 9)), Arrival::NewStream);
+        assert_eq!(q.arrive(&data(1, 0, 9)), Arrival::NewStream { lost: 0 });
+    }
+
+    /// A stream whose first slots the network lost: they are counted from instant 1 (a
+    /// marker covers its own instant too); a first slot far into the stream (a bridge that
+    /// joined mid-stream) fills nothing.
+    #[test]
+    fn a_stream_missing_its_first_slots_counts_them() {
+        let mut q = Sequence::default();
+        assert_eq!(q.arrive(&data(3, 0, 7)), Arrival::NewStream { lost: 2 });
+        assert_eq!(
+            q.arrive(&data(4, 0, 7)),
+            Arrival::InOrder { from: 4, lost: 0 }
+        );
+        let end = Slot::marker(SLOT_END, 2, 1, 2, 8, 0);
+        assert_eq!(q.arrive(&end), Arrival::NewStream { lost: 2 });
+        let far = data(LEADING_LOSS_MAX + 2, 0, 9);
+        assert_eq!(q.arrive(&far), Arrival::NewStream { lost: 0 });
+        let edge = data(LEADING_LOSS_MAX + 1, 1, 10);
+        assert_eq!(
+            q.arrive(&edge),
+            Arrival::NewStream {
+                lost: LEADING_LOSS_MAX
+            }
+        );
     }
 
     #[test]
     fn a_repeated_marker_is_known_as_a_copy() {
         let mut q = Sequence::default();
-        assert_eq!(q.arrive(&data(1, 0, 7)), Arrival::NewStream);
+        assert_eq!(q.arrive(&data(1, 0, 7)), Arrival::NewStream { lost: 0 });
         let end = Slot::marker(SLOT_END, 3, 0, 2, 7, 0);
         assert!(!q.is_last_marker(&end));
         assert_eq!(q.arrive(&end), Arrival::InOrder { from: 2, lost: 2 });
