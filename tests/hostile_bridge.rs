@@ -96,6 +96,23 @@ fn wildcard_key_is_refused() {
     assert!(err.contains("--key"), "{err}");
     bad_flag("bf-key2", &["--key", "a/**/b"]);
     bad_flag("bf-key3", &["--key", "a//b"]);
+    // A key is printed in every progress line: a newline in it split them.
+    let err = bad_flag("bf-key4", &["--key", "a\nb"]);
+    assert!(err.contains("control characters"), "{err}");
+}
+
+#[test]
+fn endpoints_zenoh_would_refuse_only_at_the_session_are_bad_flags() {
+    // They used to exit 1 with zenoh's "cannot open the zenoh session: invalid port value
+    // at …/lib.rs:62".
+    for (name, e, why) in [
+        ("bf-port", "tcp/127.0.0.1:99999", "not a port number"),
+        ("bf-ip", "tcp/999.1.1.1:1", "not an IPv4 address"),
+        ("bf-noport", "udp/127.0.0.1", "HOST:PORT"),
+    ] {
+        let err = bad_flag(name, &["--listen", e]);
+        assert!(err.contains("--listen") && err.contains(why), "{e}: {err}");
+    }
 }
 
 #[test]

@@ -432,7 +432,14 @@ fn every_float_flag_refuses_nan_inf_and_meaningless_values() {
 }
 
 #[test]
-fn eval_reports_progress_without_a_terminal_and_keeps_its_runs_on_sigint() {
+fn eval_reports_progress_without_a_terminal_and_keeps_its_runs_on_sigint_and_sighup() {
+    // SIGHUP: a closed terminal or ssh session; it used to kill eval with its runs unwritten.
+    for (what, sig) in [("SIGINT", libc::SIGINT), ("SIGHUP", libc::SIGHUP)] {
+        eval_keeps_its_runs_on(what, sig);
+    }
+}
+
+fn eval_keeps_its_runs_on(what: &str, sig: libc::c_int) {
     let dir = scratch("hostile-eval-int");
     let (json, csv_path) = (dir.join("e.json"), dir.join("e.csv"));
     // ~0.1 s per run on one thread: a few progress lines, then SIGINT long before the end.
@@ -460,7 +467,7 @@ fn eval_reports_progress_without_a_terminal_and_keeps_its_runs_on_sigint() {
         ],
     );
     p.wait_for_stderr("/400 runs", 60);
-    p.signal(libc::SIGINT);
+    p.signal(sig);
     let st = p.wait(60);
     let d = Done {
         code: st.code(),
@@ -469,7 +476,7 @@ fn eval_reports_progress_without_a_terminal_and_keeps_its_runs_on_sigint() {
         took: Duration::ZERO,
     };
     assert_sane(&d, "eval");
-    assert_eq!(d.code, Some(130), "{}", d.err);
+    assert_eq!(d.code, Some(130), "{what}: {}", d.err);
     // Progress lines (stderr is a file here): done/total, ETA.
     let progress: Vec<&str> = d.err.lines().filter(|l| l.contains("/400 runs")).collect();
     assert!(

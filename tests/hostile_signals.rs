@@ -290,12 +290,14 @@ fn a_stall_longer_than_the_stall_limit_is_a_loss() {
 }
 
 #[test]
-fn sigint_and_sigterm_stop_run_in_every_wait_mode_also_mid_catch_up() {
+fn sigint_sigterm_and_sighup_stop_run_in_every_wait_mode_also_mid_catch_up() {
     for mode in MODES {
         // Paced, and mid catch-up: a runner 2 ms per slot behind a full 4096-slot queue.
-        let cases: [(&str, i32, Vec<&str>, Vec<&str>); 3] = [
+        let cases: [(&str, i32, Vec<&str>, Vec<&str>); 4] = [
             ("SIGINT", libc::SIGINT, vec![], vec!["--rate", "200"]),
             ("SIGTERM", libc::SIGTERM, vec![], vec!["--rate", "200"]),
+            // A closed terminal: the report is written as for the others.
+            ("SIGHUP", libc::SIGHUP, vec![], vec!["--rate", "200"]),
             (
                 "SIGTERM mid catch-up",
                 libc::SIGTERM,

@@ -110,10 +110,19 @@ impl BridgeArgs {
             check_writable(p)?;
         }
         let key = self.key();
+        // A key is printed in every progress line and in the report.
+        if key.chars().any(char::is_control) {
+            bail!("--key {key:?} must not contain control characters");
+        }
         zenoh::key_expr::KeyExpr::try_from(format!("{key}/slots"))
             .map_err(|e| anyhow::anyhow!("--key {key:?} is not a zenoh key expression: {e}"))?;
         if key.contains(['*', '$', '#', '?']) {
             bail!("--key {key:?} must name one key, without wildcards");
+        }
+        for (flag, endpoints) in [("--listen", &self.listen), ("--connect", &self.connect)] {
+            for e in endpoints {
+                check_endpoint(e).map_err(|why| anyhow::anyhow!("{flag} {e:?}: {why}"))?;
+            }
         }
         self.zenoh_config()?;
         Ok(())
@@ -158,6 +167,30 @@ impl BridgeArgs {
         }
         Ok(c)
     }
+}
+
+/// What zenoh only finds when the session opens (an error that reads like a failure of the
+/// network, exit 1), checked with the flags: an IP endpoint's port is a number below 65536
+/// and a dotted host is an IPv4 address. The rest of the syntax is zenoh's to check.
+fn check_endpoint(endpoint: &str) -> std::result::Result<(), String> {
+    let address = endpoint.split(['#', '?']).next().unwrap_or_default();
+    let Some((proto, address)) = address.split_once('/') else {
+        return Ok(());
+    };
+    if !matches!(proto, "tcp" | "udp" | "tls" | "quic" | "ws") {
+        return Ok(());
+    }
+    let Some((host, port)) = address.rsplit_once(':') else {
+        return Err(format!("a {proto} endpoint is {proto}/HOST:PORT"));
+    };
+    if port.parse::<u16>().is_err() {
+        return Err(format!("port {port:?} is not a port number (0..=65535)"));
+    }
+    let dotted = !host.is_empty() && host.chars().all(|c| c.is_ascii_digit() || c == '.');
+    if dotted && host.parse::<std::net::Ipv4Addr>().is_err() {
+        return Err(format!("host {host:?} is not an IPv4 address"));
+    }
+    Ok(())
 }
 
 fn set(c: &mut zenoh::Config, key: &str, value: &str) -> Result<()> {

@@ -8,7 +8,7 @@
 //!   [`BLOCK_SLICE`]: after each the send gives up on that subscriber (iceoryx2's
 //!   `DiscardDataAndFail`) and the publisher looks for dead nodes before it sends the same slot
 //!   again. A SIGKILLed runner keeps its full queue registered until someone cleans it up, and
-//!   SIGINT/SIGTERM must still end the run, so a send never waits for more than a slice
+//!   SIGINT/SIGTERM/SIGHUP must still end the run, so a send never waits for more than a slice
 //!   without the publisher noticing either.
 //! * **discard** (the default when paced): the slot is dropped for that subscriber at once;
 //!   the runner sees the gap in `seq` and counts it as lost in the IPC, and the publisher
@@ -98,7 +98,7 @@ impl Gate {
         self.parent.store(pid, Ordering::Relaxed);
     }
 
-    /// Whether SIGINT/SIGTERM arrived ([`crate::signal`]) or the `--parent-pid` process is
+    /// Whether SIGINT/SIGTERM/SIGHUP arrived ([`crate::signal`]) or the `--parent-pid` process is
     /// gone, seen here or by the handler during a blocked send; latched. Nothing else stops
     /// a run: any other signal only ends a wait early.
     pub fn stop_requested(&self) -> bool {

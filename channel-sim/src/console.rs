@@ -34,8 +34,33 @@ macro_rules! errln {
     }};
 }
 
+/// `message` as one printable line: line breaks and tabs become spaces, any other control
+/// character its escape (`\u{1b}`). Error messages quote what came from outside (a file's
+/// text, a publisher's scenario name, a `--prefix`), which must neither split the one error
+/// line nor send escape sequences to the terminal.
+pub fn one_line(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    for c in message.chars() {
+        match c {
+            '\n' | '\r' | '\t' => out.push(' '),
+            c if c.is_control() => out.extend(c.escape_default()),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn one_line_keeps_text_and_defuses_control_characters() {
+        assert_eq!(super::one_line("a α 'b' \\"), "a α 'b' \\");
+        assert_eq!(
+            super::one_line("no subscriber on a\nb/slots\x1b[31m\u{7f}"),
+            "no subscriber on a b/slots\\u{1b}[31m\\u{7f}"
+        );
+    }
+
     /// The macros format like `println!` (checked through a closed pipe in tests/hostile_cli).
     #[test]
     fn they_expand_and_format() {

@@ -37,7 +37,10 @@ fn main() {
         }
     };
     if let Err(e) = channel_sim::publisher::run(&cli.args) {
-        channel_sim::errln!("channel-sim: error: {e:#}");
+        channel_sim::errln!(
+            "channel-sim: error: {}",
+            channel_sim::console::one_line(&format!("{e:#}"))
+        );
         // 2 for bad input and for a refusal (a peer outside the contract, iceoryx2
         // directories of another user: docs/security.md), as `ipc-runner`; 1 for anything else.
         let code = if channel_sim::flags::is_bad_input(&e) {

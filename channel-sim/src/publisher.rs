@@ -22,7 +22,7 @@
 //! calls `try_cleanup_dead_nodes()` at startup (a SIGKILLed predecessor leaves its publisher
 //! port behind), every 100 ms and whenever a blocked send gives up after
 //! [`BLOCK_SLICE`]; if the subscriber is gone it pauses and
-//! waits for a new one. SIGINT/SIGTERM end the run cleanly with an ABORT marker, also while a
+//! waits for a new one. SIGINT/SIGTERM/SIGHUP end the run cleanly with an ABORT marker, also while a
 //! send is blocked, and so does the end of the `--parent-pid` process (`ipc-runner demo`
 //! passes its own: a SIGKILLed demo leaves no publisher behind). No other signal stops it
 //! (SIGCONT, SIGSTOP/SIGCONT, SIGUSR1, …): a wait it cuts short is taken up again, so the
@@ -105,7 +105,7 @@ pub struct PublisherReport {
     pub slots: u64,
     /// Instants published.
     pub instants: u32,
-    /// Stopped by SIGINT/SIGTERM before the last instant.
+    /// Stopped by SIGINT/SIGTERM/SIGHUP before the last instant.
     pub interrupted: bool,
     /// Times the subscriber was lost and a new one awaited.
     pub subscriber_losses: u32,
@@ -310,7 +310,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
     };
 
-    // Before anything can wait: SIGINT/SIGTERM set a flag from here on, nothing else stops.
+    // Before anything can wait: SIGINT/SIGTERM/SIGHUP set a flag from here on, nothing else stops.
     crate::signal::install();
     let node = crate::node::create("channel-sim")?;
     // A SIGKILLed predecessor leaves its ports registered; remove them before we claim ours.

@@ -1,5 +1,6 @@
-//! SIGINT and SIGTERM as a flag; every other signal changes nothing (docs/security.md,
-//! "Signals").
+//! SIGINT, SIGTERM and SIGHUP as a flag; every other signal changes nothing
+//! (docs/security.md, "Signals"). SIGHUP is a stop like the others: a closed terminal or ssh
+//! session used to kill a long `eval` with its finished runs unwritten.
 //!
 //! iceoryx2 0.10 installs one handler (without `SA_RESTART`) for a dozen signals, SIGCONT and
 //! SIGTSTP among them, and records only the *last* one in a single slot that every
@@ -7,7 +8,7 @@
 //! wait and the wait reported an interrupt, which the product took for Ctrl-C (a SIGCONT from
 //! job control, a debugger or a cgroup resume ended the stream); a SIGINT followed by any
 //! other signal before the next check was forgotten; and Ctrl-Z did not stop the process. So
-//! the product installs its own handler for SIGINT and SIGTERM, which only sets a flag that
+//! the product installs its own handler for SIGINT, SIGTERM and SIGHUP, which only sets a flag that
 //! stays set, and gives the job-control signals back their default actions. A wait that
 //! returns early (`EINTR`: a signal, or on Linux a stop and continue even without a handler)
 //! is only a wake-up: callers look at [`termination_requested`] and wait again.
@@ -24,8 +25,21 @@ static TERMINATION: AtomicBool = AtomicBool::new(false);
 static SIGNAL: AtomicI32 = AtomicI32::new(0);
 static INSTALL: Once = Once::new();
 
-/// The signals that stop a run.
-const STOP: [libc::c_int; 2] = [libc::SIGINT, libc::SIGTERM];
+/// The signals that stop a run: the ones that ask a process to end (SIGXCPU: the soft CPU
+/// limit, before the hard one kills).
+const STOP: [libc::c_int; 4] = [libc::SIGINT, libc::SIGTERM, libc::SIGHUP, libc::SIGXCPU];
+/// Signals whose default action kills the process although nobody asked it to end (a stray
+/// timer, I/O readiness, a power event; SIGXFSZ makes the write that crossed the file-size
+/// limit fail with `EFBIG` instead, an error the command reports): ignored, so that a run
+/// never dies with its results unwritten. The real-time signals are ignored too
+/// ([`install`]).
+const IGNORED: [libc::c_int; 5] = [
+    libc::SIGALRM,
+    libc::SIGIO,
+    libc::SIGPWR,
+    libc::SIGXFSZ,
+    libc::SIGSTKFLT,
+];
 /// Job control: iceoryx2 catches these, so Ctrl-Z would neither stop the process nor would
 /// `fg` resume it without interrupting every wait. Their default actions are restored.
 const JOB_CONTROL: [libc::c_int; 4] = [libc::SIGTSTP, libc::SIGTTIN, libc::SIGTTOU, libc::SIGCONT];
@@ -49,13 +63,19 @@ pub fn install() {
         for s in JOB_CONTROL {
             set_action(s, libc::SIG_DFL);
         }
+        for s in IGNORED
+            .into_iter()
+            .chain(libc::SIGRTMIN()..=libc::SIGRTMAX())
+        {
+            set_action(s, libc::SIG_IGN);
+        }
     });
 }
 
 fn set_action(signal: libc::c_int, handler: libc::sighandler_t) {
-    // SAFETY: `sigaction` with a zeroed action, an empty mask and either `SIG_DFL` or a handler
-    // that only stores to atomics (async-signal-safe). No `SA_RESTART`: a blocking wait returns
-    // at once on SIGINT/SIGTERM, so a stop is seen within a wait slice.
+    // SAFETY: `sigaction` with a zeroed action, an empty mask and `SIG_DFL`, `SIG_IGN` or a
+    // handler that only stores to atomics (async-signal-safe). No `SA_RESTART`: a blocking
+    // wait returns at once on a stop signal, so a stop is seen within a wait slice.
     #[allow(unsafe_code)]
     unsafe {
         let mut action: libc::sigaction = std::mem::zeroed();
@@ -65,8 +85,8 @@ fn set_action(signal: libc::c_int, handler: libc::sighandler_t) {
     }
 }
 
-/// Whether SIGINT or SIGTERM arrived since the process started (the first call installs the
-/// handlers). The flag stays set: every caller sees it, however many ask.
+/// Whether a stop signal (SIGINT, SIGTERM, SIGHUP, SIGXCPU) arrived since the process
+/// started (the first call installs the handlers). The flag stays set: every caller sees it, however many ask.
 #[inline]
 pub fn termination_requested() -> bool {
     install();
@@ -81,6 +101,8 @@ pub fn termination_signal() -> Option<&'static str> {
     Some(match SIGNAL.load(Ordering::Relaxed) {
         libc::SIGINT => "SIGINT",
         libc::SIGTERM => "SIGTERM",
+        libc::SIGHUP => "SIGHUP",
+        libc::SIGXCPU => "SIGXCPU",
         _ => "a termination signal",
     })
 }
@@ -90,7 +112,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn sigcont_changes_nothing_and_sigterm_sets_the_flag_for_every_caller() {
+    fn sigcont_and_stray_signals_change_nothing_and_sigterm_sets_the_flag_for_every_caller() {
         install();
         assert!(!termination_requested());
         // SAFETY: raise(3) on this process; SIGCONT's default action on a running process is
@@ -101,6 +123,16 @@ mod tests {
         }
         assert!(!termination_requested());
         assert_eq!(termination_signal(), None);
+        // Signals that would kill by default without anyone asking for an end: ignored
+        // (this test process would die here otherwise).
+        for s in [libc::SIGALRM, libc::SIGIO, libc::SIGPWR, libc::SIGRTMIN()] {
+            // SAFETY: raise(3) on this process; the signal is ignored.
+            #[allow(unsafe_code)]
+            unsafe {
+                libc::raise(s);
+            }
+        }
+        assert!(!termination_requested());
         #[allow(unsafe_code)]
         // SAFETY: raise(3); our handler only sets the flag.
         unsafe {

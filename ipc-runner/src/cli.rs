@@ -4,7 +4,7 @@
 //! Exit codes (docs/pipeline.md, "Exit codes and limits"): 0 ok; 1 a failure while running
 //! (transport, I/O after the checks); 2 bad input (flags, scenario, CSV/slot-log content,
 //! unwritable outputs, memory budget, a peer outside the wire contract); 3 `run`/`demo`:
-//! the publisher was lost; 130 `run`/`demo`: interrupted (SIGINT/SIGTERM). A clap error, a
+//! the publisher was lost; 130 `run`/`demo`: interrupted (SIGINT/SIGTERM/SIGHUP). A clap error, a
 //! bad value or a refused file is one line on stderr, `<name>: error: …`.
 
 use clap::{Parser, Subcommand};
@@ -100,8 +100,8 @@ pub fn main(name: &str) -> ! {
     match result {
         Ok(()) => std::process::exit(0),
         Err(CommandError { code, message }) => {
-            // One line, whatever a message quoted from a file contained.
-            let message = message.replace(['\n', '\r'], " ");
+            // One line, whatever a message quoted from a file or a peer contained.
+            let message = channel_sim::console::one_line(&message);
             channel_sim::errln!("{name}: error: {message}");
             std::process::exit(code);
         }

@@ -295,7 +295,7 @@ fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
 
 /// `ipc-runner demo`. Returns the exit code.
 pub fn main(args: &DemoArgs) -> Result<i32> {
-    // SIGINT/SIGTERM set a flag from here on (the loop ends, the child is told).
+    // SIGINT/SIGTERM/SIGHUP set a flag from here on (the loop ends, the child is told).
     channel_sim::signal::install();
     let (scenario_name, scenario) = match (&args.scenario, &args.config) {
         (Some(n), _) => (n.clone(), resolve(n, None)?),

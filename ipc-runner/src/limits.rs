@@ -32,34 +32,74 @@ pub const MAX_LINE_BYTES: usize = 64 * 1024;
 
 const MIB: u64 = 1 << 20;
 
-/// A memory budget (`--max-memory MIB`).
+/// A memory budget (`--max-memory MIB`), never more than this machine has
+/// ([`machine_memory`]): a budget above that would let a command allocate what the
+/// kernel cannot give, which aborts the process instead of refusing the flags.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Budget {
     /// Bytes allowed.
     pub bytes: u64,
+    /// Whether `--max-memory` asked for more than the machine has (the message says so).
+    pub clamped: bool,
 }
 
 impl Budget {
-    /// `mib` MiB.
+    /// `mib` MiB, or this machine's memory and swap if that is less.
     pub fn mib(mib: u64) -> Self {
-        Self {
-            bytes: mib.saturating_mul(MIB),
+        let asked = mib.saturating_mul(MIB);
+        match machine_memory() {
+            Some(m) if m < asked => Self {
+                bytes: m,
+                clamped: true,
+            },
+            _ => Self {
+                bytes: asked,
+                clamped: false,
+            },
         }
     }
 
     /// Refuses `need` bytes beyond the budget: `Err` names what was asked (`what`), the
-    /// bytes it needs, the budget and the flag that raises it.
+    /// bytes it needs, the budget and the flag that raises it. A `need` that saturated
+    /// [`product`] (`u64::MAX`: more than any machine has) is refused whatever the budget.
     pub fn check(&self, what: &str, need: u64) -> Result<(), BadInput> {
-        if need <= self.bytes {
-            Ok(())
-        } else {
-            Err(BadInput(format!(
-                "{what} needs about {} of memory; the budget is {} (--max-memory MIB raises it)",
-                human_bytes(need),
-                human_bytes(self.bytes)
-            )))
+        if need < u64::MAX && need <= self.bytes {
+            return Ok(());
         }
+        let need = if need == u64::MAX {
+            "more than 16 EiB".to_string()
+        } else {
+            format!("about {}", human_bytes(need))
+        };
+        let budget = human_bytes(self.bytes);
+        Err(BadInput(if self.clamped {
+            format!("{what} needs {need} of memory; this machine has {budget} (memory and swap)")
+        } else {
+            format!(
+                "{what} needs {need} of memory; the budget is {budget} (--max-memory MIB raises it)"
+            )
+        }))
     }
+}
+
+/// This machine's memory and swap in bytes (`MemTotal + SwapTotal` of `/proc/meminfo`),
+/// read once; `None` where that cannot be read (no cap then).
+pub fn machine_memory() -> Option<u64> {
+    static MEMORY: std::sync::OnceLock<Option<u64>> = std::sync::OnceLock::new();
+    *MEMORY.get_or_init(|| {
+        let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+        let kib = |key: &str| -> Option<u64> {
+            let line = text.lines().find(|l| l.starts_with(key))?;
+            line[key.len()..]
+                .trim()
+                .strip_suffix("kB")?
+                .trim()
+                .parse()
+                .ok()
+        };
+        let total = kib("MemTotal:")?.saturating_add(kib("SwapTotal:").unwrap_or(0));
+        (total > 0).then(|| total.saturating_mul(1024))
+    })
 }
 
 /// `bytes` in MiB or GiB with three significant digits.
@@ -77,6 +117,73 @@ pub fn human_bytes(bytes: u64) -> String {
 /// `a · b · …` in u64, saturating (a product of flags must not wrap into a small number).
 pub fn product(factors: &[u64]) -> u64 {
     factors.iter().fold(1u64, |p, &f| p.saturating_mul(f))
+}
+
+/// [`check_output`] for every `(flag, path)` of `outputs`, and that no two of them, and
+/// none of them and an input of `inputs`, are the same file: `replay --input log.csv
+/// --output log.csv` would replace the log by its estimates, `eval --json r --csv r` keep
+/// only the CSV. Compared as files (device and inode when the file exists, so a symlink or
+/// `./x` is caught; the canonical directory and name when it does not yet); outputs that
+/// are not regular files (`/dev/null`, a FIFO) may be shared.
+pub fn check_outputs(outputs: &[(&str, &Path)], inputs: &[(&str, &Path)]) -> Result<(), BadInput> {
+    for (flag, path) in outputs {
+        check_output(flag, path)?;
+    }
+    let ids = |paths: &[(&str, &Path)]| -> Vec<(String, Option<FileId>)> {
+        paths
+            .iter()
+            .map(|&(flag, path)| (flag.to_string(), FileId::of(path)))
+            .collect()
+    };
+    let (ins, outs) = (ids(inputs), ids(outputs));
+    for (i, &(flag, path)) in outputs.iter().enumerate() {
+        let Some(id) = &outs[i].1 else { continue };
+        if !id.shareable() {
+            for (other, other_id) in ins.iter().chain(&outs[..i]) {
+                if other_id.as_ref() == Some(id) {
+                    let role = if inputs.iter().any(|(f, _)| f == other) {
+                        "it would be overwritten"
+                    } else {
+                        "one would replace the other"
+                    };
+                    return Err(BadInput(format!(
+                        "{flag} {}: the same file as {other} ({role})",
+                        path.display()
+                    )));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// What makes two paths one file ([`check_outputs`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+enum FileId {
+    /// An existing file: device, inode, and whether it is a regular file.
+    Inode(u64, u64, bool),
+    /// A file not created yet: its canonical directory and its name.
+    Path(std::path::PathBuf),
+}
+
+impl FileId {
+    fn of(path: &Path) -> Option<Self> {
+        use std::os::unix::fs::MetadataExt as _;
+        if let Ok(m) = std::fs::metadata(path) {
+            return Some(Self::Inode(m.dev(), m.ino(), m.is_file()));
+        }
+        let name = path.file_name()?;
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        Some(Self::Path(std::fs::canonicalize(dir).ok()?.join(name)))
+    }
+
+    /// Device files and FIFOs: writing one twice loses nothing a file would keep.
+    fn shareable(&self) -> bool {
+        matches!(self, Self::Inode(_, _, false))
+    }
 }
 
 /// Checks that `path` (the value of `flag`) can be written, before any work: an existing
@@ -329,12 +436,74 @@ mod tests {
     }
 
     #[test]
+    fn outputs_are_no_input_and_not_each_other() {
+        let dir = std::env::temp_dir().join(format!("limits-same-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let input = dir.join("in.csv");
+        std::fs::write(&input, "k\n").unwrap();
+        let link = dir.join("link.csv");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink(&input, &link).unwrap();
+        let fresh = dir.join("out.json");
+        let inputs = [("--input", input.as_path())];
+        // The input itself, through a symlink, through `dir/../dir/`.
+        let roundabout = dir.join("..").join(dir.file_name().unwrap()).join("in.csv");
+        for out in [&input, &link, &roundabout] {
+            let e = check_outputs(&[("--output", out)], &inputs).unwrap_err().0;
+            assert!(
+                e.contains("the same file as --input") && e.contains("overwritten"),
+                "{e}"
+            );
+        }
+        // Two outputs, neither existing yet.
+        let e = check_outputs(
+            &[("--json", &fresh), ("--csv", &dir.join("./out.json"))],
+            &[],
+        )
+        .unwrap_err()
+        .0;
+        assert!(
+            e.starts_with("--csv ") && e.contains("same file as --json"),
+            "{e}"
+        );
+        assert!(!fresh.exists(), "the check left {fresh:?} behind");
+        // Distinct files, and /dev/null twice, pass.
+        check_outputs(
+            &[("--json", &fresh), ("--csv", &dir.join("out.csv"))],
+            &inputs,
+        )
+        .unwrap();
+        let null = Path::new("/dev/null");
+        check_outputs(&[("--json", null), ("--csv", null)], &[]).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn budget_names_the_numbers_and_the_flag() {
         let b = Budget::mib(1);
         b.check("x", 1 << 20).unwrap();
         let e = b.check("--horizon 5", (1 << 20) + 1).unwrap_err().0;
         assert!(e.contains("--horizon 5") && e.contains("1.0 MiB") && e.contains("--max-memory"));
         assert_eq!(product(&[u64::MAX, 2]), u64::MAX);
+    }
+
+    #[test]
+    fn no_budget_exceeds_the_machine_and_a_saturated_need_is_refused() {
+        // The helper-found abort: `--max-memory 18446744073709551615` let a 16 GB
+        // allocation through on a machine with less.
+        let huge = Budget::mib(u64::MAX);
+        let machine = machine_memory().expect("/proc/meminfo on Linux");
+        assert_eq!((huge.bytes, huge.clamped), (machine, true));
+        let e = huge.check("--horizon 9", machine + 1).unwrap_err().0;
+        assert!(e.contains("this machine has"), "{e}");
+        // A product that saturated stands for more than any machine: refused even by a
+        // budget of u64::MAX bytes.
+        let all = Budget {
+            bytes: u64::MAX,
+            clamped: false,
+        };
+        let e = all.check("--particles 18446744073709551615", product(&[u64::MAX, 2]));
+        assert!(e.unwrap_err().0.contains("more than 16 EiB"));
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! instead of live shared memory — for sensor logs recorded elsewhere, or to re-examine a run
 //! offline.
 
-use crate::limits::{check_output, product, BadInput, Budget};
+use crate::limits::{check_outputs, product, BadInput, Budget};
 use crate::run::select;
 use crate::slot_log::{read_slots_within, LoggedInstant};
 use crate::Estimator;
@@ -20,7 +20,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub input: PathBuf,
     /// Scenario whose model the estimators use.
-    #[arg(long, default_value = "occlusion")]
+    #[arg(long, default_value = "occlusion", conflicts_with = "config")]
     pub scenario: String,
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
@@ -83,7 +83,9 @@ pub fn run_estimators(
 /// log's content, an unwritable output) is an error of [`BadInput`] (exit code 2).
 pub fn main(args: &ReplayArgs) -> Result<i32> {
     if let Some(p) = &args.output {
-        check_output("--output", p)?;
+        let mut inputs = vec![("--input", args.input.as_path())];
+        inputs.extend(args.config.as_deref().map(|c| ("--config", c)));
+        check_outputs(&[("--output", p)], &inputs)?;
     }
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
@@ -112,6 +114,12 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     // The estimators' count, for the bytes per instant (the log gives the horizon).
     let n_est = factory(1)?()?.len() as u64;
     let per_instant = size_of::<LoggedInstant>() as u64 + product(&[8, n_est, nx as u64]);
+    // The particles must leave room for at least one instant, or the log's first row would
+    // be refused as "beyond the row limit" without a word about the particles.
+    budget.check(
+        &format!("--particles {} and one instant", choice.particles),
+        pf.saturating_add(per_instant),
+    )?;
     let max_instants = budget.bytes.saturating_sub(pf) / per_instant;
     let instants = read_slots_within(&args.input, nodes, ny, max_instants)?;
     let make = factory(u32::try_from(instants.len()).unwrap_or(u32::MAX))?;
@@ -174,6 +182,8 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             }
             writeln!(w)?;
         }
+        // Dropping a BufWriter loses its last error: a full disk must fail the command.
+        w.flush().with_context(|| format!("cannot write {p:?}"))?;
         channel_sim::outln!("estimates written to {p:?}");
     }
     Ok(0)

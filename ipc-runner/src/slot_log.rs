@@ -58,6 +58,9 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
         }
         writeln!(w)?;
     }
+    // Dropping a BufWriter loses its last error: a full disk must fail the write.
+    w.flush()
+        .with_context(|| format!("cannot write {path:?}"))?;
     Ok(())
 }
 
@@ -100,20 +103,32 @@ pub fn read_slots_within(
         .1
         .to_string();
     let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    let idx = |c: &str| {
-        cols.iter().position(|h| *h == c).ok_or_else(|| {
+    // A column the reader uses must be there once: with two `k` columns, which one is the
+    // instant is a guess.
+    let find = |c: &str| -> Result<Option<usize>> {
+        let mut at = cols
+            .iter()
+            .enumerate()
+            .filter(|(_, h)| **h == c)
+            .map(|(i, _)| i);
+        match (at.next(), at.next()) {
+            (Some(i), Some(j)) => Err(bad(format!(
+                "{name} line 1: column {c:?} appears twice (columns {} and {})",
+                i + 1,
+                j + 1
+            ))),
+            (first, _) => Ok(first),
+        }
+    };
+    let idx = |c: &str| -> Result<usize> {
+        find(c)?.ok_or_else(|| {
             bad(format!(
                 "{name} line 1: header lacks column {c:?} (have {:?})",
                 cols.iter().take(24).collect::<Vec<_>>()
             ))
         })
     };
-    let (ck, cn, cd, cf) = (
-        idx("k")?,
-        idx("node")?,
-        idx("delivered")?,
-        idx("flags").ok(),
-    );
+    let (ck, cn, cd, cf) = (idx("k")?, idx("node")?, idx("delivered")?, find("flags")?);
     let cy: Vec<usize> = (0..ny)
         .map(|j| idx(&format!("y_{j}")))
         .collect::<Result<_>>()?;
@@ -291,6 +306,13 @@ mod tests {
         assert!(e.contains("line 2: k: \"x\" is not an instant"), "{e}");
         let e = refuse("k,node,delivered,y_0\n1,0,2,1\n", 10);
         assert!(e.contains("line 2: delivered: must be 0 or 1"), "{e}");
+        let e = refuse("k,k,node,delivered,y_0\n1,2,0,1,1\n", 10);
+        assert!(
+            e.contains("line 1: column \"k\" appears twice (columns 1 and 2)"),
+            "{e}"
+        );
+        let e = refuse("k,node,delivered,flags,y_0,flags\n1,0,1,0,1,0\n", 10);
+        assert!(e.contains("column \"flags\" appears twice"), "{e}");
         let e = refuse("node,delivered\n", 10);
         assert!(e.contains("line 1: header lacks column \"k\""), "{e}");
         let e = refuse("", 10);

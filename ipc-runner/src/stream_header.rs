@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(Clone, Debug, clap::Args)]
 pub struct StreamHeaderArgs {
     /// Scenario preset name.
-    #[arg(long, default_value = "occlusion")]
+    #[arg(long, default_value = "occlusion", conflicts_with = "config")]
     pub scenario: String,
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
@@ -30,9 +30,17 @@ pub fn to_json(h: &StreamHeader) -> serde_json::Value {
     })
 }
 
-/// Prints the header of `--scenario`/`--config`.
+/// Prints the header of `--scenario`/`--config`. The line is the command's whole product,
+/// so a stdout that cannot take it (a full disk, a closed pipe) fails the command (exit 1)
+/// instead of leaving an empty `header.json` behind a success.
 pub fn main(args: &StreamHeaderArgs) -> Result<i32> {
+    use anyhow::Context as _;
+    use std::io::Write as _;
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
-    channel_sim::outln!("{}", to_json(&channel_sim::wire::stream_header(&*scenario)));
+    let line = to_json(&channel_sim::wire::stream_header(&*scenario));
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}")
+        .and_then(|()| out.flush())
+        .context("cannot write the stream header to stdout")?;
     Ok(0)
 }

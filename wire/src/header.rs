@@ -80,11 +80,13 @@ impl StreamHeader {
         &self.ny[..usize::from(self.nodes).min(MAX_NODES)]
     }
 
-    /// `'linear' (nodes 1, nx 2, ny [1], model 0x…)`.
+    /// `'linear' (nodes 1, nx 2, ny [1], model 0x…)`. The name comes from the publisher, so
+    /// its control characters are escaped (`\n`, `\u{1b}`): an error naming it stays one
+    /// line, and no escape sequence reaches the terminal.
     pub fn describe(&self) -> String {
         format!(
             "'{}' (nodes {}, nx {}, ny {:?}, model {:#018x})",
-            self.scenario_name(),
+            self.scenario_name().escape_debug(),
             self.nodes,
             self.nx,
             self.ny_per_node(),
@@ -189,6 +191,17 @@ mod tests {
         assert!(h.validate().is_err());
         assert!(StreamHeader::new("x", 9, 2, &[1; 9], 1).validate().is_err());
         assert!(StreamHeader::new("x", 1, 2, &[5], 1).validate().is_err());
+    }
+
+    #[test]
+    fn a_hostile_name_is_described_on_one_line_without_escape_sequences() {
+        let h = StreamHeader::new("evil\nsecond\u{1b}[31mred", 1, 2, &[1], 1);
+        let d = h.describe();
+        assert!(
+            d.starts_with("'evil\\nsecond\\u{1b}[31mred' (nodes 1"),
+            "{d}"
+        );
+        assert!(!d.chars().any(char::is_control), "{d}");
     }
 
     #[test]

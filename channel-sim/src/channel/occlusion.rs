@@ -45,10 +45,16 @@ impl<const S: usize> OcclusionSpec<S> {
                 format!("must be {nx} finite entries"),
             ));
         }
-        if !psi.is_finite() || psi <= 0.0 {
+        // The estimators' own test of Ψ too (a Cholesky factor): a variance this rejects
+        // (1e308: its factor overflows) must be refused here, naming the field, and not
+        // later by every estimator as "does not match the plant".
+        if !psi.is_finite()
+            || psi <= 0.0
+            || estimator_core::linalg::check_spd(&SMatrix::<f64, 1, 1>::new(psi), "Psi").is_err()
+        {
             return Err(ScenarioError::invalid(
                 "occlusion.psi",
-                format!("must be a positive variance, got {psi}"),
+                format!("must be a positive variance the estimators can factor, got {psi:e}"),
             ));
         }
         let regions = OcclusionRegions::new(centres.map(|c| SVector::from([c])), radii)

@@ -81,10 +81,16 @@ impl Control {
             } => {
                 vector(offset, "control.u.offset")?;
                 vector(amplitude, "control.u.amplitude")?;
-                if !(period.is_finite() && *period > 0.0) {
+                // 2πk/period must stay finite for every k a stream can have (u32): a
+                // subnormal period made u NaN, which was then blamed on `initial.cov`.
+                let angle = 2.0 * std::f64::consts::PI * f64::from(u32::MAX) / *period;
+                if !(period.is_finite() && *period > 0.0 && angle.is_finite()) {
                     return Err(ScenarioError::invalid(
                         "control.u.period",
-                        format!("must be a positive number of instants, got {period}"),
+                        format!(
+                            "must be a positive number of instants (2πk/period finite for \
+                             every k), got {period:e}"
+                        ),
                     ));
                 }
                 if !phase.is_finite() {
@@ -223,16 +229,20 @@ mod tests {
         assert!(
             err(Control::new(b.clone(), Schedule::List(vec![]), 2)).contains("control.u.values")
         );
-        assert!(err(Control::new(
-            b,
-            Schedule::Sinusoid {
-                offset: vec![0.0],
-                amplitude: vec![1.0],
-                period: 0.0,
-                phase: 0.0
-            },
-            2
-        ))
-        .contains("control.u.period"));
+        // 0, and a subnormal period whose 2πk/period overflows (it was blamed on
+        // `initial.cov`).
+        for period in [0.0, 1e-320] {
+            assert!(err(Control::new(
+                b.clone(),
+                Schedule::Sinusoid {
+                    offset: vec![0.0],
+                    amplitude: vec![1.0],
+                    period,
+                    phase: 0.0
+                },
+                2
+            ))
+            .contains("control.u.period"));
+        }
     }
 }

@@ -431,12 +431,34 @@ impl StageConfig {
     }
 }
 
-/// Reads and validates a scenario file.
+/// Largest scenario file read (bytes). A scenario is a few kB (the largest part, an 8 × 8
+/// matrix, a few hundred bytes); TOML parsing holds about 50× the text, so without a bound
+/// `--config /dev/zero` or an 80 MB file grew until the allocator aborted the process.
+pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
+
+/// Reads and validates a scenario file (at most [`MAX_SCENARIO_BYTES`]).
 pub fn load(path: &Path) -> Result<ComposedScenario, ScenarioError> {
+    use std::io::Read as _;
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::File {
+    let fail = |reason: String| ScenarioError::File {
         path: shown.clone(),
-        reason: e.to_string(),
+        reason,
+    };
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_SCENARIO_BYTES + 1).read_to_end(&mut bytes))
+        .map_err(|e| fail(e.to_string()))?;
+    if bytes.len() as u64 > MAX_SCENARIO_BYTES {
+        return Err(fail(format!(
+            "larger than {} KiB; a scenario file is a few kB",
+            MAX_SCENARIO_BYTES >> 10
+        )));
+    }
+    let text = String::from_utf8(bytes).map_err(|e| {
+        fail(format!(
+            "not UTF-8 text (byte {})",
+            e.utf8_error().valid_up_to()
+        ))
     })?;
     let stem = path
         .file_stem()

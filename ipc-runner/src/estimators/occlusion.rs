@@ -95,9 +95,13 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
     loss_rate: f64,
     gate: Option<f64>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let occ: Occlusion<f64, NX, 1, S> = spec
-        .occlusion::<NX>()
-        .ok_or_else(|| anyhow::anyhow!("occlusion stage does not match the plant"))?;
+    let occ: Occlusion<f64, NX, 1, S> = spec.occlusion::<NX>().ok_or_else(|| {
+        anyhow::anyhow!(
+            "the occlusion stage (e of {} entries, psi {}) does not fit the {NX}-state plant",
+            spec.e.len(),
+            spec.psi
+        )
+    })?;
     let init = composed.initial();
     let x0 = SVector::<f64, NX>::from_column_slice(init.estimator_mean.as_slice());
     let p0: SMatrix<f64, NX, NX> = fixed(&init.estimator_cov);

@@ -6,7 +6,7 @@ use channel_sim::scenario;
 
 use super::{evaluate_with, Control, EvalEnding, RunConfig};
 use crate::estimators::{EvalOptions, FACTORIES};
-use crate::limits::{check_output, Budget};
+use crate::limits::{check_outputs, Budget};
 
 /// Arguments of `ipc-runner eval`.
 #[derive(Debug, clap::Args)]
@@ -85,6 +85,27 @@ pub struct EvalArgs {
 /// Most worker threads `--threads` accepts (each holds a run's records).
 pub const MAX_THREADS: u64 = 1024;
 
+/// The worker threads without `--threads`: `RAYON_NUM_THREADS` when it is set (rayon's
+/// convention, `0` meaning the default), else one per core. The variable is checked like
+/// the flag: rayon itself panicked on `RAYON_NUM_THREADS=3000` when it could not start them.
+pub fn default_threads(env: Option<&std::ffi::OsStr>) -> Result<usize, String> {
+    let cores = || std::thread::available_parallelism().map_or(1, |n| n.get());
+    let Some(value) = env else {
+        return Ok(cores());
+    };
+    let bad = || {
+        format!(
+            "RAYON_NUM_THREADS={}: a worker count 0..={MAX_THREADS} (0: one per core) or unset",
+            value.to_string_lossy()
+        )
+    };
+    match value.to_str().and_then(|v| v.trim().parse::<u64>().ok()) {
+        Some(0) => Ok(cores()),
+        Some(n) if n <= MAX_THREADS => Ok(n as usize),
+        _ => Err(bad()),
+    }
+}
+
 /// A probability in `[0, 1)` (a loss rate).
 pub fn loss_probability(s: &str) -> Result<f64, String> {
     channel_sim::flags::probability_below_one(s)
@@ -138,15 +159,21 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     if let Some(plot) = &args.plot {
         crate::plot::check_extension(plot).map_err(CommandError::usage)?;
     }
-    for (flag, path) in [
+    let outputs: Vec<(&str, &Path)> = [
         ("--json", &args.json),
         ("--csv", &args.csv),
         ("--plot", &args.plot),
-    ] {
-        if let Some(p) = path {
-            check_output(flag, p).map_err(CommandError::usage)?;
-        }
-    }
+    ]
+    .into_iter()
+    .filter_map(|(flag, p)| Some((flag, p.as_deref()?)))
+    .collect();
+    let inputs: Vec<(&str, &Path)> = args
+        .config
+        .as_deref()
+        .map(|c| ("--config", c))
+        .into_iter()
+        .collect();
+    check_outputs(&outputs, &inputs).map_err(CommandError::usage)?;
     // clap lets through one of the two, never both.
     let scenario = scenario::resolve(
         args.scenario.as_deref().unwrap_or_default(),
@@ -154,10 +181,11 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     )
     .map_err(CommandError::usage)?;
     let budget = Budget::mib(args.max_memory);
-    // rayon's default (RAYON_NUM_THREADS, else one per core) when --threads is not given.
-    let threads = args
-        .threads
-        .map_or_else(rayon::current_num_threads, |t| t as usize);
+    let threads = match args.threads {
+        Some(t) => t as usize,
+        None => default_threads(std::env::var_os("RAYON_NUM_THREADS").as_deref())
+            .map_err(CommandError::usage)?,
+    };
     let particles = particles(args.particles, &args.estimators);
     // Before any estimator is built (the name check below builds them): a particle filter
     // allocates its particles at once.
@@ -184,17 +212,26 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         transport_loss_unmarked: args.transport_loss_unmarked,
         gate: args.gate,
     };
+    // Every estimator that applies, built once for run 0 before any work: what refuses to
+    // build (a P0 that is not positive definite, a model no occlusion filter has a size
+    // for) is the scenario's fault, so it is bad input (exit 2) naming its origin.
+    let all = EvalOptions {
+        estimators: Vec::new(),
+        ..options.clone()
+    };
+    let available: Vec<&str> =
+        crate::estimators::build_all(FACTORIES, &*scenario, &all, options.seed, 0)
+            .map_err(|e| {
+                let origin = match &args.config {
+                    Some(c) => format!("--config {}", c.display()),
+                    None => format!("--scenario {}", scenario.name()),
+                };
+                CommandError::usage(format!("{origin}: {e:#}"))
+            })?
+            .iter()
+            .map(|e| e.name())
+            .collect();
     if !options.estimators.is_empty() {
-        let all = EvalOptions {
-            estimators: Vec::new(),
-            ..options.clone()
-        };
-        let available: Vec<&str> =
-            crate::estimators::build_all(FACTORIES, &*scenario, &all, options.seed, 0)
-                .map_err(|e| CommandError::failure(format!("{e:#}")))?
-                .iter()
-                .map(|e| e.name())
-                .collect();
         for n in &options.estimators {
             if !available
                 .iter()
@@ -214,7 +251,8 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         }
     }
     let run_config = RunConfig {
-        threads: args.threads.map(|t| t as usize),
+        // Always a count: rayon would read RAYON_NUM_THREADS again, unchecked.
+        threads: Some(threads),
         progress: !args.quiet,
     };
     // The first call installs the handler (iceoryx2's, as `run` uses): from here on SIGINT

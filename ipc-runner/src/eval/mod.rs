@@ -15,7 +15,7 @@
 //!
 //! **Bounds and endings** ([`evaluate_with`], [`Control`]): what the evaluation holds
 //! ([`memory_need`]) is checked against a budget before the first run, and the chunk of
-//! finished runs shrinks to fit it (results unchanged); a stop request (SIGINT/SIGTERM in
+//! finished runs shrinks to fit it (results unchanged); a stop request (SIGINT/SIGTERM/SIGHUP in
 //! `ipc-runner eval`) or a run that fails ends the evaluation with the runs done before the
 //! first one not done ([`EvalEnding`]), whose results are exactly those of an evaluation of
 //! that many runs (docs/pipeline.md, "Exit codes and limits").
@@ -67,7 +67,8 @@ use std::time::Duration;
 /// How to run an evaluation (beyond what estimators see in [`EvalOptions`]).
 #[derive(Clone, Debug, Default)]
 pub struct RunConfig {
-    /// Worker threads (`None`: rayon's default, one per core).
+    /// Worker threads (`None`: one per core; `ipc-runner eval` reads `RAYON_NUM_THREADS`
+    /// itself, [`cli::default_threads`]).
     pub threads: Option<usize>,
     /// Show progress on stderr (a bar on a terminal, else a line every few seconds).
     pub progress: bool,
@@ -142,7 +143,7 @@ pub fn memory_need(nx: usize, n_est: usize, horizon: u32, runs: u64) -> (u64, u6
 pub enum EvalEnding {
     /// Every requested run was done.
     Completed,
-    /// Stopped by SIGINT/SIGTERM ([`Control::stop`]); the runs done before are reported.
+    /// Stopped by SIGINT/SIGTERM/SIGHUP ([`Control::stop`]); the runs done before are reported.
     Interrupted,
     /// A run failed (its estimators could not be built); the runs before it are reported.
     Failed,
@@ -175,7 +176,11 @@ pub fn evaluate_with(
 ) -> anyhow::Result<EvalResult> {
     anyhow::ensure!(options.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(options.horizon >= 1, "--horizon must be at least 1");
-    let threads = config.threads.unwrap_or_else(rayon::current_num_threads);
+    // Not rayon's global pool, which panics when RAYON_NUM_THREADS asks for more threads
+    // than can start: the count is ours, and the pool built below is given it.
+    let threads = config
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     // Before anything is built: the particle filters allocate their particles at once.
     let pf = product(&[
         options.particles as u64,
@@ -222,11 +227,10 @@ pub fn evaluate_with(
     );
 
     let mut acc = report::Accumulator::new(scenario, options, &names);
-    let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(t) = config.threads {
-        pool = pool.num_threads(t);
-    }
-    let pool = pool.build().context("cannot start the worker threads")?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+        .context("cannot start the worker threads")?;
     let stopped = std::sync::atomic::AtomicBool::new(false);
     let stop_now = || {
         use std::sync::atomic::Ordering::Relaxed;

@@ -20,7 +20,7 @@
 //! standard error (sample standard deviation of the run averages / √valid_runs),
 //! `median_run_avg` the median of the run averages. Non-finite values are written as `null`.
 //!
-//! `ending` is `completed`, `interrupted` (SIGINT/SIGTERM) or `failed` (with `error`): then
+//! `ending` is `completed`, `interrupted` (SIGINT/SIGTERM/SIGHUP) or `failed` (with `error`): then
 //! `runs` are the runs done before the first one not done, of `runs_requested`, and every
 //! number is over those. `truth_nonfinite` counts the (run, k) instants whose truth had a
 //! non-finite component; they are left out of every MSE (MSE(k) is then the mean over the

@@ -604,11 +604,14 @@ impl Assembler {
             }
             None => {
                 let mut y = [0.0; MAX_NY];
-                if let Some(v) = slot.measurement() {
+                let net_lost = slot.flags & FLAG_NET_LOST != 0;
+                if let Some(v) = slot.measurement().filter(|_| !net_lost) {
                     y[..v.len()].copy_from_slice(v);
                 }
-                if slot.flags & FLAG_NET_LOST != 0 {
-                    // A bridge's stand-in for a slot the network lost (docs/bridge.md).
+                if net_lost {
+                    // A bridge's stand-in for a slot the network lost (docs/bridge.md). Its
+                    // count says lost, so it is handed on as lost: a foreign publisher that
+                    // sets the bit on a measurement does not get it used behind the count.
                     self.counts.lost_on_network += 1;
                 } else {
                     self.counts.received += 1;
@@ -621,7 +624,7 @@ impl Assembler {
                 let o = Observation {
                     k: slot.k,
                     node: slot.node,
-                    delivered: slot.delivered == 1,
+                    delivered: slot.delivered == 1 && !net_lost,
                     ny: self.ny[m],
                     y,
                     flags: slot.flags & !FLAG_IPC_LOST,

@@ -34,7 +34,7 @@
 //! (up to `--stall-limit`). One that is gone is lost: the runner exits with
 //! [`EXIT_PUBLISHER_LOST`], or with `--wait-for-restart` waits for a new channel-sim and
 //! starts a new session (fresh estimators; the new process starts its stream at k = 1). Only
-//! SIGINT/SIGTERM stop the loop; any other signal is a wake-up (docs/security.md, "Signals").
+//! SIGINT/SIGTERM/SIGHUP stop the loop; any other signal is a wake-up (docs/security.md, "Signals").
 //!
 //! The parts, one file each: `args` ([`RunArgs`]), `slot_loop` (the loop, [`run_loop`]),
 //! `instant` (one instant's work), `publish`, `truth` (the evaluation beside the loop),

@@ -53,7 +53,7 @@ pub enum Ending {
     Completed,
     /// The publisher was stopped early (ABORT marker).
     PublisherStopped,
-    /// The runner got SIGINT/SIGTERM.
+    /// The runner got SIGINT/SIGTERM/SIGHUP.
     Interrupted,
     /// The data deadline passed and no restart was awaited.
     PublisherLost,

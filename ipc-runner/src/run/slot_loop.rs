@@ -108,7 +108,7 @@ pub fn run_loop(
         relay: Relay::default(),
     };
 
-    // Before announcing the wait: from here on SIGINT/SIGTERM set the flag every wait mode
+    // Before announcing the wait: from here on SIGINT/SIGTERM/SIGHUP set the flag every wait mode
     // reads, and no other signal ends the run (docs/security.md, "Signals"). Earlier, a
     // signal takes its default action (the process ends without a report, as nothing ran).
     channel_sim::signal::install();

@@ -93,6 +93,9 @@ impl Trajectories {
             }
             writeln!(w)?;
         }
+        // Dropping a BufWriter loses its last error: a full disk must fail the write.
+        w.flush()
+            .with_context(|| format!("cannot write {path:?}"))?;
         Ok(())
     }
 
@@ -111,6 +114,8 @@ impl Trajectories {
             let (t_s, transport, e2e) = self.latency_point(tr);
             writeln!(w, "{session},{k},{t_s:.6},{transport:.3},{e2e:.3}")?;
         }
+        w.flush()
+            .with_context(|| format!("cannot write {path:?}"))?;
         Ok(())
     }
 

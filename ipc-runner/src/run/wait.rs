@@ -8,7 +8,7 @@
 //! A wake-up says only that something may be there: wake-ups can be spurious and one
 //! notification may stand for several slots, so the loop re-drains `receive()` after each.
 //!
-//! Only SIGINT/SIGTERM stop a run: the flag of `channel_sim::signal`, read after every
+//! Only SIGINT/SIGTERM/SIGHUP stop a run: the flag of `channel_sim::signal`, read after every
 //! wake-up. iceoryx2 reports every wait that a signal cut short as an interrupt (SIGCONT, a
 //! stop and continue, SIGUSR1 …); that is a wake-up like any other (docs/security.md,
 //! "Signals").
@@ -35,7 +35,7 @@ pub const SPIN_CLOCK_EVERY: u32 = 256;
 pub(super) enum Woke {
     /// Slots may be there.
     Ready,
-    /// SIGINT or SIGTERM.
+    /// SIGINT, SIGTERM or SIGHUP.
     Signal,
 }
 

@@ -134,6 +134,25 @@ fn a_gap_after_the_relay_changed_is_lost_on_the_network_once() {
 }
 
 #[test]
+fn a_measurement_flagged_lost_on_the_network_is_handed_on_as_lost() {
+    // A foreign publisher setting FLAG_NET_LOST on a delivered slot: counted lost on the
+    // network, so its measurement must not reach the estimators either.
+    let h = header(1, &[1]);
+    let mut a = Assembler::new(&h, Limits::default());
+    let mut s2 = slot(2, 0, 1, 1);
+    s2.flags |= FLAG_NET_LOST;
+    assert_eq!(s2.delivered, 1);
+    let (out, _) = run(&mut a, &h, &[slot(1, 0, 1, 1), s2, slot(3, 0, 1, 1)]);
+    assert_eq!(ks(&out), [1, 2, 3]);
+    let o = &out[1].1[0];
+    assert!(!o.delivered && o.flags & FLAG_NET_LOST != 0, "{o:?}");
+    assert!(o.y.iter().all(|v| *v == 0.0), "{o:?}");
+    assert!(out[0].1[0].delivered);
+    assert!(out[2].1[0].delivered);
+    assert_eq!((a.counts.received, a.counts.lost_on_network), (2, 1));
+}
+
+#[test]
 fn per_node_end_markers_fill_the_tail_and_end_the_stream() {
     let h = header(2, &[1, 1]);
     let mut a = Assembler::new(&h, Limits::default());
