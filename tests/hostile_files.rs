@@ -286,3 +286,46 @@ fn a_scenario_no_estimator_can_start_from_is_bad_input_naming_the_file() {
     assert_one_line(&d, 2, &["--config p0.toml", "P0"]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_run_whose_csv_cannot_be_written_says_so_and_keeps_its_json() {
+    use common::{prefix, report, start_channel_sim, Proc};
+    let dir = scratch("hf-run-full");
+    let p = prefix("hf-run-full");
+    // Was: exit 0 and nothing on stderr, the CSV lost (the BufWriter's error dropped).
+    for flag in ["--estimates-csv", "--latency-csv", "--slots-csv"] {
+        let json = dir.join("run.json");
+        let mut run = Proc::start(
+            &dir,
+            "run",
+            &[
+                "run",
+                "--scenario",
+                "linear",
+                "--prefix",
+                &p,
+                "--steps",
+                "50",
+                "--quiet",
+                "--json",
+                json.to_str().unwrap(),
+                flag,
+                "/dev/full",
+            ],
+        );
+        let _publisher = start_channel_sim(&dir, &p, "linear", 50, 0);
+        let st = run.wait(60);
+        let err = run.err();
+        assert_eq!(st.code(), Some(1), "{flag}: {st}\n{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        let lines: Vec<&str> = err.lines().filter(|l| l.contains("error:")).collect();
+        assert_eq!(lines.len(), 1, "{flag}: {err}");
+        assert!(
+            lines[0].contains("/dev/full") && lines[0].contains("No space"),
+            "{err}"
+        );
+        assert_eq!(report(&json)["counts"]["received"], 50, "{flag}");
+        let _ = std::fs::remove_file(&json);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
