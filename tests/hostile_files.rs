@@ -7,9 +7,8 @@
 #[path = "pipeline_common.rs"]
 mod common;
 
-use common::scratch;
+use common::{prefix, report, scratch, start_channel_sim, Proc};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// A finished `pipeline-node`: exit code and stderr.
@@ -18,36 +17,14 @@ struct Done {
     err: String,
 }
 
-/// Runs `pipeline-node <args>` with `env` added and stdout to `stdout` (a file of `dir` when
-/// `None`); killed and failed after 60 s. Fails on a panic, an abort or a death by signal.
+/// Runs `pipeline-node <args>` in `dir` with `env` added and stdout to `stdout` (a file of
+/// `dir` when `None`); killed and failed after 60 s. Fails on a panic, an abort or a death
+/// by signal.
 fn node(dir: &Path, args: &[&str], env: &[(&str, &str)], stdout: Option<&Path>) -> Done {
-    let err_file = dir.join("err.txt");
-    let out = match stdout {
-        Some(p) => std::fs::OpenOptions::new().write(true).open(p).unwrap(),
-        None => std::fs::File::create(dir.join("out.txt")).unwrap(),
-    };
-    let mut child = Command::new(env!("CARGO_BIN_EXE_pipeline-node"))
-        .args(args)
-        .current_dir(dir)
-        .env("IOX2_LOG_LEVEL", "Error")
-        .envs(env.iter().copied())
-        .stdin(Stdio::null())
-        .stdout(out)
-        .stderr(std::fs::File::create(&err_file).unwrap())
-        .spawn()
-        .unwrap();
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            break st;
-        }
-        if t0.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            panic!("{args:?} did not end within 60 s");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    };
-    let err = std::fs::read_to_string(&err_file).unwrap();
+    let out = stdout.map(|p| std::fs::OpenOptions::new().write(true).open(p).unwrap());
+    let mut p = Proc::start_in(dir, "node", args, env, out);
+    let status = p.wait(60);
+    let err = p.err();
     assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
     assert!(
         !matches!(status.code(), None | Some(101 | 134)),
@@ -289,7 +266,6 @@ fn a_scenario_no_estimator_can_start_from_is_bad_input_naming_the_file() {
 
 #[test]
 fn a_run_whose_csv_cannot_be_written_says_so_and_keeps_its_json() {
-    use common::{prefix, report, start_channel_sim, Proc};
     let dir = scratch("hf-run-full");
     let p = prefix("hf-run-full");
     // Was: exit 0 and nothing on stderr, the CSV lost (the BufWriter's error dropped).

@@ -47,16 +47,34 @@ impl Proc {
 
     /// Starts `program <args>` (e.g. a Python client) with output captured to files in `dir`.
     pub fn start_program(dir: &Path, name: &str, program: &Path, args: &[&str]) -> Self {
+        Self::spawn(dir, name, Command::new(program).args(args), None)
+    }
+
+    /// Starts `pipeline-node <args>` in `dir` (relative paths are `dir`'s) with `env` added,
+    /// and stdout to `stdout` instead of a file of `dir` when given (`/dev/full`).
+    pub fn start_in(
+        dir: &Path,
+        name: &str,
+        args: &[&str],
+        env: &[(&str, &str)],
+        stdout: Option<std::fs::File>,
+    ) -> Self {
+        let mut cmd = Command::new(node_exe());
+        cmd.args(args).current_dir(dir).envs(env.iter().copied());
+        Self::spawn(dir, name, &mut cmd, stdout)
+    }
+
+    fn spawn(dir: &Path, name: &str, cmd: &mut Command, out: Option<std::fs::File>) -> Self {
         let stdout = dir.join(format!("{name}.out"));
         let stderr = dir.join(format!("{name}.err"));
-        let child = Command::new(program)
-            .args(args)
+        let out = out.unwrap_or_else(|| std::fs::File::create(&stdout).unwrap());
+        let child = cmd
             .env("IOX2_LOG_LEVEL", "Error")
             .stdin(Stdio::null())
-            .stdout(std::fs::File::create(&stdout).unwrap())
+            .stdout(out)
             .stderr(std::fs::File::create(&stderr).unwrap())
             .spawn()
-            .unwrap_or_else(|e| panic!("start {program:?}: {e}"));
+            .unwrap_or_else(|e| panic!("start {:?}: {e}", cmd.get_program()));
         Self {
             child: Some(child),
             stderr,
