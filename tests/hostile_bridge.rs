@@ -280,10 +280,10 @@ fn a_runner_whose_bridge_never_returns_ends_within_the_stall_limit() {
     eprintln!("bridge never returned: the run ended {took:?} after the kill");
 }
 
-/// SIGINT to either side while it forwards: it ends within a bounded time, exit 0, its report
-/// written with the ending "interrupted".
+/// SIGINT or SIGHUP to either side while it forwards: it ends within a bounded time, exit 0,
+/// its report written with the ending "interrupted".
 #[test]
-fn sigint_ends_a_forwarding_bridge_with_its_report() {
+fn sigint_and_sighup_end_a_forwarding_bridge_with_its_report() {
     let c = Chain::new("hb-int");
     let est = bridge_common::bridge(&c.dir, "estimator", &c.b, &c.key, &c.endpoint, false, &[]);
     let _run = c.runner("run", 100_000, &[]);
@@ -292,8 +292,13 @@ fn sigint_ends_a_forwarding_bridge_with_its_report() {
     sen.wait_for_stderr("forwarding", 30);
     est.wait_for_stderr("listening on", 30);
     std::thread::sleep(Duration::from_millis(300));
-    for (mut p, name) in [(sen, "sensor"), (est, "estimator")] {
-        p.signal(libc::SIGINT);
+    // SIGHUP (a closed terminal) to the estimator side: it used to kill it without a report.
+    let sides = [
+        (sen, "sensor", libc::SIGINT),
+        (est, "estimator", libc::SIGHUP),
+    ];
+    for (mut p, name, sig) in sides {
+        p.signal(sig);
         let t = Instant::now();
         let st = p.wait(10);
         let took = t.elapsed();
@@ -303,7 +308,7 @@ fn sigint_ends_a_forwarding_bridge_with_its_report() {
         assert_eq!(r["ending"], "interrupted", "{name}: {r}");
         assert!(r["slots"].as_u64().unwrap() > 0, "{name}: {r}");
         assert!(p.err().contains("interrupted"), "{name}: {}", p.err());
-        eprintln!("SIGINT to the {name} side: ended after {took:?}");
+        eprintln!("signal {sig} to the {name} side: ended after {took:?}");
     }
 }
 

@@ -38,6 +38,7 @@ mod stop;
 
 pub use args::{BridgeArgs, Side};
 pub use report::BridgeReport;
+pub use stop::also_stop_when;
 
 /// The name of a bridge's iceoryx2 node (both sides). The runner tells by it that its slot
 /// publisher is a bridge's estimator side, a relay that may go away and come back with the

@@ -62,6 +62,10 @@ fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
 fn bridge(a: &estpipe_bridge::BridgeArgs) -> anyhow::Result<i32> {
     a.check()
         .map_err(|e| anyhow::Error::new(channel_sim::flags::BadInput(format!("{e:#}"))))?;
+    // The product's stop signals (SIGHUP too, which killed the bridge without its report)
+    // and ignored stray killers, as for every other subcommand.
+    channel_sim::signal::install();
+    estpipe_bridge::also_stop_when(channel_sim::signal::termination_requested);
     estpipe_bridge::main(a)
 }
 
