@@ -305,3 +305,60 @@ fn a_run_whose_csv_cannot_be_written_says_so_and_keeps_its_json() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_variance_no_estimator_can_factor_is_refused_by_its_field() {
+    let dir = scratch("hf-psi");
+    // Was: exit 1, "occlusion stage does not match the plant", neither file nor field.
+    let toml = "[model]\na = [[1.0, 1.0], [0.0, 1.0]]\nq = [[0.1, 0.0], [0.0, 0.1]]\n\
+                [initial]\nmean = [0.0, 0.0]\ncov = [[1.0, 0.0], [0.0, 1.0]]\n\
+                [[sensors]]\nc = [[1.0, 0.0]]\nr = [[0.1]]\n\
+                [[stages]]\nkind = \"occlusion\"\ne = [1.0, 0.0]\npsi = 1e308\n\
+                centres = [1.0]\nradii = [0.5]\n";
+    std::fs::write(dir.join("psi.toml"), toml).unwrap();
+    let d = node(
+        &dir,
+        &["eval", "--config", "psi.toml", "--runs", "2", "--quiet"],
+        &[],
+        None,
+    );
+    assert_one_line(&d, 2, &["psi.toml", "stages[0].psi", "1e308"]);
+    // The same file with psi = 0.1 runs: the refusal is the variance's.
+    std::fs::write(dir.join("ok.toml"), toml.replace("1e308", "0.1")).unwrap();
+    let d = node(
+        &dir,
+        &["eval", "--config", "ok.toml", "--runs", "2", "--quiet"],
+        &[],
+        None,
+    );
+    assert_eq!(d.code, Some(0), "{}", d.err);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_unknown_iceoryx2_log_level_is_one_warning_line() {
+    let dir = scratch("hf-iox2");
+    // Was: iceoryx2's four lines ("Invalid value for 'IOX2_LOG_LEVEL' …").
+    let args = [
+        "eval",
+        "--scenario",
+        "linear",
+        "--runs",
+        "2",
+        "--horizon",
+        "3",
+        "--quiet",
+    ];
+    let d = node(&dir, &args, &[("IOX2_LOG_LEVEL", "garbage\nx")], None);
+    assert_eq!(d.code, Some(0), "{}", d.err);
+    let lines: Vec<&str> = d.err.lines().collect();
+    assert_eq!(lines.len(), 1, "{:?}", d.err);
+    assert!(
+        lines[0].starts_with("pipeline-node: warning: IOX2_LOG_LEVEL=")
+            && lines[0].contains("using error"),
+        "{lines:?}"
+    );
+    let d = node(&dir, &args, &[("IOX2_LOG_LEVEL", "Warn")], None);
+    assert_eq!((d.code, d.err.as_str()), (Some(0), ""));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -68,8 +68,11 @@ impl Proc {
         let stdout = dir.join(format!("{name}.out"));
         let stderr = dir.join(format!("{name}.err"));
         let out = out.unwrap_or_else(|| std::fs::File::create(&stdout).unwrap());
+        // Quiet iceoryx2 unless the caller set a level of its own.
+        if !cmd.get_envs().any(|(k, _)| k == "IOX2_LOG_LEVEL") {
+            cmd.env("IOX2_LOG_LEVEL", "Error");
+        }
         let child = cmd
-            .env("IOX2_LOG_LEVEL", "Error")
             .stdin(Stdio::null())
             .stdout(out)
             .stderr(std::fs::File::create(&stderr).unwrap())

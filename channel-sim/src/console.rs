@@ -50,8 +50,52 @@ pub fn one_line(message: &str) -> String {
     out
 }
 
+/// iceoryx2's log level from `IOX2_LOG_LEVEL` (fatal, error, warn, info, debug, trace, any
+/// case; `error` when unset). A value it does not know is one warning line naming `binary`,
+/// and `error`: iceoryx2's own parser printed four lines for it.
+pub fn set_iceoryx2_log_level(binary: &str) {
+    use iceoryx2::prelude::LogLevel;
+    let level = match std::env::var_os("IOX2_LOG_LEVEL") {
+        None => LogLevel::Error,
+        Some(v) => match log_level(&v.to_string_lossy()) {
+            Some(l) => l,
+            None => {
+                crate::errln!(
+                    "{binary}: warning: IOX2_LOG_LEVEL={} is none of fatal, error, warn, info, \
+                     debug, trace; using error",
+                    one_line(&format!("{v:?}"))
+                );
+                LogLevel::Error
+            }
+        },
+    };
+    iceoryx2::prelude::set_log_level(level);
+}
+
+fn log_level(v: &str) -> Option<iceoryx2::prelude::LogLevel> {
+    use iceoryx2::prelude::LogLevel;
+    Some(match v.trim().to_lowercase().as_str() {
+        "trace" => LogLevel::Trace,
+        "debug" => LogLevel::Debug,
+        "info" => LogLevel::Info,
+        "warn" => LogLevel::Warn,
+        "error" => LogLevel::Error,
+        "fatal" => LogLevel::Fatal,
+        _ => return None,
+    })
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn log_levels_are_iceoryx2s_names_in_any_case() {
+        use iceoryx2::prelude::LogLevel;
+        assert!(matches!(super::log_level("Error"), Some(LogLevel::Error)));
+        assert!(matches!(super::log_level(" TRACE "), Some(LogLevel::Trace)));
+        assert!(super::log_level("garbage").is_none());
+        assert!(super::log_level("").is_none());
+    }
+
     #[test]
     fn one_line_keeps_text_and_defuses_control_characters() {
         assert_eq!(super::one_line("a α 'b' \\"), "a α 'b' \\");

@@ -16,7 +16,7 @@ struct Cli {
 }
 
 fn main() {
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    channel_sim::console::set_iceoryx2_log_level("channel-sim");
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {

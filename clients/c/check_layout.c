@@ -4,7 +4,7 @@
  *     Slot size 96 align 8
  *     Slot.version offset 0 size 4
  *
- * wire/tests/c_header.rs compiles and runs it with the system `cc` and compares the output
+ * wire/tests/layout.rs compiles and runs it with the system `cc` and compares the output
  * with the Rust types. Exit code 1 names the first mismatch.
  */
 #include <stdio.h>

@@ -72,7 +72,7 @@ fn bridge(a: &estpipe_bridge::BridgeArgs) -> anyhow::Result<i32> {
 /// Parses the command line, runs the subcommand and exits; `name` prefixes the one-line
 /// error messages.
 pub fn main(name: &str) -> ! {
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    channel_sim::console::set_iceoryx2_log_level(name);
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {

@@ -277,7 +277,7 @@ impl<R: BufRead> BoundedLines<R> {
         if self.line > self.max_lines {
             return Err(BadInput(format!(
                 "{} line {}: more than {} lines (the row limit of the memory budget; \
-                 --max-memory MIB raises it)",
+                 --max-memory MIB raises it, up to this machine's memory)",
                 self.file, self.line, self.max_lines
             )));
         }

@@ -189,7 +189,7 @@ pub fn read_slots_within(
                 format!(
                     "k = {k} means replaying {k} instants (every k from 1, gaps as lost), \
                      about {} of memory; the budget holds {max_instants} instants \
-                     (--max-memory MIB raises it)",
+                     (--max-memory MIB raises it, up to this machine's memory)",
                     crate::limits::human_bytes(u64::from(k).saturating_mul(per))
                 ),
             ));
