@@ -26,7 +26,7 @@ pub const FRAC_1_SQRT_2PI: f64 = 0.398_942_280_401_432_677_94;
 pub const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_741_78;
 
 /// Above this ζ, λ is evaluated by its continued fraction instead of `pdf/sf`.
-const CF_THRESHOLD: f64 = 4.0;
+pub(crate) const CF_THRESHOLD: f64 = 4.0;
 /// Terms of the backward continued-fraction evaluation. The fraction converges faster the
 /// larger ζ is; these counts reach one ulp in f64 with a margin of 1.5× (measured against a
 /// 40-digit reference: 40 terms at ζ = 4, 32 at 5, 24 at 6, 16 from 8 on).
@@ -73,7 +73,7 @@ pub fn sf<T: Real>(x: T) -> T {
 
 /// `t(ζ) = λ(ζ) − ζ = 1/(ζ + 2/(ζ + 3/(ζ + …)))`, for ζ ≥ [`CF_THRESHOLD`].
 #[inline]
-fn cf_tail<T: Real>(z: T) -> T {
+pub(crate) fn cf_tail<T: Real>(z: T) -> T {
     let mut t = T::zero();
     let mut n = cf_terms(z.to_f64());
     while n >= 2 {

@@ -32,7 +32,7 @@
 //! then equals to within rounding), and an end beyond `±B` of an interval that contains 0, where
 //! `Φ` rounds to 0 or 1 and `φ(B)` is negligible (`B = 10` in `f64`, 7 in `f32`).
 
-use crate::gauss::{cdf, ln_pdf, pdf, sf};
+use crate::gauss::{cdf, cf_tail, ln_pdf, pdf, sf, CF_THRESHOLD};
 use crate::Real;
 
 /// `ln(1/EPS)` of `T`.
@@ -56,38 +56,9 @@ fn far_end<T: Real>() -> T {
     }
 }
 
-/// Above this ζ, λ is evaluated by its continued fraction (as in [`crate::gauss`]).
-const CF_THRESHOLD: f64 = 4.0;
-
-/// Terms of the continued fraction, [`crate::gauss`]'s counts (so that λ is bit-identical to
-/// [`crate::gauss::inv_mills`]).
-#[inline]
-fn cf_terms(z: f64) -> usize {
-    if z < 5.0 {
-        64
-    } else if z < 6.0 {
-        48
-    } else if z < 8.0 {
-        36
-    } else {
-        24
-    }
-}
-
-/// `λ(ζ) − ζ = 1/(ζ + 2/(ζ + 3/(ζ + …)))`, for ζ > [`CF_THRESHOLD`].
-#[inline]
-fn cf_tail<T: Real>(z: T) -> T {
-    let mut t = T::zero();
-    let mut n = cf_terms(z.to_f64());
-    while n >= 2 {
-        t = T::lit(n as f64) / (z + t);
-        n -= 1;
-    }
-    T::one() / (z + t)
-}
-
 /// `(λ(ζ), δ(ζ))`, `λ = φ/(1 − Φ)` and `δ = λ(λ − ζ)`, bit-identical to
-/// [`crate::gauss::inv_mills`] and [`crate::gauss::inv_mills_delta`], from one evaluation.
+/// [`crate::gauss::inv_mills`] and [`crate::gauss::inv_mills_delta`] (the same continued
+/// fraction, `gauss`'s own), from one evaluation.
 #[inline]
 fn mills<T: Real>(z: T) -> (T, T) {
     if z > T::lit(CF_THRESHOLD) {
