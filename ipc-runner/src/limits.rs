@@ -73,7 +73,10 @@ impl Budget {
         };
         let budget = human_bytes(self.bytes);
         Err(BadInput(if self.clamped {
-            format!("{what} needs {need} of memory; this machine has {budget} (memory and swap)")
+            format!(
+                "{what} needs {need} of memory; this machine has {budget} (memory and swap, \
+                 or the container's limit)"
+            )
         } else {
             format!(
                 "{what} needs {need} of memory; the budget is {budget} (--max-memory MIB raises it)"
@@ -82,8 +85,10 @@ impl Budget {
     }
 }
 
-/// This machine's memory and swap in bytes (`MemTotal + SwapTotal` of `/proc/meminfo`),
-/// read once; `None` where that cannot be read (no cap then).
+/// This machine's memory and swap in bytes (`MemTotal + SwapTotal` of `/proc/meminfo`), or
+/// the container's memory limit when that is less (cgroup v2 `memory.max`, v1
+/// `memory.limit_in_bytes`: the kernel ends the process there), read once; `None` where
+/// `/proc/meminfo` cannot be read (no cap then).
 pub fn machine_memory() -> Option<u64> {
     static MEMORY: std::sync::OnceLock<Option<u64>> = std::sync::OnceLock::new();
     *MEMORY.get_or_init(|| {
@@ -98,7 +103,18 @@ pub fn machine_memory() -> Option<u64> {
                 .ok()
         };
         let total = kib("MemTotal:")?.saturating_add(kib("SwapTotal:").unwrap_or(0));
-        (total > 0).then(|| total.saturating_mul(1024))
+        let total = total.saturating_mul(1024);
+        // "max" (v2) or a page-rounded i64::MAX (v1) mean no limit: `min` keeps the total.
+        let limit = [
+            "/sys/fs/cgroup/memory.max",
+            "/sys/fs/cgroup/memory/memory.limit_in_bytes",
+        ]
+        .iter()
+        .filter_map(|p| std::fs::read_to_string(p).ok()?.trim().parse::<u64>().ok())
+        .filter(|&l| l > 0)
+        .min();
+        let bytes = limit.map_or(total, |l| l.min(total));
+        (bytes > 0).then_some(bytes)
     })
 }
 
