@@ -135,6 +135,11 @@ pub fn product(factors: &[u64]) -> u64 {
     factors.iter().fold(1u64, |p, &f| p.saturating_mul(f))
 }
 
+/// The `(flag, path)` pairs of the flags that were given, for [`check_outputs`].
+pub fn given<'a>(flags: &[(&'a str, Option<&'a Path>)]) -> Vec<(&'a str, &'a Path)> {
+    flags.iter().filter_map(|&(f, p)| Some((f, p?))).collect()
+}
+
 /// [`check_output`] for every `(flag, path)` of `outputs`, and that no two of them, and
 /// none of them and an input of `inputs`, are the same file: `replay --input log.csv
 /// --output log.csv` would replace the log by its estimates, `eval --json r --csv r` keep

@@ -2,7 +2,7 @@
 //! instead of live shared memory — for sensor logs recorded elsewhere, or to re-examine a run
 //! offline.
 
-use crate::limits::{check_outputs, product, BadInput, Budget};
+use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use crate::run::select;
 use crate::slot_log::{read_slots_within, LoggedInstant};
 use crate::Estimator;
@@ -83,8 +83,10 @@ pub fn run_estimators(
 /// log's content, an unwritable output) is an error of [`BadInput`] (exit code 2).
 pub fn main(args: &ReplayArgs) -> Result<i32> {
     if let Some(p) = &args.output {
-        let mut inputs = vec![("--input", args.input.as_path())];
-        inputs.extend(args.config.as_deref().map(|c| ("--config", c)));
+        let inputs = given(&[
+            ("--input", Some(args.input.as_path())),
+            ("--config", args.config.as_deref()),
+        ]);
         check_outputs(&[("--output", p)], &inputs)?;
     }
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;

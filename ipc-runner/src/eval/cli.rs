@@ -6,7 +6,7 @@ use channel_sim::scenario;
 
 use super::{evaluate_with, Control, EvalEnding, RunConfig};
 use crate::estimators::{EvalOptions, FACTORIES};
-use crate::limits::{check_outputs, Budget};
+use crate::limits::{check_outputs, given, Budget};
 
 /// Arguments of `ipc-runner eval`.
 #[derive(Debug, clap::Args)]
@@ -159,20 +159,12 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     if let Some(plot) = &args.plot {
         crate::plot::check_extension(plot).map_err(CommandError::usage)?;
     }
-    let outputs: Vec<(&str, &Path)> = [
-        ("--json", &args.json),
-        ("--csv", &args.csv),
-        ("--plot", &args.plot),
-    ]
-    .into_iter()
-    .filter_map(|(flag, p)| Some((flag, p.as_deref()?)))
-    .collect();
-    let inputs: Vec<(&str, &Path)> = args
-        .config
-        .as_deref()
-        .map(|c| ("--config", c))
-        .into_iter()
-        .collect();
+    let outputs = given(&[
+        ("--json", args.json.as_deref()),
+        ("--csv", args.csv.as_deref()),
+        ("--plot", args.plot.as_deref()),
+    ]);
+    let inputs = given(&[("--config", args.config.as_deref())]);
     check_outputs(&outputs, &inputs).map_err(CommandError::usage)?;
     // clap lets through one of the two, never both.
     let scenario = scenario::resolve(

@@ -1,9 +1,9 @@
 //! The options of `ipc-runner run` (shared with `demo`).
 
-use crate::limits::{check_outputs, product, BadInput, Budget};
+use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use estpipe_wire as wire;
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Longest slot queue `--buffer` accepts (iceoryx2 preallocates it in shared memory).
 pub const MAX_BUFFER: usize = 1 << 16;
@@ -198,21 +198,13 @@ impl RunArgs {
     /// Checks, before the loop starts, that every output file can be written (a file that
     /// cannot would otherwise fail after the whole stream, losing it).
     pub fn check_outputs(&self) -> Result<(), BadInput> {
-        let outputs: Vec<(&str, &Path)> = [
-            ("--estimates-csv", &self.estimates_csv),
-            ("--slots-csv", &self.slots_csv),
-            ("--latency-csv", &self.latency_csv),
-            ("--json", &self.json),
-        ]
-        .into_iter()
-        .filter_map(|(flag, p)| Some((flag, p.as_deref()?)))
-        .collect();
-        let inputs: Vec<(&str, &Path)> = self
-            .config
-            .as_deref()
-            .map(|c| ("--config", c))
-            .into_iter()
-            .collect();
+        let outputs = given(&[
+            ("--estimates-csv", self.estimates_csv.as_deref()),
+            ("--slots-csv", self.slots_csv.as_deref()),
+            ("--latency-csv", self.latency_csv.as_deref()),
+            ("--json", self.json.as_deref()),
+        ]);
+        let inputs = given(&[("--config", self.config.as_deref())]);
         check_outputs(&outputs, &inputs)
     }
 
