@@ -325,17 +325,14 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
     let close = |a: f32, b: f64| (f64::from(a) - b).abs() <= 1e-7 * b.abs().max(1e-3);
     for i in 0..2 {
         for j in 0..2 {
-            assert!(close(m32.a[(i, j)], lin.a(0)[(i, j)]), "A[{i},{j}]");
+            assert!(close(m32.a[(i, j)], lin.a()[(i, j)]), "A[{i},{j}]");
             assert!(
-                close(m32.bqb[(i, j)], lin.process_cov(0)[(i, j)]),
+                close(m32.bqb[(i, j)], lin.process_cov()[(i, j)]),
                 "BQBᵀ[{i},{j}]"
             );
             for m in 0..3 {
-                assert!(
-                    close(m32.c[m][(i, j)], lin.c(m, 0)[(i, j)]),
-                    "C_{m}[{i},{j}]"
-                );
-                let r = lin.measurement_cov(m, 0)[(i, j)];
+                assert!(close(m32.c[m][(i, j)], lin.c(m)[(i, j)]), "C_{m}[{i},{j}]");
+                let r = lin.measurement_cov(m)[(i, j)];
                 if i == j {
                     assert!(close(m32.r[m][i], r), "R_{m}[{i}]");
                 } else {
@@ -345,7 +342,14 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
         }
     }
 
-    let mut views = tobit::build(&*scenario, &EvalOptions::default(), 0, 0).unwrap();
+    let mut views = ipc_runner::source::build_for_scenario(
+        &[tobit::build],
+        &*scenario,
+        &EvalOptions::default(),
+        0,
+        0,
+    )
+    .unwrap();
     // The paper's fused view (not `fused-predict`): the firmware runs the paper's filter.
     views.retain(|v| v.name() == tobit::FUSED_NAME);
     assert_eq!(views.len(), 1);

@@ -49,7 +49,8 @@ fn estimator_allocations(name: &str) -> usize {
         run: 0,
         horizon: STEPS,
     };
-    let make = select::estimators(scenario.into(), &[], exp).unwrap();
+    let source = ipc_runner::source::Source::of_scenario(&*scenario, 0, 0);
+    let make = select::estimators(source.into(), &[], exp).unwrap();
     let mut ests = make().unwrap();
     let mut x = [0.0; channel_sim::sim::MAX_NX];
     let mut per = vec![0usize; ests.len()];

@@ -223,6 +223,7 @@ pub struct LoopSetup {
     pub nx: usize,
     pub nodes: u8,
     pub ny: u8,
+    pub spec: std::sync::Arc<estpipe_spec::EstimatorSpec>,
     pub make: ipc_runner::run::select::EstimatorFactory,
 }
 
@@ -232,7 +233,7 @@ impl LoopSetup {
         &self,
         hooks: ipc_runner::run::Hooks<'_>,
     ) -> anyhow::Result<(ipc_runner::run::RunReport, ipc_runner::run::Trajectories)> {
-        ipc_runner::run::run_loop(&self.args, self.nx, self.nodes, self.ny, &self.make, hooks)
+        ipc_runner::run::run_loop(&self.args, &self.spec, &self.make, hooks)
     }
 }
 
@@ -245,7 +246,9 @@ pub fn loop_setup(scenario: &str, prefix: &str, steps: u32) -> LoopSetup {
         run: 0,
         horizon: steps,
     };
-    let make = select::estimators(sc.into(), &[], exp).unwrap();
+    let source = std::sync::Arc::new(ipc_runner::source::Source::of_scenario(&*sc, 0, 0));
+    let spec = std::sync::Arc::clone(&source.spec);
+    let make = select::estimators(source, &[], exp).unwrap();
     let mut args = ipc_runner::run::RunArgs::new(scenario, prefix);
     args.quiet = true;
     args.steps = steps;
@@ -255,6 +258,7 @@ pub fn loop_setup(scenario: &str, prefix: &str, steps: u32) -> LoopSetup {
         nx,
         nodes,
         ny,
+        spec,
         make,
     }
 }

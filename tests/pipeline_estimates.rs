@@ -194,6 +194,7 @@ fn every_estimate_carries_the_estimators_covariance_bit_for_bit() {
         let sc: std::sync::Arc<dyn channel_sim::Scenario> =
             channel_sim::scenario::preset(scenario).unwrap().into();
         let (nx, nodes, ny) = (sc.nx(), sc.nodes(), sc.ny());
+        let source = std::sync::Arc::new(ipc_runner::source::Source::of_scenario(&*sc, 0, 0));
         let names: Vec<String> = estimators
             .split(',')
             .filter(|s| !s.is_empty())
@@ -202,7 +203,7 @@ fn every_estimate_carries_the_estimators_covariance_bit_for_bit() {
         let est_arg = if names.is_empty() {
             // Every real-time estimator of the scenario.
             let make = select::estimators(
-                sc.clone(),
+                source.clone(),
                 &[],
                 select::Experiment {
                     seed: 0,
@@ -224,7 +225,7 @@ fn every_estimate_carries_the_estimators_covariance_bit_for_bit() {
         // The same estimators in this process over the slots the runner received.
         let instants = ipc_runner::slot_log::read_slots(&slots, nodes, ny).unwrap();
         let make = select::estimators(
-            sc.clone(),
+            source.clone(),
             &names,
             select::Experiment {
                 seed: 0,

@@ -54,3 +54,14 @@ impl fmt::Display for ScenarioError {
 }
 
 impl std::error::Error for ScenarioError {}
+
+impl From<estpipe_spec::SpecError> for ScenarioError {
+    fn from(e: estpipe_spec::SpecError) -> Self {
+        match e {
+            estpipe_spec::SpecError::Invalid { field, reason } => {
+                ScenarioError::Invalid { field, reason }
+            }
+            estpipe_spec::SpecError::File { path, reason } => ScenarioError::File { path, reason },
+        }
+    }
+}

@@ -562,6 +562,4 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     Ok(report)
 }
 
-/// Instants published when `--steps` is not given: the same default horizon as
-/// `ipc-runner eval`, so the two compute the same experiment by default.
-pub const DEFAULT_STEPS: u32 = 100;
+pub use estpipe_wire::DEFAULT_STEPS;

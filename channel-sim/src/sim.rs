@@ -11,51 +11,9 @@
 // The limits and the channel flags are part of the wire contract (fixed-size payloads, the
 // slot's `flags` field), so they are defined there, once.
 pub use estpipe_wire::{
-    FLAG_CENSORED, FLAG_OCCLUDED, FLAG_RANDOM_LOSS, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, MAX_NODES,
-    MAX_NX, MAX_NY,
+    Observation, FLAG_CENSORED, FLAG_OCCLUDED, FLAG_RANDOM_LOSS, FLAG_TOKEN_BLOCKED,
+    FLAG_TRIGGERED, MAX_NODES, MAX_NX, MAX_NY,
 };
-
-/// What the channel delivers for one sampling instant and one sensor node.
-///
-/// A dropped packet still produces an observation (with `delivered == false`): in the
-/// occlusion model the drop itself is information, so the estimator must see the instant.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Observation {
-    /// Sampling instant k. The stream's slots are k ≥ 1; an observation of k = 0 exists only
-    /// for a scenario whose sensors measure at k = 0 (seed 003), and only through
-    /// [`Simulation::initial_observations`].
-    pub k: u32,
-    /// Sensor node index, 0-based.
-    pub node: u8,
-    /// Whether a measurement reached the estimator at this instant.
-    pub delivered: bool,
-    /// Number of valid entries in `y`.
-    pub ny: u8,
-    /// The measurement as received (after censoring, etc.); meaningful iff `delivered`.
-    /// Entries at index ≥ `ny` are 0.
-    pub y: [f64; MAX_NY],
-    /// Channel-side flags of this instant, see the `FLAG_*` constants.
-    pub flags: u32,
-}
-
-impl Observation {
-    /// A dropped packet at instant `k` from `node` with measurement dimension `ny`.
-    pub fn dropped(k: u32, node: u8, ny: u8, flags: u32) -> Self {
-        Self {
-            k,
-            node,
-            delivered: false,
-            ny,
-            y: [0.0; MAX_NY],
-            flags,
-        }
-    }
-
-    /// The valid part of the measurement (`None` when nothing was delivered).
-    pub fn measurement(&self) -> Option<&[f64]> {
-        self.delivered.then(|| &self.y[..self.ny as usize])
-    }
-}
 
 /// One sampling instant of a simulation.
 #[derive(Clone, Debug, PartialEq)]
@@ -107,10 +65,17 @@ pub trait Scenario: Send + Sync + std::fmt::Debug {
     }
     /// Number of sensor nodes.
     fn nodes(&self) -> usize;
+    /// What the estimators know of this scenario: the model, their prior and the channel
+    /// effects whose outcome carries information (nothing of the truth's distribution or of
+    /// random losses). The runner builds its estimators from this alone, so a spec written by
+    /// hand for the same model gives the same estimates (docs/design.md, "Architecture").
+    fn estimator_spec(&self) -> std::sync::Arc<estpipe_spec::EstimatorSpec>;
     /// The model fingerprint a stream of this scenario announces in its
-    /// [`StreamHeader`](estpipe_wire::StreamHeader) (`docs/wire.md`, "Model fingerprint"):
-    /// equal for two scenarios whose estimators cannot tell them apart.
-    fn fingerprint(&self) -> u64;
+    /// [`StreamHeader`](estpipe_wire::StreamHeader): the estimator spec's (`docs/wire.md`,
+    /// "Model fingerprint").
+    fn fingerprint(&self) -> u64 {
+        self.estimator_spec().fingerprint()
+    }
     /// Starts run `run` of the experiment seeded by `seed`. Runs are independent streams:
     /// the same `(seed, run)` gives the same instants on every machine and thread count.
     fn start(&self, seed: u64, run: u64) -> Box<dyn Simulation>;

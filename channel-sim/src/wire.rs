@@ -3,63 +3,15 @@
 //! announces. The payloads, services and QoS themselves live in `estpipe-wire`, which a
 //! foreign client depends on without this crate.
 
-use crate::sim::{Observation, Scenario, MAX_NY};
-use estpipe_wire::{Slot, StreamHeader, WireError, SLOT_DATA};
+pub use estpipe_wire::observation::{observation_of, slot_of};
 
-/// The slot carrying `obs` in stream `stream_id` of a scenario with `nodes` nodes.
-pub fn slot_of(
-    obs: &Observation,
-    nodes: u8,
-    stream_id: u64,
-    send_ns: u64,
-    period_ns: u64,
-    stream_start_ns: u64,
-) -> Slot {
-    Slot {
-        ny: obs.ny,
-        delivered: u8::from(obs.delivered),
-        flags: obs.flags,
-        send_ns,
-        period_ns,
-        stream_start_ns,
-        y: obs.y,
-        ..Slot::data(obs.k, obs.node, nodes, stream_id)
-    }
-}
-
-/// The observation a data slot carries (validated against the slot's own `nodes` and `ny`;
-/// wire version 3 refuses a non-finite measurement entry as a malformed slot, which the
-/// runner counts and hands on as lost).
-pub fn observation_of(slot: &Slot) -> Result<Observation, WireError> {
-    slot.validate()?;
-    if slot.kind != SLOT_DATA {
-        return Err(WireError::Invalid("not a data slot"));
-    }
-    let mut y = [0.0; MAX_NY];
-    if let Some(m) = slot.measurement() {
-        y[..m.len()].copy_from_slice(m);
-    }
-    Ok(Observation {
-        k: slot.k,
-        node: slot.node,
-        delivered: slot.delivered == 1,
-        ny: slot.ny,
-        y,
-        flags: slot.flags,
-    })
-}
+use crate::sim::Scenario;
+use estpipe_wire::StreamHeader;
 
 /// The header every slot of a stream of `scenario` carries: its name, nodes, nx, ny per node
 /// and [`Scenario::fingerprint`].
 pub fn stream_header(scenario: &dyn Scenario) -> StreamHeader {
-    let ny: Vec<usize> = (0..scenario.nodes()).map(|m| scenario.node_ny(m)).collect();
-    StreamHeader::new(
-        scenario.name(),
-        scenario.nodes(),
-        scenario.nx(),
-        &ny,
-        scenario.fingerprint(),
-    )
+    scenario.estimator_spec().stream_header()
 }
 
 #[cfg(test)]
@@ -67,6 +19,7 @@ mod tests {
     use super::*;
     use crate::scenario::{preset, preset_names};
     use crate::sim::FLAG_OCCLUDED;
+    use crate::sim::{Observation, MAX_NY};
 
     fn obs(k: u32, node: u8, delivered: bool) -> Observation {
         let mut y = [0.0; MAX_NY];

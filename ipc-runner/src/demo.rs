@@ -18,6 +18,7 @@
 //! crashes is noticed at once and named with its exit status.
 
 use crate::run::{self, select, Hooks, RunArgs, WaitMode};
+use crate::source::Source;
 use anyhow::{anyhow, bail, Context, Result};
 use channel_sim::publisher::DEFAULT_STEPS;
 use channel_sim::scenario::resolve;
@@ -317,9 +318,10 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     let choice =
         select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     args.check_outputs(scenario.nx(), choice.particles)?;
-    let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
+    let source = std::sync::Arc::new(Source::of_scenario(&*scenario, args.seed, args.run));
+    let spec = std::sync::Arc::clone(&source.spec);
     let make = select::estimators_with(
-        scenario.clone(),
+        source,
         &args.estimators,
         select::Experiment {
             seed: args.seed,
@@ -431,14 +433,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         peer: Some(&mut peer),
         ..Hooks::default()
     };
-    let result = run::run_loop(
-        &rargs,
-        scenario.nx(),
-        u8::try_from(scenario.nodes())?,
-        u8::try_from(scenario.ny())?,
-        &make,
-        hooks,
-    );
+    let result = run::run_loop(&rargs, &spec, &make, hooks);
     bar.finish_and_clear();
     let (report, traj) = match result {
         Ok(r) => r,

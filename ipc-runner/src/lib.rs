@@ -14,6 +14,7 @@ pub mod plot;
 pub mod replay;
 pub mod run;
 pub mod slot_log;
+pub mod source;
 pub mod stream_header;
 pub mod tail;
 pub mod transport;

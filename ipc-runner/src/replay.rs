@@ -5,10 +5,11 @@
 use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use crate::run::select;
 use crate::slot_log::{read_slots_within, LoggedInstant};
+use crate::source::Source;
 use crate::Estimator;
 use anyhow::{Context, Result};
-use channel_sim::sim::MAX_NX;
-use channel_sim::Observation;
+use estpipe_wire::Observation;
+use estpipe_wire::MAX_NX;
 use estpipe_wire::{FLAG_IPC_LOST, FLAG_NET_LOST};
 use std::io::Write;
 use std::path::PathBuf;
@@ -25,6 +26,9 @@ pub struct ReplayArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Estimator spec TOML file (as `run --estimator-spec`), instead of a scenario.
+    #[arg(long, value_name = "FILE", conflicts_with = "config")]
+    pub estimator_spec: Option<PathBuf>,
     /// Estimators to run, comma-separated (default: all real-time ones that apply to the
     /// scenario; `pf` only with `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
@@ -86,11 +90,19 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         let inputs = given(&[
             ("--input", Some(args.input.as_path())),
             ("--config", args.config.as_deref()),
+            ("--estimator-spec", args.estimator_spec.as_deref()),
         ]);
         check_outputs(&[("--output", p)], &inputs)?;
     }
-    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
-    let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
+    let source = std::sync::Arc::new(Source::resolve(
+        &args.scenario,
+        args.config.as_deref(),
+        args.estimator_spec.as_deref(),
+        args.seed,
+        args.run,
+    )?);
+    let spec = &source.spec;
+    let (nx, ny, nodes) = (spec.nx(), spec.ny(), spec.nodes());
     let choice =
         select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     let budget = Budget::mib(args.max_memory);
@@ -99,10 +111,9 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         crate::eval::pf_bytes_per_particle(nx),
     ]);
     budget.check(&format!("--particles {}", choice.particles), pf)?;
-    let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
     let factory = |horizon: u32| {
         select::estimators_with(
-            scenario.clone(),
+            source.clone(),
             &args.estimators,
             select::Experiment {
                 seed: args.seed,

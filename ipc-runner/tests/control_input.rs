@@ -9,7 +9,8 @@ use channel_sim::scenario::ComposedScenario;
 use channel_sim::sim::FLAG_OCCLUDED;
 use channel_sim::{Observation, Scenario};
 use estpipe_wire::FLAG_IPC_LOST;
-use ipc_runner::estimators::{build_all, EvalOptions, FACTORIES};
+use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::source::build_for_scenario;
 
 fn scenarios() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel-sim/scenarios")
@@ -46,9 +47,12 @@ fn the_kalman_filter_with_the_input_tracks_and_without_it_does_not() {
     let (mut mse_u, mut mse_0, mut mse_bare, mut tr_u, mut tr_0) = (0.0, 0.0, 0.0, 0.0, 0.0);
     let mut max_input = 0.0_f64;
     for run in 0..runs {
-        let mut knows = build_all(FACTORIES, &with, &options(&["ikf"]), seed, run).unwrap();
-        let mut ignores = build_all(FACTORIES, &without, &options(&["ikf"]), seed, run).unwrap();
-        let mut bare_est = build_all(FACTORIES, &without, &options(&["ikf"]), seed, run).unwrap();
+        let mut knows =
+            build_for_scenario(FACTORIES, &with, &options(&["ikf"]), seed, run).unwrap();
+        let mut ignores =
+            build_for_scenario(FACTORIES, &without, &options(&["ikf"]), seed, run).unwrap();
+        let mut bare_est =
+            build_for_scenario(FACTORIES, &without, &options(&["ikf"]), seed, run).unwrap();
         let (mut sim, mut bare) = (with.start(seed, run), without.start(seed, run));
         for k in 1..=horizon {
             let (inst, binst) = (sim.next_instant(), bare.next_instant());
@@ -111,7 +115,7 @@ fn every_prediction_adds_the_input() {
     for (flags, what) in [(FLAG_IPC_LOST, "lost"), (FLAG_OCCLUDED, "dropped")] {
         let obs = [Observation::dropped(1, 0, 1, flags)];
         let step = |s: &ComposedScenario| {
-            let mut ests = build_all(FACTORIES, s, &options(&names), 1, 0).unwrap();
+            let mut ests = build_for_scenario(FACTORIES, s, &options(&names), 1, 0).unwrap();
             ests.iter_mut()
                 .map(|e| {
                     e.step(1, &obs).unwrap();

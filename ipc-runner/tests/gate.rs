@@ -22,7 +22,8 @@
 use channel_sim::scenario::preset;
 use channel_sim::Scenario;
 use estpipe_wire::FLAG_IPC_LOST;
-use ipc_runner::estimators::{build_all, gate_counts, EvalOptions, FACTORIES};
+use ipc_runner::estimators::{gate_counts, EvalOptions, FACTORIES};
+use ipc_runner::source::build_for_scenario;
 use rayon::prelude::*;
 
 const HORIZON: u32 = 100;
@@ -55,7 +56,7 @@ fn outcome(
         .into_par_iter()
         .map(|run| {
             let mut sim = scenario.start(seed, run);
-            let mut ests: Vec<_> = build_all(FACTORIES, scenario, &options, seed, run)
+            let mut ests: Vec<_> = build_for_scenario(FACTORIES, scenario, &options, seed, run)
                 .expect("build")
                 .into_iter()
                 .filter(|e| !e.full_information())
@@ -202,7 +203,7 @@ fn estimators_flag_selects_the_gated_estimator() {
         estimators: vec!["ikf".into(), "adf+gate".into()],
         ..EvalOptions::default()
     };
-    let names: Vec<_> = build_all(FACTORIES, &*s, &options, 0, 0)
+    let names: Vec<_> = build_for_scenario(FACTORIES, &*s, &options, 0, 0)
         .unwrap()
         .iter()
         .map(|e| e.name())

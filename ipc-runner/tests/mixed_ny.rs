@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use channel_sim::Scenario;
-use ipc_runner::estimators::{build_all, EvalOptions, FACTORIES};
+use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::source::build_for_scenario;
 use nalgebra::{DMatrix, DVector};
 
 fn file() -> PathBuf {
@@ -72,12 +73,12 @@ fn node_by_node_kalman_equals_the_stacked_kalman_filter() {
         ..EvalOptions::default()
     };
     let plant = scenario.plant().linear().unwrap();
-    let (a, q) = (plant.a(0), plant.process_cov(0));
-    let node = |m: usize| (plant.c(m, 1), plant.measurement_cov(m, 1));
+    let (a, q) = (plant.a().clone(), plant.process_cov().clone());
+    let node = |m: usize| (plant.c(m).clone(), plant.measurement_cov(m).clone());
     let init = scenario.initial();
     let (mut only_one, mut both) = (0, 0);
     for run in 0..5 {
-        let mut ests = build_all(FACTORIES, &scenario, &options, 4, run).unwrap();
+        let mut ests = build_for_scenario(FACTORIES, &scenario, &options, 4, run).unwrap();
         assert_eq!(
             ests.iter().map(|e| e.name()).collect::<Vec<_>>(),
             ["kf", "ikf"]

@@ -10,10 +10,11 @@ use channel_sim::scenario;
 use estimator_core::filter::nn::NnBoundConfig;
 use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::{OnModel, Packet};
-use ipc_runner::estimators::nn::verdict;
 use ipc_runner::estimators::{EvalOptions, FACTORIES};
 use ipc_runner::eval::nn_bound::add_empirical_trace;
+use ipc_runner::eval::nn_bound::verdict;
 use ipc_runner::eval::{evaluate, RunConfig};
+use ipc_runner::source::build_for_scenario;
 
 const RUNS: u64 = 200;
 const T: u32 = 300;
@@ -112,9 +113,10 @@ fn section_iv_example_findings() {
     let mut zero_avg = vec![0.0f64; RUNS as usize];
     for run in 0..RUNS {
         let mut sim = s.start(SEED, run);
-        let mut est = ipc_runner::estimators::nn::build(&*s, &opts, SEED, run)
-            .unwrap()
-            .remove(0);
+        let mut est =
+            build_for_scenario(&[ipc_runner::estimators::nn::build], &*s, &opts, SEED, run)
+                .unwrap()
+                .remove(0);
         assert_eq!(est.name(), "nn");
         let mut xhat = [0.0; 8];
         for k in 1..=T {
@@ -199,7 +201,8 @@ fn estimators_start_with_y0() {
     assert!(o0.delivered, "μ₀ = 5 ≥ 0: y₀ is sent");
     let y0 = nalgebra::SVector::<f64, 2>::from_column_slice(&o0.y[..2]);
     let i1 = sim.next_instant();
-    let mut built = ipc_runner::estimators::nn::build(&*s, &opts, seed, run).unwrap();
+    let mut built =
+        build_for_scenario(&[ipc_runner::estimators::nn::build], &*s, &opts, seed, run).unwrap();
     let names: Vec<&str> = built.iter().map(|e| e.name()).collect();
     assert_eq!(
         names,
@@ -285,7 +288,8 @@ fn pf_sensitivity() {
                 } else {
                     (Seed003Example::xhat0(), Seed003Example::p0())
                 };
-                let y0 = initial_measurement(&*s, seed, run);
+                let source = ipc_runner::source::Source::of_scenario(&*s, seed, run);
+                let y0 = initial_measurement(&source.start(seed, run));
                 let mut pf = CoupledPf::with_eps(x0, p0, w, y0, n, eps, seed, run).unwrap();
                 let mut sum = 0.0;
                 let mut xhat = [0.0; 3];

@@ -21,8 +21,9 @@
 //! not tuned to a passing seed.
 
 use channel_sim::scenario::preset;
-use ipc_runner::estimators::{build_all, EvalOptions, FACTORIES};
+use ipc_runner::estimators::{EvalOptions, FACTORIES};
 use ipc_runner::eval::run_one;
+use ipc_runner::source::build_for_scenario;
 use rayon::prelude::*;
 
 const RUNS: u64 = 3000;
@@ -46,7 +47,7 @@ fn run_averages(unmarked: bool, runs: u64, seed: u64) -> Averages {
         ..EvalOptions::default()
     };
     let nx = scenario.nx();
-    let names: Vec<&'static str> = build_all(FACTORIES, &*scenario, &options, seed, 0)
+    let names: Vec<&'static str> = build_for_scenario(FACTORIES, &*scenario, &options, seed, 0)
         .expect("build")
         .iter()
         .map(|e| e.name())

@@ -10,7 +10,8 @@
 //! asserted here.
 
 use channel_sim::scenario::preset;
-use ipc_runner::estimators::{build_all, EvalOptions, FACTORIES};
+use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::source::build_for_scenario;
 
 const RUNS: u64 = 1500;
 const HORIZON: u32 = 100;
@@ -30,7 +31,8 @@ fn run_averages() -> Vec<(&'static str, Vec<f64>)> {
     let mut out: Vec<(&'static str, Vec<f64>)> = Vec::new();
     for run in 0..RUNS {
         let mut sim = scenario.start(SEED, run);
-        let mut ests = build_all(FACTORIES, &*scenario, &options, SEED, run).expect("build");
+        let mut ests =
+            build_for_scenario(FACTORIES, &*scenario, &options, SEED, run).expect("build");
         if out.is_empty() {
             out = ests.iter().map(|e| (e.name(), Vec::new())).collect();
         }

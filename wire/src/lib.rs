@@ -11,6 +11,7 @@
 //! | [`slot`] | [`Slot`]: one sensor node's observation of one instant, its kinds, flags and validation |
 //! | [`header`] | [`StreamHeader`]: the shape of the stream, in the user header of every slot |
 //! | [`fingerprint`] | [`Fnv1a64`], the hash behind [`StreamHeader::model`] |
+//! | [`observation`] | [`Observation`]: one node's observation of one instant as the estimators read it, and its slot |
 //! | [`estimate`] | [`Estimate`]: x̂, the packed covariance, status and timing |
 //! | [`truth`] | [`Truth`]: the true state, for evaluation only |
 //! | [`services`] | service names, QoS and opening the services with them |
@@ -33,6 +34,7 @@ pub mod fingerprint;
 pub mod header;
 pub mod layout;
 pub mod net;
+pub mod observation;
 pub mod qos;
 pub mod services;
 pub mod slot;
@@ -46,9 +48,10 @@ pub use estimate::{
 };
 pub use fingerprint::Fnv1a64;
 pub use header::StreamHeader;
+pub use observation::Observation;
 pub use services::{
     estimate_service, latest_estimates_board, ready_event_service, service_name, slot_service,
-    truth_service, DEFAULT_PREFIX, ESTIMATES, ESTIMATE_HISTORY, LATEST_ESTIMATES,
+    truth_service, DEFAULT_PREFIX, DEFAULT_STEPS, ESTIMATES, ESTIMATE_HISTORY, LATEST_ESTIMATES,
     MAX_SUBSCRIBER_BUFFER, READY_EVENT, SLOTS, SLOTS_READY, TRUTH,
 };
 pub use slot::{

@@ -25,6 +25,10 @@ use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
 /// Default service-name prefix.
 pub const DEFAULT_PREFIX: &str = "estpipe";
 
+/// Instants a stream has unless a command is told otherwise (the publisher's and the
+/// runner's `--steps`).
+pub const DEFAULT_STEPS: u32 = 100;
+
 /// Service name (under the prefix) of the slots.
 pub const SLOTS: &str = "slots";
 /// Service name (under the prefix) of the "an instant was published" event.

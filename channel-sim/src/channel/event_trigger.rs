@@ -13,179 +13,24 @@
 
 use std::any::Any;
 
-use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
+use estimator_core::protocol::event_trigger::EventTrigger;
 use estimator_core::protocol::shared_token_bucket::{
     NodeDecision, SharedTokenBucket, TriggeredBucketScheduler,
 };
-use estpipe_wire::Fnv1a64;
 use nalgebra::SVector;
 
 use super::{drop_packet, Stage, StageSpec};
-use crate::error::ScenarioError;
 use crate::rng::SimRng;
 use crate::sim::{Observation, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, MAX_NODES, MAX_NY};
 
-/// Parameters of the dynamic event triggers (one per node) and the shared token bucket.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TriggeredTokenBucket {
-    triggers: Vec<EventTriggerConfig<f64>>,
-    references: Vec<Vec<f64>>,
-    initial_tokens: u32,
-    rate: u32,
-    capacity: u32,
-    costs: Vec<u32>,
-    allow_paper_violation: bool,
-}
+pub use estpipe_spec::channel::{TriggerParams, TriggeredTokenBucket};
 
-/// Per-node trigger parameters as the paper writes them.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TriggerParams {
-    /// σ_m.
-    pub sigma: f64,
-    /// χ_m (the example's "θ_m").
-    pub chi: f64,
-    /// λ_m.
-    pub lambda: f64,
-    /// η_{m,0}.
-    pub eta0: f64,
-}
-
-impl TriggeredTokenBucket {
-    /// Validates everything through estimator-core: the triggers (`λχ > 1` is required unless
-    /// `allow_paper_violation`), the bucket (`ξ₀ ≤ b`, integer tokens), and one reference
-    /// (the initial ȳ, the censoring threshold τ_m in seed 004) and one cost per node.
-    pub fn new(
-        params: &[TriggerParams],
-        references: Vec<Vec<f64>>,
-        initial_tokens: u32,
-        rate: u32,
-        capacity: u32,
-        costs: Vec<u32>,
-        allow_paper_violation: bool,
-    ) -> Result<Self, ScenarioError> {
-        let l = params.len();
-        if l == 0 || l > MAX_NODES || references.len() != l || costs.len() != l {
-            return Err(ScenarioError::invalid(
-                "trigger",
-                format!(
-                    "need 1..={MAX_NODES} nodes with one parameter set, reference and cost \
-                     each; got {l}, {}, {}",
-                    references.len(),
-                    costs.len()
-                ),
-            ));
-        }
-        let mut triggers = Vec::with_capacity(l);
-        for (m, p) in params.iter().enumerate() {
-            let make = if allow_paper_violation {
-                EventTriggerConfig::new_allowing_paper_violation
-            } else {
-                EventTriggerConfig::new
-            };
-            let cfg = make(p.sigma, p.chi, p.lambda, p.eta0).map_err(|e| {
-                ScenarioError::invalid(format!("trigger.nodes[{m}]"), e.to_string())
-            })?;
-            triggers.push(cfg);
-            let r = &references[m];
-            if r.is_empty() || r.len() > MAX_NY || r.iter().any(|v| !v.is_finite()) {
-                return Err(ScenarioError::invalid(
-                    format!("trigger.references[{m}]"),
-                    format!("must have 1..={MAX_NY} finite entries"),
-                ));
-            }
-        }
-        // The bucket's own validation (with the true node count).
-        check_bucket(l, initial_tokens, rate, capacity, &costs)
-            .map_err(|e| ScenarioError::invalid("bucket", e.to_string()))?;
-        Ok(Self {
-            triggers,
-            references,
-            initial_tokens,
-            rate,
-            capacity,
-            costs,
-            allow_paper_violation,
-        })
+/// The stage of a [`TriggeredTokenBucket`] (a fresh scheduler per run).
+pub fn build_stage(spec: &TriggeredTokenBucket) -> TriggeredTokenBucketStage {
+    TriggeredTokenBucketStage {
+        sched: build_scheduler(spec),
+        last: [None; MAX_NODES],
     }
-
-    /// The node's trigger configuration.
-    pub fn trigger(&self, m: usize) -> &EventTriggerConfig<f64> {
-        &self.triggers[m]
-    }
-
-    /// Number of nodes.
-    pub fn nodes(&self) -> usize {
-        self.triggers.len()
-    }
-
-    /// Bucket parameters `(ξ₀, g, b)`.
-    pub fn bucket(&self) -> (u32, u32, u32) {
-        (self.initial_tokens, self.rate, self.capacity)
-    }
-
-    /// Per-node costs c_m.
-    pub fn costs(&self) -> &[u32] {
-        &self.costs
-    }
-
-    /// Whether the configuration was built with the explicit opt-in.
-    pub fn allows_paper_violation(&self) -> bool {
-        self.allow_paper_violation
-    }
-
-    /// One line per node whose parameters violate the paper's `λχ > 1` (accepted only with
-    /// the opt-in): what a report must print.
-    pub fn warnings(&self) -> Vec<String> {
-        self.triggers
-            .iter()
-            .enumerate()
-            .filter_map(|(m, t)| {
-                t.paper_violation().map(|why| {
-                    format!(
-                        "node {}: lambda*chi = {} * {} = {:.3} <= 1 accepted by explicit opt-in; \
-                         {why}; eta can go negative",
-                        m + 1,
-                        t.lambda(),
-                        t.chi(),
-                        t.lambda() * t.chi()
-                    )
-                })
-            })
-            .collect()
-    }
-
-    /// A fresh concrete stage (for callers that want the token level, e.g. plots).
-    pub fn build_stage(&self) -> TriggeredTokenBucketStage {
-        TriggeredTokenBucketStage {
-            sched: build_scheduler(self),
-            last: [None; MAX_NODES],
-        }
-    }
-}
-
-fn check_bucket(
-    l: usize,
-    initial: u32,
-    rate: u32,
-    capacity: u32,
-    costs: &[u32],
-) -> estimator_core::Result<()> {
-    macro_rules! check {
-        ($($n:literal)*) => {
-            match l {
-                $($n => {
-                    let mut c = [0u32; $n];
-                    c.copy_from_slice(costs);
-                    SharedTokenBucket::<$n>::new(initial, rate, capacity, c).map(|_| ())
-                })*
-                _ => Err(estimator_core::Error::InvalidConfig {
-                    field: "nodes",
-                    reason: "between 1 and MAX_NODES",
-                }),
-            }
-        };
-    }
-    check!(1 2 3 4 5 6 7 8)
 }
 
 /// The const-generic scheduler behind a node-count-erased interface.
@@ -219,13 +64,15 @@ fn build_scheduler(spec: &TriggeredTokenBucket) -> Box<dyn ErasedScheduler> {
     fn make<const L: usize>(spec: &TriggeredTokenBucket) -> Box<dyn ErasedScheduler> {
         let nodes: [EventTrigger<f64, MAX_NY>; L] = core::array::from_fn(|m| {
             let mut r = SVector::<f64, MAX_NY>::zeros();
-            r.as_mut_slice()[..spec.references[m].len()].copy_from_slice(&spec.references[m]);
-            EventTrigger::new(spec.triggers[m], r).expect("validated in TriggeredTokenBucket::new")
+            r.as_mut_slice()[..spec.reference(m).len()].copy_from_slice(spec.reference(m));
+            EventTrigger::new(*spec.trigger(m), r).expect("validated in TriggeredTokenBucket::new")
         });
-        let costs: [u32; L] = core::array::from_fn(|m| spec.costs[m]);
-        let bucket =
-            SharedTokenBucket::<L>::new(spec.initial_tokens, spec.rate, spec.capacity, costs)
-                .expect("validated in TriggeredTokenBucket::new");
+        let costs: [u32; L] = core::array::from_fn(|m| spec.costs()[m]);
+        let bucket = {
+            let (initial, rate, capacity) = spec.bucket();
+            SharedTokenBucket::<L>::new(initial, rate, capacity, costs)
+        }
+        .expect("validated in TriggeredTokenBucket::new");
         Box::new(TriggeredBucketScheduler::new(nodes, bucket))
     }
     match spec.nodes() {
@@ -260,6 +107,9 @@ impl TriggeredTokenBucketStage {
 }
 
 impl StageSpec for TriggeredTokenBucket {
+    fn knowledge(&self, k: &mut estpipe_spec::channel::ChannelKnowledge) {
+        k.event_trigger = Some(self.clone());
+    }
     fn name(&self) -> &'static str {
         "event-trigger-token-bucket"
     }
@@ -267,21 +117,7 @@ impl StageSpec for TriggeredTokenBucket {
         TriggeredTokenBucket::warnings(self)
     }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
-        Box::new(self.build_stage())
-    }
-    fn fingerprint(&self, h: &mut Fnv1a64) {
-        h.u64(self.triggers.len() as u64);
-        for (t, r) in self.triggers.iter().zip(&self.references) {
-            h.f64(t.sigma()).f64(t.chi()).f64(t.lambda()).f64(t.eta0());
-            h.u64(r.len() as u64).f64s(r);
-        }
-        h.u64(self.initial_tokens.into())
-            .u64(self.rate.into())
-            .u64(self.capacity.into());
-        for &c in &self.costs {
-            h.u64(c.into());
-        }
-        h.u64(self.allow_paper_violation.into());
+        Box::new(build_stage(self))
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -361,7 +197,7 @@ mod tests {
         )
         .unwrap();
         assert!(spec.warnings().is_empty());
-        let mut st = spec.build_stage();
+        let mut st = build_stage(&spec);
         let mut rng = crate::rng::run_rng(0, 0, crate::rng::Stream::Channel);
         let mut o = [obs(0, [1.0, 0.0]), obs(1, [2.0, 0.0]), obs(2, [3.0, 0.0])];
         st.apply(1, &[], &mut o, &mut rng);

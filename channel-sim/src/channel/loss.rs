@@ -3,7 +3,6 @@
 
 use std::any::Any;
 
-use estpipe_wire::Fnv1a64;
 use rand_distr::{Distribution, StandardUniform};
 use serde::Deserialize;
 
@@ -28,7 +27,7 @@ pub struct BernoulliLoss {
 impl BernoulliLoss {
     /// Validates the parameters; `field` prefixes the names in errors.
     pub fn validate(&self, field: &str) -> Result<(), ScenarioError> {
-        check_probability(self.p_loss, &format!("{field}.p_loss"))
+        Ok(check_probability(self.p_loss, &format!("{field}.p_loss"))?)
     }
 }
 
@@ -38,9 +37,6 @@ impl StageSpec for BernoulliLoss {
     }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
         Box::new(*self)
-    }
-    fn fingerprint(&self, h: &mut Fnv1a64) {
-        h.f64(self.p_loss);
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -121,12 +117,6 @@ impl StageSpec for GilbertElliottLoss {
             bad: None,
             nodes,
         })
-    }
-    fn fingerprint(&self, h: &mut Fnv1a64) {
-        h.f64(self.p_good_to_bad)
-            .f64(self.p_bad_to_good)
-            .f64(self.loss_good)
-            .f64(self.loss_bad);
     }
     fn as_any(&self) -> &dyn Any {
         self

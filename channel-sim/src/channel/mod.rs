@@ -28,7 +28,6 @@ use std::fmt::Debug;
 
 use crate::rng::SimRng;
 use crate::sim::{Observation, MAX_NY};
-use estpipe_wire::Fnv1a64;
 
 /// Configuration of one channel stage; builds the per-run state.
 pub trait StageSpec: Send + Sync + Debug {
@@ -38,10 +37,11 @@ pub trait StageSpec: Send + Sync + Debug {
     fn build(&self, nodes: usize) -> Box<dyn Stage>;
     /// For downcasting to the concrete spec (estimators read channel parameters this way).
     fn as_any(&self) -> &dyn Any;
-    /// Feeds the stage's parameters to the stream's model fingerprint (`docs/wire.md`,
-    /// "Model fingerprint"; the caller has fed [`StageSpec::name`] already). Default:
-    /// nothing, for a stage without parameters.
-    fn fingerprint(&self, _h: &mut Fnv1a64) {}
+    /// Writes what an estimator may know of this stage into `k` (the occlusion regions, the
+    /// buckets, the triggers, the censoring thresholds): the stage's part of the scenario's
+    /// [`EstimatorSpec`](estpipe_spec::EstimatorSpec). Default: nothing, for a stage whose
+    /// outcome an estimator cannot predict (a random loss).
+    fn knowledge(&self, _k: &mut estpipe_spec::channel::ChannelKnowledge) {}
     /// Parameters accepted although they violate the source paper's own conditions (accepted
     /// only by an explicit opt-in), one line each: the evaluation prints them. Default: none.
     fn warnings(&self) -> Vec<String> {

@@ -10,7 +10,6 @@
 use std::any::Any;
 
 use estimator_core::protocol::occlusion::{Occlusion, OcclusionRegions};
-use estpipe_wire::Fnv1a64;
 use nalgebra::{SMatrix, SVector};
 use rand_distr::{Distribution, StandardNormal};
 
@@ -74,6 +73,19 @@ impl<const S: usize> OcclusionSpec<S> {
         .ok()
     }
 
+    /// The occlusion model as the estimators know it (this stage's parameters, validated
+    /// here already).
+    pub fn knowledge(&self) -> estpipe_spec::channel::Occlusion {
+        estpipe_spec::channel::Occlusion::new(
+            self.e.clone(),
+            self.psi,
+            (0..S).map(|i| self.regions.centre(i)[0]).collect(),
+            (0..S).map(|i| self.regions.radius(i)).collect(),
+            self.e.len(),
+        )
+        .expect("an OcclusionSpec holds validated parameters")
+    }
+
     /// `E x`.
     pub fn ex(&self, x: &[f64]) -> f64 {
         self.e.iter().zip(x).map(|(a, b)| a * b).sum()
@@ -81,18 +93,14 @@ impl<const S: usize> OcclusionSpec<S> {
 }
 
 impl<const S: usize> StageSpec for OcclusionSpec<S> {
+    fn knowledge(&self, k: &mut estpipe_spec::channel::ChannelKnowledge) {
+        k.occlusion = Some(self.knowledge());
+    }
     fn name(&self) -> &'static str {
         "occlusion"
     }
     fn build(&self, _nodes: usize) -> Box<dyn Stage> {
         Box::new(self.clone())
-    }
-    fn fingerprint(&self, h: &mut Fnv1a64) {
-        h.u64(self.e.len() as u64).f64s(&self.e).f64(self.psi);
-        h.u64(S as u64);
-        for i in 0..S {
-            h.f64(self.regions.centre(i)[0]).f64(self.regions.radius(i));
-        }
     }
     fn as_any(&self) -> &dyn Any {
         self

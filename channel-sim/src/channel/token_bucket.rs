@@ -11,48 +11,19 @@
 use std::any::Any;
 
 use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
-use estpipe_wire::Fnv1a64;
-use serde::Deserialize;
 
 use super::{drop_packet, Stage, StageSpec};
-use crate::error::ScenarioError;
 use crate::rng::SimRng;
 use crate::sim::{Observation, FLAG_TOKEN_BLOCKED};
 
-/// Token-bucket parameters: rate `a`, cost `b`, capacity `s` (the paper's S), initial level
-/// `z0`. One bucket per sensor node.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TokenBucketStage {
-    /// Tokens added per instant.
-    pub a: u32,
-    /// Tokens spent per transmission.
-    pub b: u32,
-    /// Capacity S.
-    pub s: u32,
-    /// Initial level z₀.
-    pub z0: u32,
-}
-
-impl TokenBucketStage {
-    /// The validated core configuration; errors name `field.a`, `field.b`, ….
-    pub fn config(&self, field: &str) -> Result<TokenBucketConfig, ScenarioError> {
-        TokenBucketConfig::new(self.a, self.b, self.s, self.z0).map_err(|e| match e {
-            estimator_core::Error::InvalidConfig { field: f, reason } => {
-                ScenarioError::invalid(format!("{field}.{}", f.to_lowercase()), reason)
-            }
-            other => ScenarioError::invalid(field, other.to_string()),
-        })
-    }
-}
+pub use estpipe_spec::channel::TokenBucket as TokenBucketStage;
 
 impl StageSpec for TokenBucketStage {
+    fn knowledge(&self, k: &mut estpipe_spec::channel::ChannelKnowledge) {
+        k.token_bucket = Some(*self);
+    }
     fn name(&self) -> &'static str {
         "token-bucket"
-    }
-    fn fingerprint(&self, h: &mut Fnv1a64) {
-        let Self { a, b, s, z0 } = *self;
-        h.u64(a.into()).u64(b.into()).u64(s.into()).u64(z0.into());
     }
     fn build(&self, nodes: usize) -> Box<dyn Stage> {
         // Validated when the scenario was built; an invalid spec here is a programming error

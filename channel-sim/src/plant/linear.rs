@@ -5,152 +5,88 @@
 
 use std::any::Any;
 
-use estpipe_wire::Fnv1a64;
-use nalgebra::{DMatrix, DVector};
+use estpipe_spec::{LinearModel, Model};
+use nalgebra::DMatrix;
 
 use super::control::Control;
-use super::time_matrix::TimeMatrix;
-use super::{fingerprint_matrix, LinearDescription, Plant, PlantRun};
+use super::{Plant, PlantRun};
 use crate::error::ScenarioError;
 use crate::rng::{fill_standard_normal, SimRng};
-use crate::sim::{MAX_NODES, MAX_NX, MAX_NY};
-use crate::validate::{check_finite, check_pd, check_shape};
+use crate::sim::MAX_NY;
+use crate::validate::check_pd;
 
-/// One sensor node of a [`LinearPlant`]: `z_{m,k} = C_{m,k} x_k + D_{m,k} v_{m,k}`,
-/// `v_{m,k} ~ N(0, R_m)`.
-#[derive(Clone, Debug)]
-pub struct LinearSensor {
-    /// C_{m,k} (ny × nx).
-    pub c: TimeMatrix,
-    /// D_{m,k} (ny × nv).
-    pub d: TimeMatrix,
-    /// R_m (nv × nv), symmetric positive definite.
-    pub r: DMatrix<f64>,
-}
+/// One sensor node: `z = C x + D v`, `v ~ N(0, R)` (the estimator spec's [`Sensor`](estpipe_spec::Sensor)).
+pub use estpipe_spec::Sensor as LinearSensor;
 
-/// Linear (optionally time-varying) plant with Gaussian noise:
-/// `x_{k+1} = A_k x_k + B_k w_k`, `w_k ~ N(0, Q)`, and [`LinearSensor`]s.
+/// The linear-Gaussian plant: the estimators' [`LinearModel`] and the noise factors that
+/// draw its noises.
 #[derive(Clone, Debug)]
 pub struct LinearPlant {
-    a: TimeMatrix,
-    b: TimeMatrix,
-    q: DMatrix<f64>,
-    sensors: Vec<LinearSensor>,
+    model: LinearModel,
+    /// `L_Q`, `Q = L_Q L_Qᵀ`.
     q_factor: DMatrix<f64>,
+    /// `L_R` per node.
     r_factors: Vec<DMatrix<f64>>,
-    control: Option<Control>,
 }
 
 impl LinearPlant {
-    /// Builds and validates the plant; errors name the offending field (`model.a`,
-    /// `sensors[1].r`, …).
+    /// Validates the model ([`LinearModel::new`]; errors name `model.a`, `sensors[1].r`, …).
     pub fn new(
-        a: TimeMatrix,
-        b: TimeMatrix,
+        a: DMatrix<f64>,
+        b: DMatrix<f64>,
         q: DMatrix<f64>,
         sensors: Vec<LinearSensor>,
     ) -> Result<Self, ScenarioError> {
-        let (nx, ncols) = a.shape();
-        if nx == 0 || nx != ncols || nx > MAX_NX {
-            return Err(ScenarioError::invalid(
-                "model.a",
-                format!("must be square n×n with 1 ≤ n ≤ {MAX_NX}, got {nx}×{ncols}"),
-            ));
-        }
-        check_time_matrix(&a, "model.a")?;
-        let nw = q.nrows();
-        check_time_matrix(&b, "model.b")?;
-        check_shape(b.shape(), (nx, nw), "model.b")?;
-        let q_factor = check_pd(&q, "model.q")?;
-        if sensors.is_empty() || sensors.len() > MAX_NODES {
-            return Err(ScenarioError::invalid(
-                "sensors",
-                format!(
-                    "need between 1 and {MAX_NODES} sensors, got {}",
-                    sensors.len()
-                ),
-            ));
-        }
-        let mut r_factors = Vec::with_capacity(sensors.len());
-        for (m, s) in sensors.iter().enumerate() {
-            let field = |f: &str| format!("sensors[{m}].{f}");
-            // Each sensor has its own ny (its rows); the columns are the plant's nx.
-            let (ny, cols) = s.c.shape();
-            if ny == 0 || ny > MAX_NY || cols != nx {
-                return Err(ScenarioError::invalid(
-                    field("c"),
-                    format!(
-                        "must have 1 to {MAX_NY} rows (the sensor's ny) and nx = {nx} \
-                         columns, got {ny}×{cols}"
-                    ),
-                ));
-            }
-            check_time_matrix(&s.c, &field("c"))?;
-            check_time_matrix(&s.d, &field("d"))?;
-            check_shape(s.d.shape(), (ny, s.r.nrows()), &field("d"))?;
-            r_factors.push(check_pd(&s.r, &field("r"))?);
-            let d0 = s.d.at(0);
-            check_pd(&(&*d0 * &s.r * d0.transpose()), &field("d r dᵀ"))?;
-        }
-        Ok(Self {
-            a,
-            b,
-            q,
-            sensors,
-            q_factor,
-            r_factors,
-            control: None,
-        })
+        Ok(Self::of(LinearModel::new(a, b, q, sensors)?))
     }
 
-    /// The same plant driven by a known input as well: `x_{k+1} = A x_k + B_u u_k + B w_k`
-    /// (`control` validated for this plant's nx).
-    pub fn with_control(mut self, control: Control) -> Result<Self, ScenarioError> {
-        if control.b().nrows() != self.a.shape().0 {
-            return Err(ScenarioError::invalid(
-                "control.b",
-                format!("must have nx = {} rows", self.a.shape().0),
-            ));
+    /// The plant of a validated model.
+    pub fn of(model: LinearModel) -> Self {
+        let factor = |m: &DMatrix<f64>| check_pd(m, "").expect("validated by LinearModel::new");
+        Self {
+            q_factor: factor(model.q()),
+            r_factors: model.sensors().iter().map(|s| factor(&s.r)).collect(),
+            model,
         }
-        self.control = Some(control);
+    }
+
+    /// With the known input of `control`.
+    pub fn with_control(mut self, control: Control) -> Result<Self, ScenarioError> {
+        self.model = self.model.with_control(control)?;
         Ok(self)
     }
 
-    /// The control input, if any.
-    pub fn control(&self) -> Option<&Control> {
-        self.control.as_ref()
-    }
-
-    /// The sensors.
-    pub fn sensors(&self) -> &[LinearSensor] {
-        &self.sensors
-    }
-
-    /// The process-noise covariance Q.
-    pub fn q(&self) -> &DMatrix<f64> {
-        &self.q
+    /// The model the estimators know.
+    pub fn model(&self) -> &LinearModel {
+        &self.model
     }
 }
 
 impl Plant for LinearPlant {
     fn nx(&self) -> usize {
-        self.a.shape().0
+        self.model.nx()
     }
     fn ny(&self) -> usize {
-        (0..self.sensors.len())
-            .map(|m| self.node_ny(m))
+        (0..self.model.nodes())
+            .map(|m| self.model.node_ny(m))
             .max()
             .unwrap_or(0)
     }
     fn node_ny(&self, node: usize) -> usize {
-        self.sensors[node].c.shape().0
+        self.model.node_ny(node)
     }
     fn nodes(&self) -> usize {
-        self.sensors.len()
+        self.model.nodes()
     }
     fn start(&self, x0: &[f64]) -> Box<dyn PlantRun> {
-        let nw = self.q.nrows();
-        let nv = self.sensors.iter().map(|s| s.r.nrows()).max().unwrap_or(0);
+        let nw = self.model.q().nrows();
+        let nv = self
+            .model
+            .sensors()
+            .iter()
+            .map(|s| s.r.nrows())
+            .max()
+            .unwrap_or(0);
         let nx = x0.len();
         Box::new(LinearRun {
             plant: self.clone(),
@@ -160,61 +96,18 @@ impl Plant for LinearPlant {
                 noise: vec![0.0; nw.max(nv)],
                 ax: vec![0.0; nx],
                 bw: vec![0.0; nx],
+                input: vec![0.0; nx],
             },
         })
     }
-    fn fingerprint(&self, h: &mut Fnv1a64) {
-        h.str("linear");
-        self.a.fingerprint(h);
-        self.b.fingerprint(h);
-        fingerprint_matrix(h, &self.q);
-        h.u64(self.sensors.len() as u64);
-        for s in &self.sensors {
-            s.c.fingerprint(h);
-            s.d.fingerprint(h);
-            fingerprint_matrix(h, &s.r);
-        }
-        // Only with an input, so that the plants without one keep their fingerprints.
-        if let Some(c) = &self.control {
-            c.fingerprint(h);
-        }
+    fn model(&self) -> Option<Model> {
+        Some(Model::Linear(self.model.clone()))
     }
-    fn linear(&self) -> Option<&dyn LinearDescription> {
-        Some(self)
+    fn linear(&self) -> Option<&LinearModel> {
+        Some(&self.model)
     }
     fn as_any(&self) -> &dyn Any {
         self
-    }
-}
-
-impl LinearDescription for LinearPlant {
-    fn a(&self, k: usize) -> DMatrix<f64> {
-        self.a.at(k).into_owned()
-    }
-    fn process_cov(&self, k: usize) -> DMatrix<f64> {
-        let b = self.b.at(k);
-        symmetric(&*b * &self.q * b.transpose())
-    }
-    fn c(&self, node: usize, k: usize) -> DMatrix<f64> {
-        self.sensors[node].c.at(k).into_owned()
-    }
-    fn measurement_cov(&self, node: usize, k: usize) -> DMatrix<f64> {
-        let s = &self.sensors[node];
-        let d = s.d.at(k);
-        symmetric(&*d * &s.r * d.transpose())
-    }
-    fn input(&self, k: usize) -> Option<DVector<f64>> {
-        self.control.as_ref().map(|c| c.input(k))
-    }
-    fn time_invariant(&self) -> bool {
-        let constant = |m: &TimeMatrix| matches!(m, TimeMatrix::Constant(_));
-        self.control.is_none()
-            && constant(&self.a)
-            && constant(&self.b)
-            && self
-                .sensors
-                .iter()
-                .all(|s| constant(&s.c) && constant(&s.d))
     }
 }
 
@@ -232,6 +125,7 @@ struct Scratch {
     noise: Vec<f64>,
     ax: Vec<f64>,
     bw: Vec<f64>,
+    input: Vec<f64>,
 }
 
 impl PlantRun for LinearRun {
@@ -241,30 +135,31 @@ impl PlantRun for LinearRun {
 
     fn advance(&mut self, k: u32, rng: &mut SimRng, z: &mut [[f64; MAX_NY]]) {
         let p = &self.plant;
+        let m = &p.model;
         let s = &mut self.scratch;
         let prev = k.saturating_sub(1) as usize;
         // w = L_Q n, x = A x + B w, then per node v = L_R n, z = C x + D v: the random draws
         // in that order, every product summed as nalgebra's `gemv` sums it (`mat_vec`).
-        let nw = p.q.nrows();
+        let nw = m.q().nrows();
         fill_standard_normal(&mut s.normal[..nw], rng);
         mat_vec(&p.q_factor, &s.normal[..nw], &mut s.noise[..nw]);
-        mat_vec(&p.a.at(prev), &self.x, &mut s.ax);
-        mat_vec(&p.b.at(prev), &s.noise[..nw], &mut s.bw);
+        mat_vec(m.a(), &self.x, &mut s.ax);
+        mat_vec(m.b(), &s.noise[..nw], &mut s.bw);
         for ((x, ax), bw) in self.x.iter_mut().zip(&s.ax).zip(&s.bw) {
             *x = ax + bw;
         }
-        if let Some(c) = &p.control {
-            for (x, u) in self.x.iter_mut().zip(c.input(prev).iter()) {
+        if m.input_into(prev, &mut s.input) {
+            for (x, u) in self.x.iter_mut().zip(&s.input) {
                 *x += u;
             }
         }
-        for ((s_m, l_r), z_m) in p.sensors.iter().zip(&p.r_factors).zip(z.iter_mut()) {
+        for ((s_m, l_r), z_m) in m.sensors().iter().zip(&p.r_factors).zip(z.iter_mut()) {
             let nv = s_m.r.nrows();
             fill_standard_normal(&mut s.normal[..nv], rng);
             mat_vec(l_r, &s.normal[..nv], &mut s.noise[..nv]);
-            let (c, d) = (s_m.c.at(k as usize), s_m.d.at(k as usize));
+            let (c, d) = (&s_m.c, &s_m.d);
             for i in 0..c.nrows() {
-                z_m[i] = row_dot(&c, i, &self.x) + row_dot(&d, i, &s.noise[..nv]);
+                z_m[i] = row_dot(c, i, &self.x) + row_dot(d, i, &s.noise[..nv]);
             }
         }
     }
@@ -291,17 +186,6 @@ fn row_dot(m: &DMatrix<f64>, i: usize, x: &[f64]) -> f64 {
         acc += d[i + j * rows] * x[j];
     }
     acc
-}
-
-/// `(m + mᵀ)/2`.
-pub fn symmetric(m: DMatrix<f64>) -> DMatrix<f64> {
-    (&m + m.transpose()) * 0.5
-}
-
-fn check_time_matrix(m: &TimeMatrix, field: &str) -> Result<(), ScenarioError> {
-    let m0 = m.at(0);
-    check_shape(m0.shape(), m.shape(), field)?;
-    check_finite(&m0, field)
 }
 
 #[cfg(test)]

@@ -14,14 +14,13 @@
 //! eq. (5) uses `y₀` for `x̂₁`; docs/design.md, "Seed 003"): [`PlantRun::initial_measurement`]
 //! draws `w₀`, writes `y₀ = C₀ x₀ + D₀ w₀` and keeps `w₀` for `x₁`. The draws come in the
 //! order `w₀, w₁, …` either way, so `x_k` and `y_k` for k ≥ 1 are the same numbers whether or
-//! not `y₀` is read. The plant offers no [`LinearDescription`](super::LinearDescription): it is
+//! not `y₀` is read. The plant offers no linear model ([`Plant::linear`](super::Plant::linear)): it is
 //! neither linear nor has independent process and measurement noise.
 
 use std::any::Any;
 
 use estimator_core::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use estimator_core::papers::Seed003Example;
-use estpipe_wire::Fnv1a64;
 use nalgebra::SVector;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -71,9 +70,8 @@ impl Plant for Seed003Plant {
             pending_w: None,
         })
     }
-    fn fingerprint(&self, h: &mut Fnv1a64) {
-        // The matrices and f are fixed code (Seed003Example); only the noise is a parameter.
-        h.str("seed003").f64(self.w_var);
+    fn model(&self) -> Option<estpipe_spec::Model> {
+        Some(estpipe_spec::Model::Seed003 { w_var: self.w_var })
     }
     fn as_any(&self) -> &dyn Any {
         self

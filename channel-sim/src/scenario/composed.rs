@@ -10,7 +10,7 @@ use std::any::Any;
 use std::fmt;
 use std::sync::Arc;
 
-use estpipe_wire::Fnv1a64;
+use estpipe_spec::{ChannelKnowledge, EstimatorSpec, Prior};
 
 use super::initial::InitialDistribution;
 use crate::channel::{Stage, StageSpec};
@@ -19,10 +19,6 @@ use crate::plant::{Plant, PlantRun};
 use crate::rng::{run_rng, SimRng, Stream};
 use crate::sim::{Instant, Observation, Scenario, Simulation, MAX_NX, MAX_NY};
 
-/// The first thing a model fingerprint hashes: names the definition in `docs/wire.md`
-/// ("Model fingerprint"), changed with it.
-pub const FINGERPRINT_TAG: &str = "estpipe-model-1";
-
 /// A plant, its channel stages (applied in order) and the initial distribution, under a name.
 #[derive(Debug)]
 pub struct ComposedScenario {
@@ -30,6 +26,8 @@ pub struct ComposedScenario {
     plant: Arc<dyn Plant>,
     stages: Vec<Arc<dyn StageSpec>>,
     initial: InitialDistribution,
+    /// What the estimators know of it, formed once.
+    spec: Arc<EstimatorSpec>,
 }
 
 impl ComposedScenario {
@@ -56,11 +54,25 @@ impl ComposedScenario {
                 "dimensions exceed MAX_NX/MAX_NY",
             ));
         }
+        let name = name.into();
+        let model = plant.model().ok_or_else(|| {
+            ScenarioError::invalid("model", "the plant has no model an estimator can use")
+        })?;
+        let mut channel = ChannelKnowledge::default();
+        for s in &stages {
+            s.knowledge(&mut channel);
+        }
+        let prior = Prior {
+            mean: initial.estimator_mean.clone(),
+            cov: initial.estimator_cov.clone(),
+        };
+        let spec = Arc::new(EstimatorSpec::new(name.clone(), model, prior, channel)?);
         Ok(Self {
-            name: name.into(),
+            name,
             plant,
             stages,
             initial,
+            spec,
         })
     }
 
@@ -104,12 +116,13 @@ impl ComposedScenario {
     /// The same scenario without any channel stage (every packet delivered, plant streams
     /// unchanged).
     pub fn without_channel(&self) -> Self {
-        Self {
-            name: format!("{}-no-channel", self.name),
-            plant: Arc::clone(&self.plant),
-            stages: Vec::new(),
-            initial: self.initial.clone(),
-        }
+        Self::new(
+            format!("{}-no-channel", self.name),
+            Arc::clone(&self.plant),
+            self.initial.clone(),
+            Vec::new(),
+        )
+        .expect("the parts of a built scenario are valid")
     }
 
     /// Starts a run with the concrete simulation type.
@@ -165,22 +178,8 @@ impl Scenario for ComposedScenario {
     fn nodes(&self) -> usize {
         self.plant.nodes()
     }
-    fn fingerprint(&self) -> u64 {
-        let mut h = Fnv1a64::new();
-        h.str(FINGERPRINT_TAG)
-            .u64(self.nodes() as u64)
-            .u64(self.nx() as u64);
-        for m in 0..self.nodes() {
-            h.u64(self.node_ny(m) as u64);
-        }
-        self.plant.fingerprint(&mut h);
-        self.initial.fingerprint(&mut h);
-        h.u64(self.stages.len() as u64);
-        for s in &self.stages {
-            h.str(s.name());
-            s.fingerprint(&mut h);
-        }
-        h.finish()
+    fn estimator_spec(&self) -> Arc<EstimatorSpec> {
+        Arc::clone(&self.spec)
     }
     fn start(&self, seed: u64, run: u64) -> Box<dyn Simulation> {
         Box::new(self.simulate(seed, run))

@@ -43,24 +43,24 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use nalgebra::{DMatrix, DVector};
+use estpipe_spec::file::linear_model;
+pub use estpipe_spec::file::{
+    matrix, one_line, ControlConfig, EventTriggerToml, ModelConfig, OcclusionToml, Rows,
+    ScheduleConfig, SensorConfig, TobitConfig, TriggerNodeToml, MAX_OCCLUSION_REGIONS,
+};
+use estpipe_spec::overflow::{self, FromPrior, Written};
+use nalgebra::DVector;
 use serde::Deserialize;
 
 use super::composed::ComposedScenario;
 use super::initial::InitialDistribution;
-use crate::channel::event_trigger::{TriggerParams, TriggeredTokenBucket};
 use crate::channel::loss::{BernoulliLoss, GilbertElliottLoss};
 use crate::channel::occlusion::OcclusionSpec;
 use crate::channel::tobit::TobitCensoring;
 use crate::channel::token_bucket::TokenBucketStage;
 use crate::channel::StageSpec;
 use crate::error::ScenarioError;
-use crate::plant::control::{Control, Schedule};
-use crate::plant::linear::{LinearPlant, LinearSensor};
-use crate::validate::check_finite;
-
-/// A matrix as an array of rows.
-pub type Rows = Vec<Vec<f64>>;
+use crate::plant::linear::LinearPlant;
 
 /// The whole file.
 #[derive(Clone, Debug, Deserialize)]
@@ -81,77 +81,6 @@ pub struct ScenarioFile {
     pub control: Option<ControlConfig>,
 }
 
-/// `[control]`: `x_{k+1} = A x_k + B_u u_k + B w_k`, `u_k` known to the plant and to every
-/// estimator's time update.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ControlConfig {
-    /// B_u (nx × nu).
-    pub b: Rows,
-    /// The schedule of u_k.
-    pub u: ScheduleConfig,
-}
-
-/// `[control.u]`, selected by `kind`.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum ScheduleConfig {
-    /// `kind = "constant"`: `u_k = value`.
-    Constant {
-        /// u (nu entries).
-        value: Vec<f64>,
-    },
-    /// `kind = "sinusoid"`: `u_k = offset + amplitude · sin(2π k / period + phase)`.
-    Sinusoid {
-        /// Amplitude per entry.
-        amplitude: Vec<f64>,
-        /// Period in instants.
-        period: f64,
-        /// Phase in radians (default 0).
-        #[serde(default)]
-        phase: f64,
-        /// Mean per entry (default 0).
-        offset: Option<Vec<f64>>,
-    },
-    /// `kind = "list"`: `u_k = values[k mod len]`.
-    List {
-        /// The vectors, repeated cyclically.
-        values: Vec<Vec<f64>>,
-    },
-}
-
-impl ScheduleConfig {
-    fn schedule(self) -> Schedule {
-        match self {
-            ScheduleConfig::Constant { value } => Schedule::Constant(value),
-            ScheduleConfig::Sinusoid {
-                amplitude,
-                period,
-                phase,
-                offset,
-            } => Schedule::Sinusoid {
-                offset: offset.unwrap_or_else(|| vec![0.0; amplitude.len()]),
-                amplitude,
-                period,
-                phase,
-            },
-            ScheduleConfig::List { values } => Schedule::List(values),
-        }
-    }
-}
-
-/// `[model]`.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ModelConfig {
-    /// A (nx × nx).
-    pub a: Rows,
-    /// B (nx × nw); default I.
-    pub b: Option<Rows>,
-    /// Q (nw × nw), symmetric positive definite.
-    pub q: Rows,
-}
-
 /// `[initial]`.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -164,18 +93,6 @@ pub struct InitialConfig {
     pub estimator_mean: Option<Vec<f64>>,
     /// P_0 (default `cov`), positive definite.
     pub estimator_cov: Option<Rows>,
-}
-
-/// `[[sensors]]`.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SensorConfig {
-    /// C (ny × nx).
-    pub c: Rows,
-    /// D (ny × nv); default I.
-    pub d: Option<Rows>,
-    /// R (nv × nv), symmetric positive definite.
-    pub r: Rows,
 }
 
 /// `[[stages]]`, selected by `kind`.
@@ -202,77 +119,19 @@ pub enum StageConfig {
     Occlusion(OcclusionToml),
 }
 
-/// The most occlusion regions a TOML stage may declare (the estimators are built per count).
-pub const MAX_OCCLUSION_REGIONS: usize = 4;
-
-/// `kind = "occlusion"`.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct OcclusionToml {
-    /// The row E of `u = E x + n` (n_x entries).
-    pub e: Vec<f64>,
-    /// Ψ, the variance of n (positive).
-    pub psi: f64,
-    /// ζ_i, the regions' centres.
-    pub centres: Vec<f64>,
-    /// r_i, the regions' half-widths (positive, one per centre).
-    pub radii: Vec<f64>,
-}
-
-impl OcclusionToml {
-    fn spec<const S: usize>(&self, nx: usize) -> Result<Arc<dyn StageSpec>, ScenarioError> {
-        let arr = |v: &[f64]| -> [f64; S] { core::array::from_fn(|i| v[i]) };
-        Ok(Arc::new(OcclusionSpec::<S>::new(
-            self.e.clone(),
-            self.psi,
-            arr(&self.centres),
-            arr(&self.radii),
-            nx,
-        )?))
-    }
-}
-
-/// `kind = "tobit"`.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TobitConfig {
-    /// τ_m per node, one entry per measurement component.
-    pub thresholds: Vec<Vec<f64>>,
-}
-
-/// `kind = "event-trigger"`.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct EventTriggerToml {
-    /// Tokens in the shared bucket at k = 0.
-    pub initial_tokens: u32,
-    /// Tokens added per instant.
-    pub rate: u32,
-    /// Bucket capacity.
-    pub capacity: u32,
-    /// Accept λχ ≤ 1 (the seed 004 example does); every eval then prints a warning.
-    #[serde(default)]
-    pub allow_paper_violation: bool,
-    /// One table per node.
-    pub nodes: Vec<TriggerNodeToml>,
-}
-
-/// One node of `kind = "event-trigger"`.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TriggerNodeToml {
-    /// σ_m.
-    pub sigma: f64,
-    /// χ_m.
-    pub chi: f64,
-    /// λ_m.
-    pub lambda: f64,
-    /// η_{m,0}.
-    pub eta0: f64,
-    /// Initial reference measurement ȳ (e.g. the censoring threshold τ_m).
-    pub reference: Vec<f64>,
-    /// Tokens one transmission of this node costs.
-    pub cost: u32,
+/// The occlusion stage of `o` at `S` regions.
+fn occlusion_stage<const S: usize>(
+    o: &OcclusionToml,
+    nx: usize,
+) -> Result<Arc<dyn StageSpec>, ScenarioError> {
+    let arr = |v: &[f64]| -> [f64; S] { core::array::from_fn(|i| v[i]) };
+    Ok(Arc::new(OcclusionSpec::<S>::new(
+        o.e.clone(),
+        o.psi,
+        arr(&o.centres),
+        arr(&o.radii),
+        nx,
+    )?))
 }
 
 /// The plant's dimensions, which every stage is checked against.
@@ -369,10 +228,10 @@ impl StageConfig {
                 }
                 let nx = dims.nx;
                 match n {
-                    1 => o.spec::<1>(nx),
-                    2 => o.spec::<2>(nx),
-                    3 => o.spec::<3>(nx),
-                    _ => o.spec::<4>(nx),
+                    1 => occlusion_stage::<1>(&o, nx),
+                    2 => occlusion_stage::<2>(&o, nx),
+                    3 => occlusion_stage::<3>(&o, nx),
+                    _ => occlusion_stage::<4>(&o, nx),
                 }
                 .map_err(|e| at(field, e))?
             }
@@ -393,7 +252,7 @@ impl StageConfig {
                 for (m, tau) in t.thresholds.iter().enumerate() {
                     dims.node_vector(&format!("{field}.thresholds[{m}]"), m, tau.len())?;
                 }
-                Arc::new(TobitCensoring::new(t.thresholds).map_err(|e| at(field, e))?)
+                Arc::new(TobitCensoring::new(t.thresholds).map_err(|e| at(field, e.into()))?)
             }
             StageConfig::EventTrigger(t) => {
                 dims.per_node(field, "nodes", t.nodes.len())?;
@@ -404,66 +263,20 @@ impl StageConfig {
                         n.reference.len(),
                     )?;
                 }
-                let params: Vec<TriggerParams> = t
-                    .nodes
-                    .iter()
-                    .map(|n| TriggerParams {
-                        sigma: n.sigma,
-                        chi: n.chi,
-                        lambda: n.lambda,
-                        eta0: n.eta0,
-                    })
-                    .collect();
-                Arc::new(
-                    TriggeredTokenBucket::new(
-                        &params,
-                        t.nodes.iter().map(|n| n.reference.clone()).collect(),
-                        t.initial_tokens,
-                        t.rate,
-                        t.capacity,
-                        t.nodes.iter().map(|n| n.cost).collect(),
-                        t.allow_paper_violation,
-                    )
-                    .map_err(|e| at(field, e))?,
-                )
+                Arc::new(t.knowledge().map_err(|e| at(field, e.into()))?)
             }
         })
     }
 }
 
-/// Largest scenario file read (bytes). A scenario is a few kB (the largest part, an 8 × 8
-/// matrix, a few hundred bytes); TOML parsing holds about 50× the text, so without a bound
-/// `--config /dev/zero` or an 80 MB file grew until the allocator aborted the process.
-pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
+/// Largest scenario file read (bytes): the spec's bound, for the same reason
+/// ([`estpipe_spec::file::MAX_FILE_BYTES`]).
+pub const MAX_SCENARIO_BYTES: u64 = estpipe_spec::file::MAX_FILE_BYTES;
 
 /// Reads and validates a scenario file (at most [`MAX_SCENARIO_BYTES`]).
 pub fn load(path: &Path) -> Result<ComposedScenario, ScenarioError> {
-    use std::io::Read as _;
+    let (text, stem) = estpipe_spec::file::read_bounded(path, "scenario")?;
     let shown = path.display().to_string();
-    let fail = |reason: String| ScenarioError::File {
-        path: shown.clone(),
-        reason,
-    };
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_SCENARIO_BYTES + 1).read_to_end(&mut bytes))
-        .map_err(|e| fail(e.to_string()))?;
-    if bytes.len() as u64 > MAX_SCENARIO_BYTES {
-        return Err(fail(format!(
-            "larger than {} KiB; a scenario file is a few kB",
-            MAX_SCENARIO_BYTES >> 10
-        )));
-    }
-    let text = String::from_utf8(bytes).map_err(|e| {
-        fail(format!(
-            "not UTF-8 text (byte {})",
-            e.utf8_error().valid_up_to()
-        ))
-    })?;
-    let stem = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "config".into());
     parse(&text, &shown, &stem)
 }
 
@@ -490,32 +303,12 @@ pub fn parse(
 
 /// Builds the scenario from a parsed file.
 pub fn build(file: ScenarioFile, default_name: &str) -> Result<ComposedScenario, ScenarioError> {
-    let a = matrix(&file.model.a, "model.a")?;
-    let nx = a.nrows();
-    let q = matrix(&file.model.q, "model.q")?;
-    let b = match &file.model.b {
-        Some(b) => matrix(b, "model.b")?,
-        None => DMatrix::identity(nx, nx),
-    };
-    let mut sensors = Vec::with_capacity(file.sensors.len());
-    for (m, s) in file.sensors.iter().enumerate() {
-        let c = matrix(&s.c, &format!("sensors[{m}].c"))?;
-        let r = matrix(&s.r, &format!("sensors[{m}].r"))?;
-        let d = match &s.d {
-            Some(d) => matrix(d, &format!("sensors[{m}].d"))?,
-            None => DMatrix::identity(c.nrows(), c.nrows()),
-        };
-        sensors.push(LinearSensor {
-            c: c.into(),
-            d: d.into(),
-            r,
-        });
-    }
-    let mut plant = LinearPlant::new(a.into(), b.into(), q, sensors)?;
-    if let Some(c) = &file.control {
-        let bu = matrix(&c.b, "control.b")?;
-        plant = plant.with_control(Control::new(bu, c.u.clone().schedule(), nx)?)?;
-    }
+    let plant = LinearPlant::of(linear_model(
+        &file.model,
+        &file.sensors,
+        file.control.as_ref(),
+    )?);
+    let nx = plant.model().nx();
 
     let init = &file.initial;
     let mean = DVector::from_vec(init.mean.clone());
@@ -536,7 +329,36 @@ pub fn build(file: ScenarioFile, default_name: &str) -> Result<ComposedScenario,
         None => cov.clone(),
     };
     let initial = InitialDistribution::new(mean, cov, est_mean, est_cov)?;
-    check_overflow(&plant, &initial, &file)?;
+    let written = Written {
+        model: &file.model,
+        control: file.control.as_ref(),
+        sensors: &file.sensors,
+    };
+    let estimator_cov_rows = file
+        .initial
+        .estimator_cov
+        .as_ref()
+        .unwrap_or(&file.initial.cov);
+    overflow::check(
+        plant.model(),
+        written,
+        &[
+            FromPrior {
+                mean: &initial.mean,
+                cov: &initial.cov,
+                mean_field: "initial.mean",
+                cov_field: "initial.cov",
+                cov_rows: &file.initial.cov,
+            },
+            FromPrior {
+                mean: &initial.estimator_mean,
+                cov: &initial.estimator_cov,
+                mean_field: "initial.estimator_mean",
+                cov_field: "initial.estimator_cov",
+                cov_rows: estimator_cov_rows,
+            },
+        ],
+    )?;
 
     let dims = PlantDims::of(&plant);
     let stages = file
@@ -547,179 +369,6 @@ pub fn build(file: ScenarioFile, default_name: &str) -> Result<ComposedScenario,
         .collect::<Result<Vec<_>, _>>()?;
     let name = file.name.unwrap_or_else(|| default_name.to_owned());
     ComposedScenario::new(name, Arc::new(plant), initial, stages)
-}
-
-/// Instants over which the overflow check of [`build`] follows the model's moments.
-pub const OVERFLOW_CHECK_STEPS: usize = 20;
-
-/// The largest magnitude a moment may reach in the overflow check of [`build`]: f64's range
-/// less a margin of 10⁸ for the estimators' own sums and products of those moments (an MSE
-/// sums squared errors over runs; a Joseph update adds congruences).
-pub const MOMENT_LIMIT: f64 = 1e300;
-
-/// Refuses a model whose numbers are finite but whose products are not: from both priors
-/// (the truth's `initial.cov` and the estimators' `initial.estimator_cov`) the mean and
-/// covariance of x_k, `E‖x_k‖²`, and every node's `C x_k` and `C Σ_k Cᵀ + D R Dᵀ` must stay
-/// within [`MOMENT_LIMIT`] for k = 0..[`OVERFLOW_CHECK_STEPS`]; otherwise every run would end
-/// in NaN ("diverged") or a later error. The field named is the input with the largest entry
-/// among those the failing product used (1e308 in `model.a` names `model.a`).
-fn check_overflow(
-    plant: &LinearPlant,
-    initial: &InitialDistribution,
-    file: &ScenarioFile,
-) -> Result<(), ScenarioError> {
-    use crate::plant::{LinearDescription, Plant};
-    let amax = |rows: &[Vec<f64>]| rows.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
-    let vmax = |v: &[f64]| v.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    let mut model_fields: Vec<(String, f64)> = vec![
-        ("model.a".into(), amax(&file.model.a)),
-        ("model.q".into(), amax(&file.model.q)),
-    ];
-    if let Some(b) = &file.model.b {
-        model_fields.push(("model.b".into(), amax(b)));
-    }
-    if let Some(c) = &file.control {
-        model_fields.push(("control.b".into(), amax(&c.b)));
-        let u = match &c.u {
-            ScheduleConfig::Constant { value } => vmax(value),
-            ScheduleConfig::Sinusoid {
-                amplitude, offset, ..
-            } => vmax(amplitude) + offset.as_deref().map_or(0.0, vmax),
-            ScheduleConfig::List { values } => values.iter().map(|v| vmax(v)).fold(0.0, f64::max),
-        };
-        model_fields.push(("control.u".into(), u));
-    }
-    for (m, s) in file.sensors.iter().enumerate() {
-        model_fields.push((format!("sensors[{m}].c"), amax(&s.c)));
-        model_fields.push((format!("sensors[{m}].r"), amax(&s.r)));
-        if let Some(d) = &s.d {
-            model_fields.push((format!("sensors[{m}].d"), amax(d)));
-        }
-    }
-    let ok = |m: &[f64]| m.iter().all(|v| v.is_finite() && v.abs() <= MOMENT_LIMIT);
-    let priors = [
-        (
-            &initial.mean,
-            &initial.cov,
-            "initial.mean",
-            "initial.cov",
-            file.initial.cov.as_slice(),
-        ),
-        (
-            &initial.estimator_mean,
-            &initial.estimator_cov,
-            "initial.estimator_mean",
-            "initial.estimator_cov",
-            file.initial
-                .estimator_cov
-                .as_deref()
-                .unwrap_or(file.initial.cov.as_slice()),
-        ),
-    ];
-    for (mean, cov, mean_field, cov_field, cov_rows) in priors {
-        let mut blame = model_fields.clone();
-        blame.push((mean_field.into(), vmax(mean.as_slice())));
-        blame.push((cov_field.into(), amax(cov_rows)));
-        let fail = |k: usize, what: &str| {
-            let (field, v) = blame
-                .iter()
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .cloned()
-                .unwrap_or_default();
-            ScenarioError::invalid(
-                field,
-                format!(
-                    "entries up to {v:e} make {what} overflow f64 by k = {k} (beyond \
-                     {MOMENT_LIMIT:e}); scale the model down"
-                ),
-            )
-        };
-        let (mut m, mut s) = (mean.clone(), cov.clone());
-        for k in 0..=OVERFLOW_CHECK_STEPS {
-            let second = s.trace() + m.norm_squared();
-            if !(ok(m.as_slice())
-                && ok(s.as_slice())
-                && second.is_finite()
-                && second <= MOMENT_LIMIT)
-            {
-                return Err(fail(k, "the state's mean or covariance"));
-            }
-            for node in 0..plant.nodes() {
-                let c = plant.c(node, k);
-                let sy = &c * &s * c.transpose() + plant.measurement_cov(node, k);
-                if !(ok((&c * &m).as_slice()) && ok(sy.as_slice())) {
-                    return Err(fail(k, "the measurement's mean or covariance"));
-                }
-            }
-            let (a, q) = (plant.a(k), plant.process_cov(k));
-            if !ok(q.as_slice()) {
-                return Err(fail(k, "B Q Bᵀ"));
-            }
-            m = &a * m;
-            if let Some(bu) = plant.input(k) {
-                m += bu;
-            }
-            s = &a * s * a.transpose() + q;
-        }
-    }
-    Ok(())
-}
-
-/// A dense matrix from rows; errors unless non-empty, rectangular and finite.
-pub fn matrix(rows: &Rows, field: &str) -> Result<DMatrix<f64>, ScenarioError> {
-    let cols = rows.first().map_or(0, Vec::len);
-    if cols == 0 {
-        return Err(ScenarioError::invalid(
-            field,
-            "must be a non-empty array of rows",
-        ));
-    }
-    if let Some((i, r)) = rows.iter().enumerate().find(|(_, r)| r.len() != cols) {
-        return Err(ScenarioError::invalid(
-            field,
-            format!("row {i} has {} entries, row 0 has {cols}", r.len()),
-        ));
-    }
-    let m = DMatrix::from_fn(rows.len(), cols, |i, j| rows[i][j]);
-    check_finite(&m, field)?;
-    Ok(m)
-}
-
-/// A TOML error as one line: `line L (`key`): message`, with the key assigned on that line.
-/// The parser's message names the value's problem, not always the field, and inside a
-/// `[[stages]]` table (a tagged enum) it points at the table: then the line is the first one
-/// from there whose value holds the literal the message quotes (`-3` in "invalid value:
-/// integer `-3`, expected u32").
-fn one_line(text: &str, e: &toml::de::Error) -> String {
-    let msg = e.message().trim().replace('\n', " ");
-    let Some(span) = e.span() else {
-        return msg;
-    };
-    let start = span.start.min(text.len());
-    let mut line = text[..start].matches('\n').count() + 1;
-    fn key_of(source: &str) -> Option<(&str, &str)> {
-        source
-            .split_once('=')
-            .map(|(k, v)| (k.trim(), v))
-            .filter(|(k, _)| {
-                !k.is_empty()
-                    && k.len() <= 40
-                    && k.chars()
-                        .all(|c| c.is_alphanumeric() || "_-.\"".contains(c))
-            })
-    }
-    let quoted = msg.split('`').nth(1).filter(|q| !q.is_empty());
-    if let Some(q) = quoted {
-        if let Some((i, _)) = text.lines().enumerate().skip(line - 1).find(|(_, l)| {
-            key_of(l).is_some_and(|(_, v)| v.split('#').next().unwrap_or("").contains(q))
-        }) {
-            line = i + 1;
-        }
-    }
-    match text.lines().nth(line - 1).and_then(key_of) {
-        Some((key, _)) => format!("line {line} (`{key}`): {msg}"),
-        None => format!("line {line}: {msg}"),
-    }
 }
 
 #[cfg(test)]

@@ -1,11 +1,9 @@
 //! The initial distribution of a scenario: the truth's x_0 and the prior the estimators
 //! start from, which the papers sometimes choose differently (seed 003).
 
-use estpipe_wire::Fnv1a64;
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::ScenarioError;
-use crate::plant::fingerprint_matrix;
 use crate::rng::{standard_normal, SimRng};
 use crate::validate::{check_pd, check_psd, check_shape};
 
@@ -26,18 +24,6 @@ pub struct InitialDistribution {
 }
 
 impl InitialDistribution {
-    /// Feeds the truth's distribution and the estimators' prior to a model fingerprint:
-    /// mean (an n×1 matrix), cov, estimator_mean, estimator_cov.
-    pub fn fingerprint(&self, h: &mut Fnv1a64) {
-        for (mean, cov) in [
-            (&self.mean, &self.cov),
-            (&self.estimator_mean, &self.estimator_cov),
-        ] {
-            h.matrix(mean.len(), 1, mean.as_slice());
-            fingerprint_matrix(h, cov);
-        }
-    }
-
     /// Validates dimensions and definiteness; field names are under `initial.`.
     pub fn new(
         mean: DVector<f64>,

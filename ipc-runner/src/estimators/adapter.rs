@@ -4,10 +4,10 @@
 
 use std::sync::Mutex;
 
-use channel_sim::Observation;
 use estimator_core::filter::gate::GateState;
 use estimator_core::filter::{GateCounts, GatedStep, InnovationGate};
 use estimator_core::Error;
+use estpipe_wire::Observation;
 
 use super::fed::Fed;
 use super::slots::FromSlots;

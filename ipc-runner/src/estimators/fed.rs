@@ -1,23 +1,24 @@
 //! A core estimator ([`estimator_core::Estimator`]) as the application feeds it: instant `k`
-//! with the slot observations of `k`, converted by [`FromSlots`], and the model of `k` when
-//! the plant is time varying. Instants that never reached the runner are stepped as lost.
+//! with the slot observations of `k`, converted by [`FromSlots`], and the model's input term
+//! of `k` when the model has a control input. Instants that never reached the runner are
+//! stepped as lost.
 
 use std::sync::Arc;
 
-use channel_sim::plant::{LinearDescription, Plant};
-use channel_sim::Observation;
 use estimator_core::filter::GateCounts;
 use estimator_core::{Error, Estimator};
+use estpipe_spec::{EstimatorSpec, LinearModel};
+use estpipe_wire::Observation;
 
 use super::slots::FromSlots;
 
-/// Re-reads an estimator's model for instant `k` from the plant's linear description.
-pub(crate) type Remodel<E> = fn(&mut E, &dyn LinearDescription, usize);
+/// Brings an estimator's model to instant `k` (writes the input term in place).
+pub(crate) type Remodel<E> = fn(&mut E, &LinearModel, usize);
 
-/// A core estimator `E`, and for a time-varying plant how to bring its model to instant `k`.
+/// A core estimator `E`, and for a controlled model how to bring its model to instant `k`.
 pub(crate) struct Fed<E> {
     est: E,
-    varying: Option<(Arc<dyn Plant>, Remodel<E>)>,
+    varying: Option<(Arc<EstimatorSpec>, Remodel<E>)>,
 }
 
 impl<E> Fed<E> {
@@ -26,13 +27,13 @@ impl<E> Fed<E> {
         Self { est, varying: None }
     }
 
-    /// An estimator on `plant`, its model built for a time-invariant plant: `remodel` runs
-    /// before every step only when the plant is time varying.
-    pub(crate) fn on_plant(est: E, plant: Arc<dyn Plant>, remodel: Remodel<E>) -> Self {
-        let varying = plant
+    /// An estimator on the linear model of `spec`, its model built for instant 1: `remodel`
+    /// runs before every step only when the model has a control input.
+    pub(crate) fn on_model(est: E, spec: &Arc<EstimatorSpec>, remodel: Remodel<E>) -> Self {
+        let varying = spec
             .linear()
             .is_some_and(|m| !m.time_invariant())
-            .then_some((plant, remodel));
+            .then(|| (Arc::clone(spec), remodel));
         Self { est, varying }
     }
 
@@ -69,8 +70,8 @@ impl<E> Fed<E> {
         E: Estimator<f64, NX> + Clone,
         E::Measurement: FromSlots,
     {
-        if let Some((plant, remodel)) = &self.varying {
-            remodel(&mut self.est, super::linear_of(&**plant)?, k as usize);
+        if let Some((spec, remodel)) = &self.varying {
+            remodel(&mut self.est, linear(spec)?, k as usize);
         }
         let y = E::Measurement::from_slots(obs);
         match step(&mut self.est, k as usize, &y) {
@@ -79,13 +80,13 @@ impl<E> Fed<E> {
                 for j in expected..got {
                     // Each gap instant on its own model (a time-varying plant, a control
                     // input's u_{j−1}).
-                    if let Some((plant, remodel)) = &self.varying {
-                        remodel(&mut est, super::linear_of(&**plant)?, j);
+                    if let Some((spec, remodel)) = &self.varying {
+                        remodel(&mut est, linear(spec)?, j);
                     }
                     est.step(j, &gap)?;
                 }
-                if let Some((plant, remodel)) = &self.varying {
-                    remodel(&mut est, super::linear_of(&**plant)?, got);
+                if let Some((spec, remodel)) = &self.varying {
+                    remodel(&mut est, linear(spec)?, got);
                 }
                 let counts = step(&mut est, got, &y)?;
                 self.est = est;
@@ -94,4 +95,12 @@ impl<E> Fed<E> {
             done => done,
         }
     }
+}
+
+/// The spec's linear model, or the error every linear adapter reports without one.
+pub(crate) fn linear(spec: &EstimatorSpec) -> Result<&LinearModel, Error> {
+    spec.linear().ok_or(Error::InvalidConfig {
+        field: "model",
+        reason: "has no linear description",
+    })
 }

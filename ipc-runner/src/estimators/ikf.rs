@@ -6,22 +6,23 @@
 //! the channel, so it runs in evaluation and in the real-time loop alike. Same filter code as
 //! [`super::kf`] (estimator-core's `KalmanFilter`, Joseph form), fed the channel's output.
 //!
-//! Applies to every scenario whose plant offers a linear description. Diagnostics: `trace_p`.
+//! Applies to every spec with a linear model. Diagnostics: `trace_p`.
 
-use channel_sim::Scenario;
+use std::sync::Arc;
+
+use estpipe_spec::EstimatorSpec;
 
 use super::kf::linear_kf;
-use super::EvalOptions;
+use super::{EvalOptions, RunStart};
 use crate::Estimator;
 
-/// Builds `ikf` for a composed scenario with a linear description.
+/// Builds `ikf` for a spec with a linear model.
 pub fn build(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    _seed: u64,
-    _run: u64,
+    _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(scenario, "ikf", false, options.gate)?
+    Ok(linear_kf(spec, "ikf", false, options.gate)?
         .into_iter()
         .collect())
 }

@@ -9,7 +9,7 @@
 //! covariance). The meaningful channel-aware baseline is [`super::ikf`]. A "KF" that treats
 //! a dropped packet as y = 0 is deliberately not offered: it is neither optimal nor a bound.
 //!
-//! Applies to every scenario whose plant offers a [`LinearDescription`]. Multi-node scenarios
+//! Applies to every spec with a linear model. Multi-node models
 //! update node by node (sequential updates are exact because nodes' noises are independent),
 //! nodes of different ny included (each padded to the largest, see `snapshot`). A known
 //! control input enters the prediction (`B_u u_{k−1}`).
@@ -17,59 +17,49 @@
 
 use std::sync::Arc;
 
-use channel_sim::plant::{LinearDescription, Plant};
-use channel_sim::scenario::ComposedScenario;
-use channel_sim::sim::MAX_NODES;
-use channel_sim::Scenario;
 use estimator_core::filter::{GateCounts, GatedStep, InnovationGate, KalmanFilter};
 use estimator_core::linalg::symmetrize;
 use estimator_core::{Error, Estimate, Packet};
-use nalgebra::{DMatrix, SVector};
+use estpipe_spec::{EstimatorSpec, LinearModel};
+use estpipe_wire::MAX_NODES;
+use nalgebra::SVector;
 
 use super::adapter::Adapted;
-use super::fed::Fed;
+use super::fed::{linear, Fed};
 use super::snapshot::{fixed, Snapshot};
-use super::EvalOptions;
+use super::{EvalOptions, RunStart};
 use crate::Estimator;
 
-/// Builds `kf` for a composed scenario with a linear description.
+/// Builds `kf` for a spec with a linear model.
 pub fn build(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    _seed: u64,
-    _run: u64,
+    _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(scenario, "kf", true, options.gate)?
+    Ok(linear_kf(spec, "kf", true, options.gate)?
         .into_iter()
         .collect())
 }
 
-/// A Kalman filter on `scenario`'s linear description named `name`, or `None` when the
-/// scenario has none. `full_information` selects the oracle (`kf`) or the channel-fed filter;
-/// `gate`, the innovation gate's probability (`--gate`, docs/gate.md).
+/// A Kalman filter on `spec`'s linear model named `name`, or `None` when the spec has none.
+/// `full_information` selects the oracle (`kf`) or the channel-fed filter; `gate`, the
+/// innovation gate's probability (`--gate`, docs/gate.md).
 pub fn linear_kf(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     name: &'static str,
     full_information: bool,
     gate: Option<f64>,
 ) -> anyhow::Result<Option<Box<dyn Estimator>>> {
-    let Some(composed) = scenario.as_any().downcast_ref::<ComposedScenario>() else {
-        return Ok(None);
-    };
-    let plant = composed.plant_arc();
-    if plant.linear().is_none() {
+    if spec.linear().is_none() {
         return Ok(None);
     }
-    let init = composed.initial();
     let spec = Spec {
         name,
         full_information,
         gate,
-        plant,
-        x0: init.estimator_mean.as_slice(),
-        p0: &init.estimator_cov,
+        spec,
     };
-    let (nx, ny) = (scenario.nx(), scenario.ny());
+    let (nx, ny) = (spec.spec.nx(), spec.spec.ny());
     macro_rules! by_ny {
         ($nx:literal) => {
             match ny {
@@ -99,9 +89,7 @@ struct Spec<'a> {
     name: &'static str,
     full_information: bool,
     gate: Option<f64>,
-    plant: Arc<dyn Plant>,
-    x0: &'a [f64],
-    p0: &'a DMatrix<f64>,
+    spec: &'a Arc<EstimatorSpec>,
 }
 
 /// The Kalman filter on every node's packet of an instant: one prediction, then an update
@@ -196,23 +184,27 @@ impl<const NX: usize, const NY: usize> GatedStep<f64, NX> for NodeByNode<NX, NY>
     }
 }
 
-/// `NodeByNode`'s model at instant `k`.
+/// `NodeByNode`'s model at instant `k`: its input term (the matrices are constant).
 fn remodel<const NX: usize, const NY: usize>(
     e: &mut NodeByNode<NX, NY>,
-    model: &dyn LinearDescription,
+    model: &LinearModel,
     k: usize,
 ) {
-    e.model = Snapshot::nodes(model, e.nodes, k);
-    e.fused = fused_ok(&e.model[0]);
+    for m in &mut e.model[..e.nodes] {
+        m.set_input(model, k);
+    }
 }
 
 /// The filter of `spec` at `NX`, `NY`.
 fn boxed<const NX: usize, const NY: usize>(spec: Spec<'_>) -> anyhow::Result<Box<dyn Estimator>> {
-    let kf = KalmanFilter::new(SVector::from_column_slice(spec.x0), fixed(spec.p0))
-        .map_err(|e| anyhow::anyhow!("{}: initial.estimator_cov: {e}", spec.name))?;
-    let nodes = spec.plant.nodes();
-    let model = super::linear_of(&*spec.plant)?;
-    let model = Snapshot::nodes(model, nodes, 1);
+    let prior = &spec.spec.prior;
+    let kf = KalmanFilter::new(
+        SVector::from_column_slice(prior.mean.as_slice()),
+        fixed(&prior.cov),
+    )
+    .map_err(|e| anyhow::anyhow!("{}: prior.cov: {e}", spec.name))?;
+    let nodes = spec.spec.nodes();
+    let model = Snapshot::nodes(linear(spec.spec)?, nodes, 1);
     let est = NodeByNode::<NX, NY> {
         fused: fused_ok(&model[0]),
         model,
@@ -220,7 +212,7 @@ fn boxed<const NX: usize, const NY: usize>(spec: Spec<'_>) -> anyhow::Result<Box
         kf,
     };
     Ok(Box::new(
-        Adapted::<_, NX>::new(spec.name, Fed::on_plant(est, spec.plant, remodel))
+        Adapted::<_, NX>::new(spec.name, Fed::on_model(est, spec.spec, remodel))
             .with_full_information(spec.full_information)
             .with_gate(spec.gate)?,
     ))

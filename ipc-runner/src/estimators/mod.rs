@@ -7,8 +7,12 @@
 //! ([`estimator_core::Estimator`], mostly a filter paired with its model in an
 //! [`estimator_core::OnModel`]); the application's [`Estimator`] over one is `adapter`'s, the
 //! stepping from slot observations `fed`'s, the conversion of the observations into the core's
-//! measurements `slots`', of the plant's model into fixed-size matrices `snapshot`'s. `pf` is
+//! measurements `slots`', of the spec's model into fixed-size matrices `snapshot`'s. `pf` is
 //! the application's own particle filter and implements [`Estimator`] directly.
+//!
+//! Every family reads only the [`EstimatorSpec`] (the model, the prior, what is known of the
+//! channel) and the run's [`RunStart`]: never a simulator. A simulated scenario produces its
+//! spec; a user writes one (`run --estimator-spec FILE`).
 
 mod adapter;
 mod fed;
@@ -17,39 +21,30 @@ pub mod kf;
 pub mod nn;
 pub mod occlusion;
 pub mod pf;
+mod seed;
 mod slots;
 mod snapshot;
 pub mod tobit;
 
-use std::borrow::Cow;
+use std::sync::Arc;
 
-use channel_sim::plant::{LinearDescription, Plant};
-use channel_sim::Scenario;
-use estimator_core::Error;
+use estpipe_spec::EstimatorSpec;
+use estpipe_wire::Observation;
 
 use crate::Estimator;
 
-/// The plant's linear description, or the error every linear adapter reports without one.
-pub(crate) fn linear_of(plant: &dyn Plant) -> Result<&dyn LinearDescription, Error> {
-    plant.linear().ok_or(Error::InvalidConfig {
-        field: "plant",
-        reason: "has no linear description",
-    })
-}
-
-/// An adapter's fixed-size model of instant `k`: `cached` when the plant is time invariant
-/// (converted once, at construction), otherwise converted now by `at` (converting nalgebra's
-/// dynamic matrices allocates, so only time-varying plants pay it per step).
-pub(crate) fn model_at<'a, M: Clone>(
-    cached: &'a Option<M>,
-    plant: &dyn Plant,
-    k: usize,
-    at: impl FnOnce(&dyn LinearDescription, usize) -> Result<M, Error>,
-) -> Result<Cow<'a, M>, Error> {
-    match cached {
-        Some(m) => Ok(Cow::Borrowed(m)),
-        None => at(linear_of(plant)?, k).map(Cow::Owned),
-    }
+/// What a run's estimators are built for beyond the spec: the seed and run index (the
+/// particle filters draw their own random streams from them) and the observations of instant
+/// 0 of a model whose sensors measure at k = 0 (seed 003's y₀, docs/design.md "Seed 003";
+/// `None` otherwise, and for a stream whose y₀ the receiver cannot know).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunStart<'a> {
+    /// Experiment seed.
+    pub seed: u64,
+    /// Run index.
+    pub run: u64,
+    /// The observations of instant 0, node by node, if the run has them.
+    pub initial: Option<&'a [Observation]>,
 }
 
 /// Options of an evaluation that estimators may need. Families add their own fields (with a
@@ -131,13 +126,12 @@ pub fn gate_counts(est: &dyn Estimator) -> Option<(u64, u64)> {
     Some((tested?, rejected?))
 }
 
-/// Builds a family's estimators for run `run` of `scenario` (empty when the family does not
-/// apply). An error means the scenario's parameters are unusable for this family.
+/// Builds a family's estimators for `spec` and the run `start` (empty when the family does not
+/// apply). An error means the spec's parameters are unusable for this family.
 pub type Factory = fn(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    seed: u64,
-    run: u64,
+    start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>>;
 
 /// Every estimator family, in the order they appear in tables, JSON and plots.
@@ -150,18 +144,30 @@ pub const FACTORIES: &[Factory] = &[
     tobit::build,
 ];
 
-/// All estimators that apply to `scenario`, from `factories` in order; only those named in
-/// `options.estimators` when it is not empty.
+/// All estimators that apply to `spec`, from `factories` in order; only those named in
+/// `options.estimators` when it is not empty. The spec's own loss rate and gate apply where
+/// `options` sets none (a flag overrides the file).
 pub fn build_all(
     factories: &[Factory],
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    seed: u64,
-    run: u64,
+    start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
+    let mut merged;
+    let mut options = options;
+    if (options.loss_rate == 0.0 && spec.loss_rate.is_some())
+        || (options.gate.is_none() && spec.gate.is_some())
+    {
+        merged = options.clone();
+        if merged.loss_rate == 0.0 {
+            merged.loss_rate = spec.loss_rate.unwrap_or(0.0);
+        }
+        merged.gate = merged.gate.or(spec.gate);
+        options = &merged;
+    }
     let mut all = Vec::new();
     for f in factories {
-        all.extend(f(scenario, options, seed, run)?);
+        all.extend(f(spec, options, start)?);
     }
     if !options.estimators.is_empty() {
         // `--estimators cce --gate P` selects `cce+gate`.

@@ -28,42 +28,32 @@
 //! prediction).
 //!
 //! **`y₀`.** The paper's bucket takes its first decision at k = 0 and (5) uses `y₀` for `x̂₁`;
-//! the stream's slots start at k = 1. The scenario's run carries `y₀` and its delivery as
-//! its instant-0 observation (`channel_sim::Simulation::initial_observations`), and every
-//! estimator here is built with it ([`initial_measurement`]): re-simulating instant 0 of
-//! `(scenario, seed, run)` gives exactly what the publisher of that run drew, so `eval`,
-//! `run`, `demo` and `replay` initialise identically. A log recorded elsewhere carries no
-//! `y₀`; a replay of it gets the simulated one of `--seed`/`--run` (docs/design.md, "Seed 003").
+//! the stream's slots start at k = 1. A simulated run carries `y₀` and its delivery as its
+//! instant-0 observation, handed to the factory in [`RunStart::initial`], and every estimator
+//! here is built with it ([`initial_measurement`]): the commands re-simulate instant 0 of
+//! `(scenario, seed, run)`, exactly what the publisher of that run drew, so `eval`, `run`,
+//! `demo` and `replay` initialise identically. A log recorded elsewhere, or a run configured
+//! by a spec file, carries no `y₀` (docs/design.md, "Seed 003").
 //!
-//! This scenario's plant has no linear description, so the framework's `kf`/`ikf` do not
-//! apply to it and the name `kf` means the paper's KF here.
+//! This model has no linear description, so the framework's `kf`/`ikf` do not apply to it and
+//! the name `kf` means the paper's KF here.
 
 pub mod pf_coupled;
 
-use channel_sim::channel::token_bucket::TokenBucketStage;
-use channel_sim::plant::nn::Seed003Plant;
-use channel_sim::scenario::ComposedScenario;
-use channel_sim::Scenario;
+use std::sync::Arc;
+
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation, NoNonlinearity};
 use estimator_core::filter::independent_kf::{IndependentMode, IndependentNoiseKf};
-use estimator_core::filter::nn::{
-    check_before_run, BucketParams, NnBoundConfig, NnTbcpEstimator, PreRunVerdict, Tanh,
-};
+use estimator_core::filter::nn::{NnBoundConfig, NnTbcpEstimator, Tanh};
 use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::OnModel;
 use nalgebra::{matrix, SMatrix, SVector};
 
 use super::adapter::Adapted;
 use super::fed::Fed;
-use super::EvalOptions;
+use super::{EvalOptions, RunStart};
 use crate::Estimator;
-
-/// The seed 003 scenario's parts, if `scenario` is one.
-fn seed003(scenario: &dyn Scenario) -> Option<(&ComposedScenario, &Seed003Plant)> {
-    let composed = scenario.as_any().downcast_ref::<ComposedScenario>()?;
-    let plant = composed.plant().as_any().downcast_ref::<Seed003Plant>()?;
-    Some((composed, plant))
-}
+use estpipe_spec::{EstimatorSpec, Model};
 
 /// Section IV's configuration with the scenario's `w̄²`.
 pub fn config(w_var: f64) -> anyhow::Result<NnBoundConfig<f64>> {
@@ -75,35 +65,26 @@ pub fn config(w_var: f64) -> anyhow::Result<NnBoundConfig<f64>> {
 /// `ε̄` of section IV.
 pub const EPS_BAR: f64 = 0.1;
 
-/// `y₀` of run `run` when the bucket sent it (`None` when it was withheld or the scenario has
-/// no instant-0 observation): the run's instant 0 simulated again, which is what the run's
-/// publisher drew (same scenario, seed and run, same streams).
-pub fn initial_measurement(
-    scenario: &dyn Scenario,
-    seed: u64,
-    run: u64,
-) -> Option<SVector<f64, 2>> {
-    let sim = scenario.start(seed, run);
-    let o = sim.initial_observations()?.first()?;
+/// `y₀` when the bucket sent it: node 0's instant-0 observation of the run, if delivered
+/// (`None` when it was withheld or the run has no instant-0 observation).
+pub fn initial_measurement(start: &RunStart<'_>) -> Option<SVector<f64, 2>> {
+    let o = start.initial?.first()?;
     o.measurement().map(SVector::from_column_slice)
 }
 
-/// Builds the seed 003 estimators (none for other scenarios), each initialised with `y₀`
-/// when it was sent.
+/// Builds the seed 003 estimators (none for other specs), each initialised with `y₀` when it
+/// was sent.
 pub fn build(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    seed: u64,
-    run: u64,
+    start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let Some((composed, plant)) = seed003(scenario) else {
+    let Model::Seed003 { w_var: w } = spec.model else {
         return Ok(Vec::new());
     };
-    let init = composed.initial();
-    let x0 = SVector::<f64, 3>::from_column_slice(init.estimator_mean.as_slice());
-    let p0 = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.estimator_cov[(i, j)]);
-    let w = plant.w_var();
-    let y0 = initial_measurement(scenario, seed, run);
+    let x0 = SVector::<f64, 3>::from_column_slice(spec.prior.mean.as_slice());
+    let p0 = SMatrix::<f64, 3, 3>::from_fn(|i, j| spec.prior.cov[(i, j)]);
+    let y0 = initial_measurement(start);
     let named = |name: &'static str| move |e: estimator_core::Error| anyhow::anyhow!("{name}: {e}");
     let mut nn = NnTbcpEstimator::new(
         config(w)?,
@@ -193,8 +174,8 @@ pub fn build(
             w,
             y0,
             options.particles,
-            seed,
-            run,
+            start.seed,
+            start.run,
         )?));
     }
     Ok(all)
@@ -214,37 +195,4 @@ fn nn_diagnostics(
         "phi_exceeds",
         f64::from(u8::from(phi > nn.config().phi_bar())),
     );
-}
-
-/// The assumption checker's pre-run verdict for a seed 003 scenario (`None` otherwise).
-pub fn verdict(scenario: &dyn Scenario) -> anyhow::Result<Option<PreRunVerdict<f64>>> {
-    let Some((composed, plant)) = seed003(scenario) else {
-        return Ok(None);
-    };
-    let init = composed.initial();
-    let e0 = SVector::<f64, 3>::from_column_slice(init.mean.as_slice())
-        - SVector::<f64, 3>::from_column_slice(init.estimator_mean.as_slice());
-    let cov = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.cov[(i, j)]);
-    let p0_true = cov + e0 * e0.transpose();
-    let p0_bar = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.estimator_cov[(i, j)]);
-    let bucket = composed
-        .stage::<TokenBucketStage>()
-        .map(|b| BucketParams {
-            a: b.a,
-            b: b.b,
-            s: b.s,
-            z0: b.z0,
-        })
-        .ok_or_else(|| anyhow::anyhow!("seed 003 scenario without a token-bucket stage"))?;
-    // sup ‖f‖ of section IV's f: x₂ = π/2, |cos x₃| = 1, |sin x₁| = 1 give 8√3.
-    let f_sup = 8.0 * 3f64.sqrt();
-    Ok(Some(check_before_run::<f64, 3, 3, _>(
-        &config(plant.w_var())?,
-        &Tanh,
-        EPS_BAR,
-        &p0_true,
-        &p0_bar,
-        Some(f_sup),
-        bucket,
-    )?))
 }

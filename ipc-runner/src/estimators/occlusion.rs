@@ -4,8 +4,8 @@
 //! paper's third curve, `ikf`, is the generic [`super::ikf`] family (prediction only on a
 //! dropout).
 //!
-//! Applies to composed scenarios with one sensor node, a linear plant and an occlusion stage
-//! ([`OcclusionSpec`] with 1 to 4 intervals), for `n_x ≤ 4` and `n_y ≤ 2`. `cce` uses the
+//! Applies to specs with one sensor node, a linear model and known occlusion regions
+//! ([`Occlusion`](estpipe_spec::channel::Occlusion) with 1 to 4 intervals), for `n_x ≤ 4` and `n_y ≤ 2`. `cce` uses the
 //! KL-optimal 15-component Gaussian sum (`gsum`, σ = 0.0617 r). Diagnostics: `trace_p`.
 //!
 //! A packet lost in transport ([`Packet::Lost`]: lost inside the IPC, missed before join,
@@ -18,62 +18,44 @@
 
 use std::sync::Arc;
 
-use channel_sim::channel::occlusion::OcclusionSpec;
-use channel_sim::plant::Plant;
-use channel_sim::scenario::ComposedScenario;
-use channel_sim::Scenario;
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
 use estimator_core::gsum::GaussSum;
 use estimator_core::protocol::occlusion::Occlusion;
 use estimator_core::{OnModel, Packet};
+use estpipe_spec::{EstimatorSpec, LinearModel};
 use nalgebra::{SMatrix, SVector};
 
 use super::adapter::Adapted;
-use super::fed::Fed;
+use super::fed::{linear, Fed};
 use super::snapshot::{fixed, Snapshot};
-use super::EvalOptions;
+use super::{EvalOptions, RunStart};
 use crate::Estimator;
 
 /// Gaussian components per region used by `cce` (the paper's N = 15).
 pub const CCE_COMPONENTS: usize = 15;
 
-/// Builds `cce`, `kf-io` and `adf` for an occlusion scenario (empty list otherwise).
+/// Builds `cce`, `kf-io` and `adf` for a spec with occlusion regions (empty list otherwise).
 pub fn build(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    _seed: u64,
-    _run: u64,
+    _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let Some(composed) = scenario.as_any().downcast_ref::<ComposedScenario>() else {
+    let Some(occ) = &spec.channel.occlusion else {
         return Ok(Vec::new());
     };
-    if composed.plant().linear().is_none() || scenario.nodes() != 1 {
+    if spec.linear().is_none() || spec.nodes() != 1 {
         return Ok(Vec::new());
     }
-    macro_rules! by_s {
-        ($s:literal) => {
-            if let Some(spec) = composed.stage::<OcclusionSpec<$s>>() {
-                return by_dims::<$s>(composed, spec, options.loss_rate, options.gate);
-            }
-        };
-    }
-    by_s!(1);
-    by_s!(2);
-    by_s!(3);
-    by_s!(4);
-    Ok(Vec::new())
-}
-
-fn by_dims<const S: usize>(
-    composed: &ComposedScenario,
-    spec: &OcclusionSpec<S>,
-    loss_rate: f64,
-    gate: Option<f64>,
-) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let (nx, ny) = (composed.plant().nx(), composed.plant().ny());
+    let (nx, ny) = (spec.nx(), spec.ny());
     macro_rules! go {
         ($nx:literal, $ny:literal) => {
-            family::<$nx, $ny, S>(composed, spec, loss_rate, gate)
+            match occ.count() {
+                1 => family::<$nx, $ny, 1>(spec, options.loss_rate, options.gate),
+                2 => family::<$nx, $ny, 2>(spec, options.loss_rate, options.gate),
+                3 => family::<$nx, $ny, 3>(spec, options.loss_rate, options.gate),
+                4 => family::<$nx, $ny, 4>(spec, options.loss_rate, options.gate),
+                _ => Ok(Vec::new()),
+            }
         };
     }
     match (nx, ny) {
@@ -90,32 +72,34 @@ fn by_dims<const S: usize>(
 }
 
 fn family<const NX: usize, const NY: usize, const S: usize>(
-    composed: &ComposedScenario,
-    spec: &OcclusionSpec<S>,
+    spec: &Arc<EstimatorSpec>,
     loss_rate: f64,
     gate: Option<f64>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let occ: Occlusion<f64, NX, 1, S> = spec.occlusion::<NX>().ok_or_else(|| {
+    let known = spec
+        .channel
+        .occlusion
+        .as_ref()
+        .ok_or_else(|| anyhow::anyhow!("the spec has no occlusion regions"))?;
+    let occ: Occlusion<f64, NX, 1, S> = known.at::<NX, S>().ok_or_else(|| {
         anyhow::anyhow!(
-            "the occlusion stage (e of {} entries, psi {}) does not fit the {NX}-state plant",
-            spec.e.len(),
-            spec.psi
+            "the occlusion regions (e of {} entries, psi {}) do not fit the {NX}-state model",
+            known.e().len(),
+            known.psi()
         )
     })?;
-    let init = composed.initial();
-    let x0 = SVector::<f64, NX>::from_column_slice(init.estimator_mean.as_slice());
-    let p0: SMatrix<f64, NX, NX> = fixed(&init.estimator_cov);
-    let plant = composed.plant_arc();
+    let x0 = SVector::<f64, NX>::from_column_slice(spec.prior.mean.as_slice());
+    let p0: SMatrix<f64, NX, NX> = fixed(&spec.prior.cov);
     let gsum = GaussSum::<f64, 1, CCE_COMPONENTS>::uniform()?;
     let cce =
         CrossCoupledEstimator::new(x0, p0, occ, &gsum).map_err(|e| anyhow::anyhow!("cce: {e}"))?;
     let kfio = KfIo::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("kf-io: {e}"))?;
     let adf = AssumedDensityFilter::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("adf: {e}"))?;
-    let model = Snapshot::<NX, NY>::at(super::linear_of(&*plant)?, 1);
+    let model = Snapshot::<NX, NY>::at(linear(spec)?, 1);
     let mut out = vec![
-        adapted("cce", &plant, OnModel::new(model, cce), gate)?,
-        adapted("kf-io", &plant, OnModel::new(model, kfio), gate)?,
-        adapted("adf", &plant, OnModel::new(model, adf), gate)?,
+        adapted("cce", spec, OnModel::new(model, cce), gate)?,
+        adapted("kf-io", spec, OnModel::new(model, kfio), gate)?,
+        adapted("adf", spec, OnModel::new(model, adf), gate)?,
     ];
     if loss_rate > 0.0 {
         let bad = |name: &str, e: estimator_core::Error| anyhow::anyhow!("{name}: {e}");
@@ -129,18 +113,27 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
             .with_loss_rate(loss_rate)
             .map_err(|e| bad("adf-mix", e))?;
         out.extend([
-            adapted("cce-mix", &plant, OnModel::new(model, cce), gate)?,
-            adapted("kf-io-mix", &plant, OnModel::new(model, kfio), gate)?,
-            adapted("adf-mix", &plant, OnModel::new(model, adf), gate)?,
+            adapted("cce-mix", spec, OnModel::new(model, cce), gate)?,
+            adapted("kf-io-mix", spec, OnModel::new(model, kfio), gate)?,
+            adapted("adf-mix", spec, OnModel::new(model, adf), gate)?,
         ]);
     }
     Ok(out)
 }
 
+/// The input term of instant `k` in `on`'s model.
+fn set_input<const NX: usize, const NY: usize, F>(
+    on: &mut OnModel<Snapshot<NX, NY>, F, NY>,
+    model: &LinearModel,
+    k: usize,
+) {
+    on.model.set_input(model, k);
+}
+
 /// `on` (a filter on node 0's model) under `name`.
 fn adapted<const NX: usize, const NY: usize, F>(
     name: &'static str,
-    plant: &Arc<dyn Plant>,
+    spec: &Arc<EstimatorSpec>,
     on: OnModel<Snapshot<NX, NY>, F, NY>,
     gate: Option<f64>,
 ) -> anyhow::Result<Box<dyn Estimator>>
@@ -150,9 +143,7 @@ where
         + Send
         + 'static,
 {
-    let fed = Fed::on_plant(on, Arc::clone(plant), |on, model, k| {
-        on.model = Snapshot::at(model, k);
-    });
+    let fed = Fed::on_model(on, spec, set_input);
     let a = Adapted::<_, NX>::new(name, fed)
         .with_gate(gate)
         .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
@@ -162,23 +153,23 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::estimators::RunStart;
     use crate::estimators::{build_all, FACTORIES};
-    use channel_sim::sim::FLAG_OCCLUDED;
-    use estpipe_wire::FLAG_IPC_LOST;
+    use estpipe_wire::{Observation, FLAG_IPC_LOST, FLAG_OCCLUDED};
 
     /// A slot lost in the IPC is a prediction for every occlusion estimator (the same as
     /// `ikf`'s), a dropout is not: from the same prior, after one instant.
     #[test]
     fn a_lost_slot_is_a_prediction_and_a_dropout_is_not() {
-        let s = channel_sim::scenario::preset("occlusion").unwrap();
+        let s = crate::source::preset_spec("occlusion");
         let options = EvalOptions {
             particles: 0,
             loss_rate: 0.2,
             ..EvalOptions::default()
         };
         let after = |flags: u32| {
-            let mut ests = build_all(FACTORIES, &*s, &options, 0, 0).unwrap();
-            let obs = [channel_sim::Observation::dropped(1, 0, 2, flags)];
+            let mut ests = build_all(FACTORIES, &s, &options, &RunStart::default()).unwrap();
+            let obs = [Observation::dropped(1, 0, 2, flags)];
             ests.iter_mut()
                 .filter(|e| !e.full_information())
                 .map(|e| {

@@ -25,83 +25,66 @@
 
 use std::sync::Arc;
 
-use channel_sim::channel::occlusion::OcclusionSpec;
-use channel_sim::plant::{LinearDescription, Plant};
-use channel_sim::rng::splitmix64;
-use channel_sim::scenario::ComposedScenario;
-use channel_sim::sim::{MAX_NX, MAX_NY};
-use channel_sim::{Observation, Scenario};
 use estimator_core::gauss::{ln_interval_prob, log_sum_exp};
 use estimator_core::Error;
-use estpipe_wire::FLAGS_LOST;
-use nalgebra::{DMatrix, DVector};
+use estpipe_spec::{EstimatorSpec, LinearModel};
+use estpipe_wire::{Observation, FLAGS_LOST, MAX_NX, MAX_NY};
+use nalgebra::DMatrix;
 
-use super::EvalOptions;
+use super::seed::splitmix64;
+use super::{EvalOptions, RunStart};
 use crate::{CovarianceKind, Estimator};
 
 /// Default particle count.
 pub const DEFAULT_PARTICLES: usize = 5000;
 
-/// Builds `pf` for an occlusion scenario (empty list otherwise or with `--particles 0`), and
-/// `pf-mix` beside it when `options.loss_rate > 0`.
+/// Builds `pf` for a spec with occlusion regions (empty list otherwise or with
+/// `--particles 0`), and `pf-mix` beside it when `options.loss_rate > 0`.
 pub fn build(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    seed: u64,
-    run: u64,
+    start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     if options.particles == 0 {
         return Ok(Vec::new());
     }
-    let Some(composed) = scenario.as_any().downcast_ref::<ComposedScenario>() else {
+    let Some(occ) = &spec.channel.occlusion else {
         return Ok(Vec::new());
     };
-    if composed.plant().linear().is_none() || scenario.nodes() != 1 {
+    if spec.linear().is_none() || spec.nodes() != 1 {
         return Ok(Vec::new());
     }
-    macro_rules! by_s {
-        ($s:literal) => {
-            if let Some(spec) = composed.stage::<OcclusionSpec<$s>>() {
-                let intervals: Vec<(f64, f64)> = (0..$s)
-                    .map(|i| {
-                        let c = spec.regions.centre(i)[0];
-                        let r = spec.regions.radius(i);
-                        (c - r, c + r)
-                    })
-                    .collect();
-                let make = |intervals| {
-                    ParticleFilter::new(
-                        composed,
-                        spec.e.clone(),
-                        spec.psi,
-                        intervals,
-                        options.particles,
-                        seed,
-                        run,
-                    )
-                };
-                let mut out: Vec<Box<dyn Estimator>> = vec![Box::new(make(intervals.clone())?)];
-                let p = options.loss_rate;
-                if p > 0.0 {
-                    anyhow::ensure!(
-                        p.is_finite() && p < 1.0,
-                        "pf-mix: invalid loss_rate: must be finite and in [0, 1)"
-                    );
-                    // The same seed: pf-mix draws the same random numbers as pf.
-                    let mut mix = make(intervals)?;
-                    mix.name = "pf-mix";
-                    mix.ln_loss = Some((p.ln(), (-p).ln_1p()));
-                    out.push(Box::new(mix));
-                }
-                return Ok(out);
-            }
-        };
+    let intervals: Vec<(f64, f64)> = occ
+        .centres()
+        .iter()
+        .zip(occ.radii())
+        .map(|(c, r)| (c - r, c + r))
+        .collect();
+    let make = |intervals| {
+        ParticleFilter::new(
+            spec,
+            occ.e().to_vec(),
+            occ.psi(),
+            intervals,
+            options.particles,
+            start.seed,
+            start.run,
+        )
+    };
+    let mut out: Vec<Box<dyn Estimator>> = vec![Box::new(make(intervals.clone())?)];
+    let p = options.loss_rate;
+    if p > 0.0 {
+        anyhow::ensure!(
+            p.is_finite() && p < 1.0,
+            "pf-mix: invalid loss_rate: must be finite and in [0, 1)"
+        );
+        // The same seed: pf-mix draws the same random numbers as pf.
+        let mut mix = make(intervals)?;
+        mix.name = "pf-mix";
+        mix.ln_loss = Some((p.ln(), (-p).ln_1p()));
+        out.push(Box::new(mix));
     }
-    by_s!(1);
-    by_s!(2);
-    by_s!(3);
-    by_s!(4);
-    Ok(Vec::new())
+    Ok(out)
 }
 
 /// xoshiro256++ (Blackman & Vigna), with Box–Muller normals.
@@ -154,7 +137,7 @@ struct ParticleFilter {
     name: &'static str,
     /// `(ln p_loss, ln(1 − p_loss))` of `pf-mix`.
     ln_loss: Option<(f64, f64)>,
-    plant: Arc<dyn Plant>,
+    spec: Arc<EstimatorSpec>,
     e: Vec<f64>,
     sd_n: f64,
     /// Regions as intervals, and the gaps between them (half-lines included), both sorted.
@@ -172,31 +155,28 @@ struct ParticleFilter {
     /// The weighted sample covariance Σ_p w_p (x_p − x̂)(x_p − x̂)ᵀ, row-major (P_0 before the
     /// first step).
     cov: Vec<f64>,
-    /// The model's factors, computed once for a time-invariant plant (no allocation per step).
-    cached: Option<PfModel>,
+    /// The model's factors, computed once (no allocation per step).
+    model: PfModel,
     rng: Rng,
 }
 
-/// `A`, `L_Q` (lower Cholesky factor of `BQBᵀ`), the known input term `B_u u`, `C`, `L_R` of
-/// one instant.
+/// `A`, `L_Q` (lower Cholesky factor of `BQBᵀ`), `C`, `L_R` (the known input term `B_u u`
+/// is evaluated per instant, in place).
 #[derive(Clone)]
 struct PfModel {
     a: DMatrix<f64>,
     lq: DMatrix<f64>,
-    bu: Option<DVector<f64>>,
     c: DMatrix<f64>,
     lr: DMatrix<f64>,
 }
 
 impl PfModel {
-    fn at(model: &dyn LinearDescription, k: usize) -> Result<Self, Error> {
-        let prev = k.saturating_sub(1);
+    fn of(model: &LinearModel) -> Result<Self, Error> {
         Ok(Self {
-            a: model.a(prev),
-            lq: lower_cholesky(&model.process_cov(prev), "process covariance")?,
-            bu: model.input(prev),
-            c: model.c(0, k),
-            lr: lower_cholesky(&model.measurement_cov(0, k), "measurement covariance")?,
+            a: model.a().clone(),
+            lq: lower_cholesky(model.process_cov(), "process covariance")?,
+            c: model.c(0).clone(),
+            lr: lower_cholesky(model.measurement_cov(0), "measurement covariance")?,
         })
     }
 }
@@ -233,7 +213,7 @@ fn lower_cholesky(m: &DMatrix<f64>, what: &'static str) -> Result<DMatrix<f64>, 
 
 impl ParticleFilter {
     fn new(
-        composed: &ComposedScenario,
+        spec: &Arc<EstimatorSpec>,
         e: Vec<f64>,
         psi: f64,
         mut regions: Vec<(f64, f64)>,
@@ -241,8 +221,10 @@ impl ParticleFilter {
         seed: u64,
         run: u64,
     ) -> anyhow::Result<Self> {
-        let nx = composed.plant().nx();
-        let ny = composed.plant().ny();
+        let (nx, ny) = (spec.nx(), spec.ny());
+        let linear = spec
+            .linear()
+            .ok_or_else(|| anyhow::anyhow!("pf: the spec has no linear model"))?;
         regions.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut gaps = Vec::with_capacity(regions.len() + 1);
         let mut lo = f64::NEG_INFINITY;
@@ -251,8 +233,8 @@ impl ParticleFilter {
             lo = b;
         }
         gaps.push((lo, f64::INFINITY));
-        let init = composed.initial();
-        let l0 = lower_cholesky(&init.estimator_cov, "P0")?;
+        let prior = &spec.prior;
+        let l0 = lower_cholesky(&prior.cov, "P0")?;
         // "pf" stream: independent of the simulation's plant and channel streams.
         let mut rng = Rng::new(splitmix64(splitmix64(seed ^ 0x7066_5f70_6172_7469) ^ run));
         let mut x = vec![0.0; n * nx];
@@ -262,7 +244,7 @@ impl ParticleFilter {
                 *v = rng.normal();
             }
             for i in 0..nx {
-                let mut acc = init.estimator_mean[i];
+                let mut acc = prior.mean[i];
                 for j in 0..=i {
                     acc += l0[(i, j)] * xi[j];
                 }
@@ -272,7 +254,7 @@ impl ParticleFilter {
         Ok(Self {
             name: "pf",
             ln_loss: None,
-            plant: composed.plant_arc(),
+            spec: Arc::clone(spec),
             e,
             sd_n: psi.sqrt(),
             regions,
@@ -284,16 +266,9 @@ impl ParticleFilter {
             lw: vec![-(n as f64).ln(); n],
             scratch: vec![0.0; n * nx],
             lw_scratch: vec![0.0; n],
-            mean: init.estimator_mean.as_slice().to_vec(),
-            cov: (0..nx * nx)
-                .map(|i| init.estimator_cov[(i / nx, i % nx)])
-                .collect(),
-            cached: composed
-                .plant()
-                .linear()
-                .filter(|m| m.time_invariant())
-                .map(|m| PfModel::at(m, 1))
-                .transpose()?,
+            mean: prior.mean.as_slice().to_vec(),
+            cov: (0..nx * nx).map(|i| prior.cov[(i / nx, i % nx)]).collect(),
+            model: PfModel::of(linear)?,
             rng,
         })
     }
@@ -334,9 +309,12 @@ impl Estimator for ParticleFilter {
     }
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let m = super::model_at(&self.cached, &*self.plant, k as usize, PfModel::at)?;
+        let m = &self.model;
         let (a, lq, c, lr) = (&m.a, &m.lq, &m.c, &m.lr);
-        let bu = m.bu.as_ref().map(|v| v.as_slice());
+        let mut u = [0.0; MAX_NX];
+        let bu = super::fed::linear(&self.spec)?
+            .input_into(k.saturating_sub(1) as usize, &mut u)
+            .then_some(&u[..self.nx]);
         let (nx, ny) = (self.nx, self.ny);
         let mut y_buf = [0.0; MAX_NY];
         // Lost in transport: no likelihood, the particles only move.
@@ -451,6 +429,7 @@ impl Estimator for ParticleFilter {
 mod tests {
     use super::*;
     use crate::estimators::{build_all, FACTORIES};
+    use nalgebra::DVector;
 
     /// The weighted covariance against nalgebra's products on the same particles: the
     /// weighted mean m = Σ w x and Σ w x xᵀ − m mᵀ (a different formula, same quantity).
@@ -490,15 +469,19 @@ mod tests {
     #[test]
     fn a_slot_lost_on_the_network_is_no_information() {
         use estpipe_wire::{FLAG_IPC_LOST, FLAG_NET_LOST};
-        let s = channel_sim::scenario::preset("occlusion").unwrap();
+        let s = crate::source::preset_spec("occlusion");
         let options = EvalOptions {
             particles: 2000,
             estimators: vec!["pf".into()],
             ..EvalOptions::default()
         };
         let mut out = Vec::new();
+        let start = RunStart {
+            seed: 3,
+            ..RunStart::default()
+        };
         for flags in [FLAG_IPC_LOST, FLAG_NET_LOST, 0] {
-            let mut ests = build_all(FACTORIES, &*s, &options, 3, 0).unwrap();
+            let mut ests = build_all(FACTORIES, &s, &options, &start).unwrap();
             let o = Observation::dropped(1, 0, s.ny() as u8, flags);
             ests[0].step(1, &[o]).unwrap();
             let mut x = [0.0; 3];
@@ -519,14 +502,17 @@ mod tests {
     /// tr P; the observed gap is a few percent), and it is reported as an estimate.
     #[test]
     fn pf_covariance_is_the_kf_covariance_where_occlusion_says_nothing() {
-        let s = channel_sim::scenario::preset("occlusion").unwrap();
+        let (s, mut sim) = crate::source::preset_run("occlusion", 3, 0);
+        let start = RunStart {
+            seed: 3,
+            ..RunStart::default()
+        };
         let options = EvalOptions {
             particles: 40_000,
             estimators: vec!["ikf".into(), "pf".into()],
             ..EvalOptions::default()
         };
-        let mut ests = build_all(FACTORIES, &*s, &options, 3, 0).unwrap();
-        let mut sim = s.start(3, 0);
+        let mut ests = build_all(FACTORIES, &s, &options, &start).unwrap();
         let inst = sim.next_instant();
         assert!(inst.obs[0].delivered, "precondition: k = 1 delivered");
         let mut p = [[0.0; 9]; 2];

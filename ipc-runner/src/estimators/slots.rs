@@ -1,4 +1,4 @@
-//! What the slot observations of one instant (`channel_sim::Observation`, one per node) become
+//! What the slot observations of one instant ([`Observation`], one per node) become
 //! for a core estimator: its [`Estimator::Measurement`](estimator_core::Estimator::Measurement),
 //! a [`Packet`] or one per node.
 //!
@@ -15,8 +15,8 @@
 //!   or instant the runner has no observation of at all:
 //!   [`Packet::Lost`], which carries none.
 
-use channel_sim::Observation;
 use estimator_core::Packet;
+use estpipe_wire::Observation;
 use estpipe_wire::FLAGS_LOST;
 use nalgebra::SVector;
 
@@ -69,8 +69,8 @@ impl<const NY: usize, const L: usize> FromSlots for [Packet<f64, NY>; L] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use channel_sim::sim::{FLAG_OCCLUDED, FLAG_RANDOM_LOSS};
     use estpipe_wire::{FLAG_IPC_LOST, FLAG_NET_LOST};
+    use estpipe_wire::{FLAG_OCCLUDED, FLAG_RANDOM_LOSS};
 
     #[test]
     fn delivered_dropped_and_lost() {

@@ -1,15 +1,16 @@
-//! The plant's linear description at one instant, at the fixed sizes the core filters take.
+//! The spec's linear model at one instant, at the fixed sizes the core filters take.
 //!
-//! channel-sim describes a plant with nalgebra's dynamic matrices; the core runs on
-//! const-generic ones. Converting allocates (every dynamic matrix the description returns is a
-//! fresh one), so the adapters convert a time-invariant plant once, at construction, and only a
-//! time-varying one at every step ([`super::fed::Fed`]).
+//! The spec describes a model with nalgebra's dynamic matrices; the core runs on const-generic
+//! ones. The matrices are constant, so the adapters convert them once, at construction; of a
+//! controlled model only the input term `B_u u_{k−1}` changes, and [`Snapshot::set_input`]
+//! writes it in place at every step, without allocating ([`super::fed::Fed`]).
 
-use channel_sim::plant::LinearDescription;
 use estimator_core::model::LinearSystem;
+use estpipe_spec::LinearModel;
+use estpipe_wire::MAX_NX;
 use nalgebra::{DMatrix, SMatrix, SVector};
 
-/// One node's view of the plant at instant `k` as a core [`LinearSystem`]: `A`, `B Q Bᵀ` and
+/// One node's view of the model at instant `k` as a core [`LinearSystem`]: `A`, `B Q Bᵀ` and
 /// the known input term `B_u u` (a control input, if the plant has one) of `k − 1`, the node's
 /// `C` and `D R Dᵀ` of `k`. A node that measures fewer components than `NY` (sensors of
 /// different ny) is padded: zero rows of `C`, unit variances in `D R Dᵀ`, and zeros in its
@@ -27,28 +28,21 @@ pub(crate) struct Snapshot<const NX: usize, const NY: usize> {
 
 impl<const NX: usize, const NY: usize> Snapshot<NX, NY> {
     /// Node 0 at instant `k`.
-    pub(crate) fn at(model: &dyn LinearDescription, k: usize) -> Self {
+    pub(crate) fn at(model: &LinearModel, k: usize) -> Self {
         let [s] = Self::nodes(model, 1, k);
         s
     }
 
     /// Nodes `0..nodes` at instant `k` (`A` and `B Q Bᵀ` converted once). The entries from
     /// `nodes` on, which no node fills, have `C = 0` and `D R Dᵀ = I`.
-    pub(crate) fn nodes<const L: usize>(
-        model: &dyn LinearDescription,
-        nodes: usize,
-        k: usize,
-    ) -> [Self; L] {
-        let prev = k.saturating_sub(1);
-        let (a, q) = (fixed(&model.a(prev)), fixed(&model.process_cov(prev)));
-        let u = model
-            .input(prev)
-            .map(|u| SVector::<f64, NX>::from_fn(|i, _| u[i]));
+    pub(crate) fn nodes<const L: usize>(model: &LinearModel, nodes: usize, k: usize) -> [Self; L] {
+        let (a, q) = (fixed(model.a()), fixed(model.process_cov()));
+        let u = input(model, k);
         core::array::from_fn(|m| {
             let (c, r) = if m < nodes {
                 (
-                    padded(&model.c(m, k), 0.0),
-                    padded(&model.measurement_cov(m, k), 1.0),
+                    padded(model.c(m), 0.0),
+                    padded(model.measurement_cov(m), 1.0),
                 )
             } else {
                 (SMatrix::zeros(), SMatrix::identity())
@@ -56,6 +50,19 @@ impl<const NX: usize, const NY: usize> Snapshot<NX, NY> {
             Self { a, q, c, r, u }
         })
     }
+
+    /// The input term of instant `k` (`B_u u_{k−1}`), written in place.
+    pub(crate) fn set_input(&mut self, model: &LinearModel, k: usize) {
+        self.u = input(model, k);
+    }
+}
+
+/// `B_u u_{k−1}` of instant `k`, if the model has an input.
+fn input<const NX: usize>(model: &LinearModel, k: usize) -> Option<SVector<f64, NX>> {
+    let mut u = [0.0; MAX_NX];
+    model
+        .input_into(k.saturating_sub(1), &mut u)
+        .then(|| SVector::<f64, NX>::from_fn(|i, _| u[i]))
 }
 
 impl<const NX: usize, const NY: usize> LinearSystem<f64, NX, NY> for Snapshot<NX, NY> {

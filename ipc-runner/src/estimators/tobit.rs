@@ -12,8 +12,9 @@
 //! measurement ([`Silence::Predict`], the product's option; docs/tobit-fusion.md, "Predict
 //! on silence"), where the paper updates with the held measurement.
 //!
-//! Applies to a composed scenario with a linear plant, a [`TobitCensoring`] stage (τ_m) and a
-//! [`TriggeredTokenBucket`] stage (σ_m, χ_m, λ_m, η_{m,0} enter Ξ). A node whose packet was not
+//! Applies to a spec with a linear model, Tobit censoring thresholds τ_m
+//! ([`TobitCensoring`]) and event triggers sharing a token bucket ([`TriggeredTokenBucket`]:
+//! σ_m, χ_m, λ_m, η_{m,0} enter Ξ). A node whose packet was not
 //! delivered has θ = 1 (the filter holds its last received measurement, eq. 19). The filter's
 //! own scalars are the example's (ε₁…ε₅ = 0.05, ε₆…ε₁₃ = 0.7, ε₁₄ = 1, d = 1.5, e = 2),
 //! C(Υ∘Ω₁)Cᵀ as written, α_m = 1/l (`docs/design.md` "Seed 004").
@@ -26,21 +27,19 @@
 
 use std::sync::{Arc, Mutex};
 
-use channel_sim::channel::event_trigger::TriggeredTokenBucket;
-use channel_sim::channel::tobit::TobitCensoring;
-use channel_sim::plant::Plant;
-use channel_sim::scenario::ComposedScenario;
-use channel_sim::{Observation, Scenario};
 use estimator_core::filter::gate::GateState;
 use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
 use estimator_core::filter::{GatedStep as _, InnovationGate, TobitFusion};
 use estimator_core::{Error, Estimator as _, OnModel};
-use nalgebra::{DMatrix, SVector};
+use estpipe_spec::channel::{TobitCensoring, TriggeredTokenBucket};
+use estpipe_spec::{EstimatorSpec, LinearModel};
+use estpipe_wire::Observation;
+use nalgebra::SVector;
 
 use super::adapter::{gated_name, write_row_major};
-use super::fed::Fed;
+use super::fed::{linear, Fed};
 use super::snapshot::{fixed, Snapshot};
-use super::EvalOptions;
+use super::{EvalOptions, RunStart};
 use crate::{CovarianceKind, Estimator};
 
 /// The names of the local views, node 1 first.
@@ -73,22 +72,21 @@ pub const XI_D: f64 = 1.5;
 /// `e_t` of Ξ in the example.
 pub const XI_E: f64 = 2.0;
 
-/// Builds the views for a scenario with the seed 004 channel (empty otherwise).
+/// Builds the views for a spec with the seed 004 channel (empty otherwise).
 pub fn build(
-    scenario: &dyn Scenario,
+    spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
-    _seed: u64,
-    _run: u64,
+    _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let Some(parts) = Parts::of(scenario) else {
+    let Some(parts) = Parts::of(spec) else {
         return Ok(Vec::new());
     };
-    let (nx, ny, l) = (scenario.nx(), scenario.ny(), scenario.nodes());
-    if let Some(m) = (0..l).find(|&m| scenario.node_ny(m) != ny) {
+    let (nx, ny, l) = (spec.nx(), spec.ny(), spec.nodes());
+    if let Some(m) = (0..l).find(|&m| spec.node_ny(m) != ny) {
         anyhow::bail!(
             "tobit: the Tobit fusion filters need the same n_y at every node, but node {m} \
              measures {} and another {ny} components",
-            scenario.node_ny(m)
+            spec.node_ny(m)
         );
     }
     macro_rules! by_l {
@@ -113,39 +111,32 @@ pub fn build(
     }
 }
 
-/// What the factory reads from the scenario.
+/// What the factory reads from the spec.
 #[derive(Debug)]
 pub struct Parts {
-    plant: Arc<dyn Plant>,
+    spec: Arc<EstimatorSpec>,
     censoring: TobitCensoring,
     trigger: TriggeredTokenBucket,
-    x0: Vec<f64>,
-    p0: DMatrix<f64>,
 }
 
 impl Parts {
-    /// The seed 004 parts of `scenario`, if it has them.
-    pub fn of(scenario: &dyn Scenario) -> Option<Self> {
-        let composed = scenario.as_any().downcast_ref::<ComposedScenario>()?;
-        let plant = composed.plant_arc();
-        plant.linear()?;
-        let init = composed.initial();
+    /// The seed 004 parts of `spec`, if it has them.
+    pub fn of(spec: &Arc<EstimatorSpec>) -> Option<Self> {
+        spec.linear()?;
         Some(Self {
-            censoring: composed.stage::<TobitCensoring>()?.clone(),
-            trigger: composed.stage::<TriggeredTokenBucket>()?.clone(),
-            plant,
-            x0: init.estimator_mean.as_slice().to_vec(),
-            p0: init.estimator_cov.clone(),
+            censoring: spec.channel.tobit.clone()?,
+            trigger: spec.channel.event_trigger.clone()?,
+            spec: Arc::clone(spec),
         })
     }
 
-    /// The λχ warnings of the scenario's triggers (printed by the evaluation).
+    /// The λχ warnings of the spec's triggers (printed by the evaluation).
     pub fn warnings(&self) -> Vec<String> {
         self.trigger.warnings()
     }
 }
 
-/// A fresh fusion filter for the scenario whose local filters do `silence` at an instant
+/// A fresh fusion filter for the spec whose local filters do `silence` at an instant
 /// without a measurement.
 pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
@@ -177,8 +168,8 @@ pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
     let cfgs: [TobitFilterConfig<f64, NY>; L] = core::array::from_fn(|m| cfgs[m]);
     TobitFusion::new(
         cfgs,
-        SVector::from_column_slice(&parts.x0),
-        fixed(&parts.p0),
+        SVector::from_column_slice(parts.spec.prior.mean.as_slice()),
+        fixed(&parts.spec.prior.cov),
     )
     .map_err(|e| anyhow::anyhow!("tobit: initial prior: {e}"))
 }
@@ -187,21 +178,26 @@ pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
 type OnNodes<const NX: usize, const NY: usize, const L: usize> =
     OnModel<[Snapshot<NX, NY>; L], TobitFusion<f64, NX, NY, L>, NY>;
 
-/// A fresh fusion filter on the scenario's model, converted for instant 1 (and by [`Fed`] for
-/// every instant when the plant is time varying).
+/// A fresh fusion filter on the spec's model, converted for instant 1 (its input term brought
+/// to every instant by [`Fed`] when the model has one).
 fn fed_fusion<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
     silence: Silence,
 ) -> anyhow::Result<Fed<OnNodes<NX, NY, L>>> {
-    let model = Snapshot::nodes(super::linear_of(&*parts.plant)?, L, 1);
+    let model = Snapshot::nodes(linear(&parts.spec)?, L, 1);
     let on = OnModel::new(model, fusion_for::<NX, NY, L>(parts, silence)?);
-    Ok(Fed::on_plant(
-        on,
-        Arc::clone(&parts.plant),
-        |on, model, k| {
-            on.model = Snapshot::nodes(model, L, k);
-        },
-    ))
+    Ok(Fed::on_model(on, &parts.spec, set_inputs))
+}
+
+/// The input term of instant `k` in every node's model.
+fn set_inputs<const NX: usize, const NY: usize, const L: usize>(
+    on: &mut OnNodes<NX, NY, L>,
+    model: &LinearModel,
+    k: usize,
+) {
+    for m in &mut on.model {
+        m.set_input(model, k);
+    }
 }
 
 /// The views' one filter: stepped by whichever view asks first at an instant, its result
@@ -371,8 +367,8 @@ mod tests {
 
     #[test]
     fn builds_views_for_the_preset_and_none_for_others() {
-        let s = channel_sim::scenario::preset("tobit-fusion").unwrap();
-        let v = build(&*s, &EvalOptions::default(), 0, 0).unwrap();
+        let s = crate::source::preset_spec("tobit-fusion");
+        let v = build(&s, &EvalOptions::default(), &RunStart::default()).unwrap();
         let names: Vec<_> = v.iter().map(|e| e.name()).collect();
         assert_eq!(
             names,
@@ -387,27 +383,26 @@ mod tests {
                 "fused-predict"
             ]
         );
-        let lin = channel_sim::scenario::preset("linear").unwrap();
-        assert!(build(&*lin, &EvalOptions::default(), 0, 0)
+        let lin = crate::source::preset_spec("linear");
+        assert!(build(&lin, &EvalOptions::default(), &RunStart::default())
             .unwrap()
             .is_empty());
     }
 
     #[test]
     fn views_step_one_shared_filter_once_per_instant() {
-        let s = channel_sim::scenario::preset("tobit-fusion").unwrap();
-        let parts = Parts::of(&*s).unwrap();
-        let mut v = build(&*s, &EvalOptions::default(), 0, 0).unwrap();
+        let (s, mut sim) = crate::source::preset_run("tobit-fusion", 3, 0);
+        let parts = Parts::of(&s).unwrap();
+        let mut v = build(&s, &EvalOptions::default(), &RunStart::default()).unwrap();
         let mut alone = fusion_for::<2, 2, 3>(&parts, Silence::HeldMeasurement).unwrap();
         let mut predict = fusion_for::<2, 2, 3>(&parts, Silence::Predict).unwrap();
-        let mut sim = s.start(3, 0);
         for k in 1..=50u32 {
             let inst = sim.next_instant();
             for e in v.iter_mut() {
                 e.step(k, &inst.obs).unwrap();
             }
             let models: [Snapshot<2, 2>; 3] =
-                Snapshot::nodes(parts.plant.linear().unwrap(), 3, k as usize);
+                Snapshot::nodes(parts.spec.linear().unwrap(), 3, k as usize);
             let y: Vec<_> = inst
                 .obs
                 .iter()

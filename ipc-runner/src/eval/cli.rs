@@ -211,18 +211,26 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         estimators: Vec::new(),
         ..options.clone()
     };
-    let available: Vec<&str> =
-        crate::estimators::build_all(FACTORIES, &*scenario, &all, options.seed, 0)
-            .map_err(|e| {
-                let origin = match &args.config {
-                    Some(c) => format!("--config {}", c.display()),
-                    None => format!("--scenario {}", scenario.name()),
-                };
-                CommandError::usage(format!("{origin}: {e:#}"))
-            })?
-            .iter()
-            .map(|e| e.name())
-            .collect();
+    let available: Vec<&str> = crate::estimators::build_all(
+        FACTORIES,
+        &scenario.estimator_spec(),
+        &all,
+        &crate::estimators::RunStart {
+            seed: options.seed,
+            run: 0,
+            initial: None,
+        },
+    )
+    .map_err(|e| {
+        let origin = match &args.config {
+            Some(c) => format!("--config {}", c.display()),
+            None => format!("--scenario {}", scenario.name()),
+        };
+        CommandError::usage(format!("{origin}: {e:#}"))
+    })?
+    .iter()
+    .map(|e| e.name())
+    .collect();
     if !options.estimators.is_empty() {
         for n in &options.estimators {
             if !available

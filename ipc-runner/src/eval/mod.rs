@@ -59,7 +59,7 @@ use channel_sim::{Observation, Scenario};
 use estpipe_wire::FLAG_IPC_LOST;
 use rayon::prelude::*;
 
-use crate::estimators::{build_all, EvalOptions, Factory};
+use crate::estimators::{build_all, EvalOptions, Factory, RunStart};
 use crate::limits::{product, Budget, Progress};
 pub use report::{ChannelSummary, EstimatorResult, EvalResult, NodeCounts, Trajectory};
 use std::time::Duration;
@@ -191,7 +191,13 @@ pub fn evaluate_with(
         &format!("--particles {} on {threads} thread(s)", options.particles),
         pf,
     )?;
-    let names: Vec<&'static str> = build_all(factories, scenario, options, options.seed, 0)?
+    let spec = scenario.estimator_spec();
+    let probe = RunStart {
+        seed: options.seed,
+        run: 0,
+        initial: None,
+    };
+    let names: Vec<&'static str> = build_all(factories, &spec, options, &probe)?
         .iter()
         .map(|e| e.name())
         .collect();
@@ -363,7 +369,12 @@ pub fn run_one(
 ) -> anyhow::Result<RunOutput> {
     let (nx, horizon) = (scenario.nx(), options.horizon as usize);
     let mut sim = scenario.start(options.seed, run);
-    let mut estimators = build_all(factories, scenario, options, options.seed, run)?;
+    let start = RunStart {
+        seed: options.seed,
+        run,
+        initial: sim.initial_observations(),
+    };
+    let mut estimators = build_all(factories, &scenario.estimator_spec(), options, &start)?;
     let built: Vec<&str> = estimators.iter().map(|e| e.name()).collect();
     anyhow::ensure!(
         built == names,

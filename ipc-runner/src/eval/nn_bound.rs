@@ -4,10 +4,15 @@
 
 use std::path::Path;
 
+use channel_sim::channel::token_bucket::TokenBucketStage;
+use channel_sim::plant::nn::Seed003Plant;
+use channel_sim::scenario::ComposedScenario;
 use channel_sim::Scenario;
+use estimator_core::filter::nn::{check_before_run, BucketParams, PreRunVerdict, Tanh};
+use nalgebra::{SMatrix, SVector};
 
 use super::report::EvalResult;
-use crate::estimators::nn::verdict;
+use crate::estimators::nn;
 
 /// How the empirical covariance trace compares with the bound, per k.
 #[derive(Clone, Debug, PartialEq)]
@@ -19,6 +24,42 @@ pub struct BoundCheck {
     pub non_finite_at: Vec<usize>,
     /// Smallest tr P̄_k / tr E[e eᵀ] over k ≥ 1.
     pub min_ratio_after_0: f64,
+}
+
+/// The assumption checker's pre-run verdict for a seed 003 scenario (`None` otherwise).
+pub fn verdict(scenario: &dyn Scenario) -> anyhow::Result<Option<PreRunVerdict<f64>>> {
+    let Some(composed) = scenario.as_any().downcast_ref::<ComposedScenario>() else {
+        return Ok(None);
+    };
+    let Some(plant) = composed.plant().as_any().downcast_ref::<Seed003Plant>() else {
+        return Ok(None);
+    };
+    let init = composed.initial();
+    let e0 = SVector::<f64, 3>::from_column_slice(init.mean.as_slice())
+        - SVector::<f64, 3>::from_column_slice(init.estimator_mean.as_slice());
+    let cov = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.cov[(i, j)]);
+    let p0_true = cov + e0 * e0.transpose();
+    let p0_bar = SMatrix::<f64, 3, 3>::from_fn(|i, j| init.estimator_cov[(i, j)]);
+    let bucket = composed
+        .stage::<TokenBucketStage>()
+        .map(|b| BucketParams {
+            a: b.a,
+            b: b.b,
+            s: b.s,
+            z0: b.z0,
+        })
+        .ok_or_else(|| anyhow::anyhow!("seed 003 scenario without a token-bucket stage"))?;
+    // sup ‖f‖ of section IV's f: x₂ = π/2, |cos x₃| = 1, |sin x₁| = 1 give 8√3.
+    let f_sup = 8.0 * 3f64.sqrt();
+    Ok(Some(check_before_run::<f64, 3, 3, _>(
+        &nn::config(plant.w_var())?,
+        &Tanh,
+        nn::EPS_BAR,
+        &p0_true,
+        &p0_bar,
+        Some(f_sup),
+        bucket,
+    )?))
 }
 
 /// Adds `empirical_trace` (= MSE(k) = tr E[e_k e_kᵀ]) to the `nn` entry, prints the assumption

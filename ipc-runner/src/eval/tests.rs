@@ -3,6 +3,7 @@ use channel_sim::{Observation, Scenario};
 use nalgebra::{dmatrix, DMatrix};
 
 use super::*;
+use crate::estimators::RunStart;
 use crate::estimators::{EvalOptions, FACTORIES};
 use crate::Estimator;
 
@@ -213,13 +214,12 @@ impl Estimator for Faulty {
 }
 
 fn faulty(
-    s: &dyn Scenario,
+    s: &std::sync::Arc<estpipe_spec::EstimatorSpec>,
     _o: &EvalOptions,
-    _seed: u64,
-    run: u64,
+    start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     Ok(vec![Box::new(Faulty {
-        run,
+        run: start.run,
         nx: s.nx(),
         k: 0,
     })])
@@ -351,8 +351,8 @@ impl Scenario for NanTruthAt {
     fn nodes(&self) -> usize {
         self.inner.nodes()
     }
-    fn fingerprint(&self) -> u64 {
-        self.inner.fingerprint()
+    fn estimator_spec(&self) -> std::sync::Arc<estpipe_spec::EstimatorSpec> {
+        self.inner.estimator_spec()
     }
     fn start(&self, seed: u64, run: u64) -> Box<dyn channel_sim::Simulation> {
         Box::new(NanTruthSim {
@@ -400,12 +400,20 @@ fn non_finite_truth_is_counted_and_left_out_of_every_mse() {
         .estimators
         .iter()
         .map(|(n, _)| {
-            build_all(FACTORIES, &*plain, &o, 3, 0)
-                .unwrap()
-                .iter()
-                .map(|e| e.name())
-                .find(|m| m == n)
-                .unwrap()
+            build_all(
+                FACTORIES,
+                &plain.estimator_spec(),
+                &o,
+                &RunStart {
+                    seed: 3,
+                    ..Default::default()
+                },
+            )
+            .unwrap()
+            .iter()
+            .map(|e| e.name())
+            .find(|m| m == n)
+            .unwrap()
         })
         .collect();
     for (j, ((name, ra), (_, rb))) in a.estimators.iter().zip(&b.estimators).enumerate() {

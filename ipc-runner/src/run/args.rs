@@ -43,6 +43,11 @@ pub struct RunArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Estimator spec TOML file: the model, prior and channel knowledge of your own sensors,
+    /// with no simulation section (docs/pipeline.md, "Estimator specs"); the stream must
+    /// announce the same model. Instead of `--scenario`/`--config`.
+    #[arg(long, value_name = "FILE", conflicts_with = "config")]
+    pub estimator_spec: Option<PathBuf>,
     /// Estimators to run, comma-separated (default: all real-time ones that apply to the
     /// scenario; `pf` only with `--particles N` or when named here).
     #[arg(long, value_delimiter = ',')]
@@ -112,7 +117,7 @@ pub struct RunArgs {
     /// Instants channel-sim publishes: the horizon the estimators are built for, and the
     /// size of the preallocated trajectory recording (later instants are processed but not
     /// recorded).
-    #[arg(long, default_value_t = channel_sim::publisher::DEFAULT_STEPS)]
+    #[arg(long, default_value_t = wire::DEFAULT_STEPS)]
     pub steps: u32,
     /// Write estimates and truth per instant to this CSV file at the end.
     #[arg(long)]
@@ -165,6 +170,7 @@ impl RunArgs {
         Self {
             scenario: scenario.to_string(),
             config: None,
+            estimator_spec: None,
             estimators: Vec::new(),
             particles: None,
             loss_rate: 0.0,
@@ -182,7 +188,7 @@ impl RunArgs {
             mlock: false,
             seed: 0,
             run: 0,
-            steps: channel_sim::publisher::DEFAULT_STEPS,
+            steps: wire::DEFAULT_STEPS,
             estimates_csv: None,
             slots_csv: None,
             latency_csv: None,
@@ -257,5 +263,5 @@ impl RunArgs {
 }
 
 fn observation_bytes() -> u64 {
-    size_of::<channel_sim::Observation>() as u64
+    size_of::<wire::Observation>() as u64
 }

@@ -30,11 +30,11 @@
 //! slot with another stream id is counted and skipped, so a stream id flipping on every other
 //! slot never resets the estimators.
 
-use channel_sim::sim::{MAX_NODES, MAX_NY};
-use channel_sim::Observation;
+use estpipe_wire::Observation;
 use estpipe_wire::{
     Slot, SlotFault, StreamHeader, FLAG_IPC_LOST, FLAG_NET_LOST, SLOT_ABORT, SLOT_DATA,
 };
+use estpipe_wire::{MAX_NODES, MAX_NY};
 use serde::Serialize;
 
 /// Pending instants the assembler holds: how far one node may run ahead of the slowest

@@ -6,8 +6,8 @@ use crate::latency::Latency;
 use crate::transport::Transport;
 use crate::Estimator;
 use anyhow::Result;
-use channel_sim::sim::MAX_NX;
-use channel_sim::Observation;
+use estpipe_wire::Observation;
+use estpipe_wire::MAX_NX;
 use estpipe_wire::{self as wire, Estimate, COV_LEN, WIRE_VERSION};
 
 use super::args::RunArgs;

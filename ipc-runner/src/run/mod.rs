@@ -63,6 +63,7 @@ pub use slot_loop::{run_loop, Hooks, Progress, PEER_CHECK_NS};
 pub use trajectories::Trajectories;
 
 use crate::limits;
+use crate::source::Source;
 use anyhow::Result;
 use std::sync::Arc;
 
@@ -71,14 +72,20 @@ use std::sync::Arc;
 /// ends in a failure). Returns the process exit code.
 pub fn main(args: &RunArgs) -> Result<i32> {
     args.check_outputs()?;
-    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
+    let source = Arc::new(Source::resolve(
+        &args.scenario,
+        args.config.as_deref(),
+        args.estimator_spec.as_deref(),
+        args.seed,
+        args.run,
+    )?);
+    let spec = Arc::clone(&source.spec);
     let choice =
         select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
     // Before any estimator is built: the particle filter allocates its particles at once.
-    args.check_memory(scenario.nx(), scenario.nodes(), 0, choice.particles)?;
-    let scenario: Arc<dyn channel_sim::Scenario> = scenario.into();
+    args.check_memory(spec.nx(), spec.nodes(), 0, choice.particles)?;
     let make = select::estimators_with(
-        scenario.clone(),
+        source,
         &args.estimators,
         select::Experiment {
             seed: args.seed,
@@ -89,14 +96,7 @@ pub fn main(args: &RunArgs) -> Result<i32> {
     )
     .map_err(|e| limits::BadInput(format!("{e:#}")))?;
     let n_est = make()?.len();
-    args.check_memory(scenario.nx(), scenario.nodes(), n_est, choice.particles)?;
-    let (report, traj) = run_loop(
-        args,
-        scenario.nx(),
-        u8::try_from(scenario.nodes())?,
-        u8::try_from(scenario.ny())?,
-        &make,
-        Hooks::default(),
-    )?;
-    conclude(args, &report, &traj, scenario.ny())
+    args.check_memory(spec.nx(), spec.nodes(), n_est, choice.particles)?;
+    let (report, traj) = run_loop(args, &spec, &make, Hooks::default())?;
+    conclude(args, &report, &traj, spec.ny())
 }

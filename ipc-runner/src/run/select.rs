@@ -1,11 +1,11 @@
 //! Estimator lookup for `run`, `demo` and `replay`: the same [`crate::estimators::FACTORIES`]
-//! as `eval`, so the commands can never disagree about what a name means (scenarios: every
-//! command and the publisher call `channel_sim::scenario::resolve`).
+//! as `eval`, so the commands can never disagree about what a name means, built from the
+//! estimators' [`Source`] (a spec, from a scenario or a spec file) alone.
 
 use crate::estimators::{build_all, EvalOptions, FACTORIES};
+use crate::source::Source;
 use crate::Estimator;
 use anyhow::{bail, Result};
-use channel_sim::Scenario;
 use std::sync::Arc;
 
 /// A factory for a fresh set of estimators (called again when a stream restarts).
@@ -61,22 +61,22 @@ impl Choice {
     }
 }
 
-/// The estimators that can run on live data for `scenario`: `names` (all when empty), with
+/// The estimators that can run on live data for `source`: `names` (all when empty), with
 /// `pf` and without the `-mix` variants ([`Choice::EVERY`]; the commands use
 /// [`estimators_with`]). The full-information oracles of `eval`
 /// (`Estimator::full_information`) read observations from before the channel, which a
 /// real-time loop does not have; they are left out.
 pub fn estimators(
-    scenario: Arc<dyn Scenario>,
+    source: Arc<Source>,
     names: &[String],
     exp: Experiment,
 ) -> Result<EstimatorFactory> {
-    estimators_with(scenario, names, exp, Choice::EVERY)
+    estimators_with(source, names, exp, Choice::EVERY)
 }
 
 /// [`estimators`] with the particle count and loss rate of `choice`.
 pub fn estimators_with(
-    scenario: Arc<dyn Scenario>,
+    source: Arc<Source>,
     names: &[String],
     exp: Experiment,
     choice: Choice,
@@ -92,7 +92,12 @@ pub fn estimators_with(
         gate: choice.gate,
         ..EvalOptions::default()
     };
-    let all = build_all(FACTORIES, scenario.as_ref(), &options, exp.seed, exp.run)?;
+    let all = build_all(
+        FACTORIES,
+        &source.spec,
+        &options,
+        &source.start(exp.seed, exp.run),
+    )?;
     let available: Vec<&'static str> = all
         .iter()
         .filter(|e| !e.full_information())
@@ -113,7 +118,7 @@ pub fn estimators_with(
                 } else {
                     "does not exist"
                 },
-                scenario.name(),
+                source.spec.name,
                 available.join(", ")
             );
         }
@@ -121,12 +126,17 @@ pub fn estimators_with(
     if available.is_empty() {
         bail!(
             "no real-time estimator applies to scenario {:?}",
-            scenario.name()
+            source.spec.name
         );
     }
     let names = names.to_vec();
     Ok(Box::new(move || {
-        let built = build_all(FACTORIES, scenario.as_ref(), &options, exp.seed, exp.run)?;
+        let built = build_all(
+            FACTORIES,
+            &source.spec,
+            &options,
+            &source.start(exp.seed, exp.run),
+        )?;
         Ok(built
             .into_iter()
             .filter(|e| !e.full_information())
@@ -140,7 +150,7 @@ mod tests {
     use super::*;
 
     fn names(names: &[&str], particles: Option<usize>, loss_rate: f64) -> Result<Vec<String>> {
-        let scenario: Arc<dyn Scenario> = channel_sim::scenario::preset("occlusion")?.into();
+        let scenario = Arc::new(Source::of_spec(crate::source::preset_spec("occlusion")));
         let names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
         let exp = Experiment {
             seed: 0,
@@ -176,8 +186,7 @@ mod tests {
         let e = names(&["cce-mix"], None, 0.0).unwrap_err().to_string();
         assert!(e.contains("needs --loss-rate P"), "{e}");
         // The library default keeps pf.
-        let scenario: Arc<dyn Scenario> =
-            channel_sim::scenario::preset("occlusion").unwrap().into();
+        let scenario = Arc::new(Source::of_spec(crate::source::preset_spec("occlusion")));
         let exp = Experiment {
             seed: 0,
             run: 0,

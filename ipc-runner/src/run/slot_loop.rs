@@ -7,7 +7,8 @@ use crate::latency::Latency;
 use crate::transport::Transport;
 use crate::Estimator;
 use anyhow::{bail, Result};
-use channel_sim::Observation;
+use estpipe_spec::EstimatorSpec;
+use estpipe_wire::Observation;
 use estpipe_wire::{self as wire, SlotFault, StreamHeader, MAX_NODES};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::time::Duration;
@@ -62,19 +63,17 @@ pub const PEER_CHECK_NS: u64 = 10_000_000;
 
 /// Runs the loop with estimators from `make` (called again for every new stream) until the
 /// stream ends. Errors are configuration/transport failures; a lost publisher is reported in
-/// [`RunReport::ending`]. Every node's ny comes from the scenario's stream header (`_ny` is
-/// not used: nodes may differ).
+/// [`RunReport::ending`]. The estimators were built for `spec`: its stream header is the
+/// shape and model a stream must announce (every node's ny among them: nodes may differ).
 pub fn run_loop(
     args: &RunArgs,
-    nx: usize,
-    nodes: u8,
-    _ny: u8,
+    spec: &EstimatorSpec,
     make: &dyn Fn() -> Result<Vec<Box<dyn Estimator>>>,
     mut hooks: Hooks<'_>,
 ) -> Result<(RunReport, Trajectories)> {
     // The shape a stream must announce to feed these estimators (docs/wire.md, Stream header).
-    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
-    let expected = channel_sim::wire::stream_header(&*scenario);
+    let expected = spec.stream_header();
+    let (nx, nodes) = (spec.nx(), u8::try_from(spec.nodes())?);
     let machine = Machine::set_up(args);
     let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
     let runner = Runner::new(&t, args, make()?, nx, nodes)?;
@@ -185,8 +184,9 @@ pub fn run_loop(
         report.error_code = crate::exit_code_of(&e);
         report.error = Some(format!("{e:#}"));
     }
-    // The scenario's own name: a `--config` file's, not the `--scenario` default.
-    report.scenario = scenario.name().to_string();
+    // The spec's own name: a `--config` or `--estimator-spec` file's, not the `--scenario`
+    // default.
+    report.scenario = spec.name.clone();
     Ok((report, traj))
 }
 

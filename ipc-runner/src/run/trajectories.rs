@@ -2,8 +2,8 @@
 //! estimates, timing and the received slots; written at the end as CSV files.
 
 use anyhow::{Context, Result};
-use channel_sim::sim::MAX_NX;
-use channel_sim::Observation;
+use estpipe_wire::Observation;
+use estpipe_wire::MAX_NX;
 
 /// Recorded trajectories (preallocated; recording stops when full).
 #[derive(Debug, Default)]

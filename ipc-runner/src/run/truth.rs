@@ -2,7 +2,7 @@
 //! kept in a ring by instant, and every estimator's squared error against them.
 
 use crate::transport::Transport;
-use channel_sim::sim::MAX_NX;
+use estpipe_wire::MAX_NX;
 use estpipe_wire::WIRE_VERSION;
 
 /// Instants of truth kept: the truth of k must still be there when k's estimates are out.

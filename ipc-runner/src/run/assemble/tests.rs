@@ -16,7 +16,7 @@ fn slot(k: u32, node: u8, nodes: u8, sid: u64) -> Slot {
         y: if node != 1 { y } else { [0.0; MAX_NY] },
         flags: 0,
     };
-    channel_sim::wire::slot_of(&o, nodes, sid, 10, 0, 100)
+    estpipe_wire::observation::slot_of(&o, nodes, sid, 10, 0, 100)
 }
 
 type Out = Vec<(u32, Vec<Observation>)>;

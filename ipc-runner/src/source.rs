@@ -1,0 +1,110 @@
+//! Where the estimators' spec comes from: a simulated scenario (a preset or a scenario TOML,
+//! which produces its [`EstimatorSpec`]) or a spec file written by hand (`--estimator-spec`).
+//! The one place the runner's commands meet the simulator: `run/`, `estimators/` and
+//! `replay` read only the [`Source`].
+
+use std::path::Path;
+use std::sync::Arc;
+
+use channel_sim::Scenario;
+use estpipe_spec::EstimatorSpec;
+use estpipe_wire::Observation;
+
+use crate::estimators::RunStart;
+
+/// The estimators' spec and what a run adds to it.
+#[derive(Clone, Debug)]
+pub struct Source {
+    /// What the estimators know.
+    pub spec: Arc<EstimatorSpec>,
+    /// The observations of instant 0 of the run (a scenario whose sensors measure at k = 0,
+    /// seed 003's y₀): the run's instant 0 simulated again, which is what its publisher drew.
+    /// `None` for the others and for a spec file (the receiver cannot know a y₀ that was
+    /// never on the stream).
+    pub initial: Option<Vec<Observation>>,
+}
+
+impl Source {
+    /// Run `run` of `scenario` seeded by `seed`.
+    pub fn of_scenario(scenario: &dyn Scenario, seed: u64, run: u64) -> Self {
+        let sim = scenario.start(seed, run);
+        Self {
+            spec: scenario.estimator_spec(),
+            initial: sim.initial_observations().map(<[Observation]>::to_vec),
+        }
+    }
+
+    /// A spec on its own.
+    pub fn of_spec(spec: Arc<EstimatorSpec>) -> Self {
+        Self {
+            spec,
+            initial: None,
+        }
+    }
+
+    /// The spec of `--estimator-spec FILE` when given, else of the scenario of `--scenario
+    /// NAME` / `--config FILE` for run `run` seeded by `seed`. A bad file is bad input naming
+    /// the file and the field.
+    pub fn resolve(
+        scenario: &str,
+        config: Option<&Path>,
+        estimator_spec: Option<&Path>,
+        seed: u64,
+        run: u64,
+    ) -> anyhow::Result<Self> {
+        match estimator_spec {
+            Some(path) => {
+                let spec = estpipe_spec::file::load(path)
+                    .map_err(|e| crate::limits::BadInput(e.to_string()))?;
+                Ok(Self::of_spec(spec))
+            }
+            None => {
+                let scenario = channel_sim::scenario::resolve(scenario, config)?;
+                Ok(Self::of_scenario(&*scenario, seed, run))
+            }
+        }
+    }
+
+    /// The run as the estimator factories see it.
+    pub fn start(&self, seed: u64, run: u64) -> RunStart<'_> {
+        RunStart {
+            seed,
+            run,
+            initial: self.initial.as_deref(),
+        }
+    }
+}
+
+/// The spec of preset `name` (tests of the estimator families, which never read a simulator
+/// themselves).
+#[cfg(test)]
+pub(crate) fn preset_spec(name: &str) -> Arc<EstimatorSpec> {
+    channel_sim::scenario::preset(name)
+        .expect("a preset")
+        .estimator_spec()
+}
+
+/// The spec of preset `name` and its run `(seed, run)` (tests of the estimator families that
+/// need simulated instants).
+#[cfg(test)]
+pub(crate) fn preset_run(
+    name: &str,
+    seed: u64,
+    run: u64,
+) -> (Arc<EstimatorSpec>, Box<dyn channel_sim::Simulation>) {
+    let s = channel_sim::scenario::preset(name).expect("a preset");
+    (s.estimator_spec(), s.start(seed, run))
+}
+
+/// The estimators of `factories` for run `(seed, run)` of `scenario`: its spec and its
+/// instant-0 observations, as `eval` builds them.
+pub fn build_for_scenario(
+    factories: &[crate::estimators::Factory],
+    scenario: &dyn Scenario,
+    options: &crate::estimators::EvalOptions,
+    seed: u64,
+    run: u64,
+) -> anyhow::Result<Vec<Box<dyn crate::Estimator>>> {
+    let source = Source::of_scenario(scenario, seed, run);
+    crate::estimators::build_all(factories, &source.spec, options, &source.start(seed, run))
+}
