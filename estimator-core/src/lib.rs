@@ -97,6 +97,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod catch_up;
 pub mod covariance_update;
 pub mod error;
 pub mod estimate;
@@ -111,6 +112,7 @@ pub mod papers;
 pub mod protocol;
 pub mod real;
 
+pub use catch_up::{catch_up, CatchUp, LostMeasurement};
 pub use covariance_update::{CovarianceForm, CovarianceUpdate, JosephForm, StandardForm};
 pub use error::{Error, Result};
 pub use estimate::Estimate;

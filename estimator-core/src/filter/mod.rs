@@ -4,7 +4,8 @@
 //! * [`gate`]: the innovation gate every estimator with an innovation can run behind
 //!   (docs/gate.md).
 //! * Linear-Gaussian: [`kalman`] (the Kalman filter), [`intermittent`] (update only on
-//!   arrival), [`time_update`] (the prediction they all share).
+//!   arrival), [`sequential_kf`] (several nodes' measurements of one instant, one after the
+//!   other), [`time_update`] (the prediction they all share).
 //! * [`occlusion`] (seed 001): state-dependent dropouts — the cross-coupled estimator, an
 //!   assumed-density filter and the KF-IO baseline.
 //! * [`nn`] (seed 003): the NN estimator under the token bucket; [`coupled_kf`] holds its
@@ -20,6 +21,7 @@ pub mod intermittent;
 pub mod kalman;
 pub mod nn;
 pub mod occlusion;
+pub mod sequential_kf;
 pub mod time_update;
 pub mod tobit;
 
@@ -31,4 +33,5 @@ pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::KalmanFilter;
 pub use nn::NnTbcpEstimator;
 pub use occlusion::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
+pub use sequential_kf::SequentialKf;
 pub use tobit::{TobitFilter, TobitFusion};

@@ -72,107 +72,79 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use super::skeleton::{OcclusionFilter, OcclusionUpdate};
 use super::truncnorm::{truncated_std_normal, union_moments, Intervals};
-use crate::estimate::Estimate;
-use crate::estimator::{Estimator, OnModel};
-use crate::filter::gate::{admits_linear, GateCounts, GatedStep, InnovationGate};
 use crate::filter::kalman::kalman_update;
-use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob, LogSumExp};
 use crate::linalg::check_finite;
 use crate::model::LinearSystem;
-use crate::packet::{check_loss_rate, Packet};
+use crate::packet::check_loss_rate;
 use crate::protocol::occlusion::Occlusion;
 use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
 
-/// Assumed-density filter with the exact occlusion likelihood (`n_e = 1`, `S` regions).
+/// Assumed-density filter with the exact occlusion likelihood (`n_e = 1`, `S` regions): the
+/// [`OcclusionFilter`] of an [`AdfConfig`].
+pub type AssumedDensityFilter<T, const NX: usize, const S: usize> =
+    OcclusionFilter<T, NX, AdfConfig<T, NX, S>>;
+
+/// The configuration of an [`AssumedDensityFilter`]: the occlusion model and its regions as
+/// sorted intervals, whether an arrival truncates, the covariance form of the Kalman update
+/// and the loss rate.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AssumedDensityFilter<T: Real, const NX: usize, const S: usize> {
-    est: Estimate<T, NX>,
+pub struct AdfConfig<T: Real, const NX: usize, const S: usize> {
     occ: Occlusion<T, NX, 1, S>,
     /// Regions as sorted intervals `(lower, upper, index)`.
     sorted: [(T, T, usize); S],
-    label: usize,
-    /// `(m, s)` of `u`'s predicted marginal at the last dropout (`s = 0` before any): the
-    /// region probabilities are computed from it when asked for.
-    dropout_marginal: (T, T),
     truncate_on_arrival: bool,
     form: CovarianceUpdate,
-    /// `(p_loss, ln p_loss, ln(1 − p_loss))` of [`Self::with_loss_rate`] (`p_loss = 0`: none).
+    /// `(p_loss, ln p_loss, ln(1 − p_loss))` of [`AdfConfig::with_loss_rate`] (`p_loss = 0`:
+    /// none).
     loss: (T, T, T),
 }
 
-impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
-    /// Starts from `x̂_0 = x0`, `P_0 = p0`.
-    pub fn new(
-        x0: SVector<T, NX>,
-        p0: SMatrix<T, NX, NX>,
-        occ: Occlusion<T, NX, 1, S>,
-    ) -> Result<Self> {
-        let est = Estimate::new(x0, p0)?;
-        Ok(Self {
-            est,
+/// The running state of an [`AssumedDensityFilter`] beside its estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdfState<T: Real> {
+    /// The most probable region at the last dropout (`1..=S`; 0 after an arrival, and after
+    /// a dropout more probably a loss).
+    pub label: usize,
+    /// `(m, s)` of `u`'s predicted marginal at the last dropout (`s = 0` before any): the
+    /// region probabilities are computed from it when asked for.
+    pub dropout_marginal: (T, T),
+}
+
+impl<T: Real, const NX: usize, const S: usize> AdfConfig<T, NX, S> {
+    /// The occlusion model (its regions sorted here, once).
+    pub fn new(occ: Occlusion<T, NX, 1, S>) -> Self {
+        Self {
             sorted: occ.regions.sorted_intervals(),
             occ,
-            label: 0,
-            dropout_marginal: (T::zero(), T::zero()),
             truncate_on_arrival: true,
             form: CovarianceUpdate::Joseph,
             loss: (T::zero(), -T::one() / T::zero(), T::zero()),
-        })
+        }
     }
 
-    /// A dropout may also be a packet lost in transport with the known probability `p_loss`
-    /// (independent of the state), which the receiver cannot tell from an occlusion dropout:
-    /// the dropout update becomes the exact moments of the two-component posterior (module
-    /// docs, "A known loss rate"). `p_loss = 0` (the default) is the filter without it.
-    /// Refuses a `p_loss` that is not finite or not in `[0, 1)`.
-    pub fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
-        let p = check_loss_rate(p_loss)?;
-        self.loss = (p, p.ln(), (-p).ln_1p());
-        Ok(self)
-    }
-
-    /// `p_loss` (0 unless set by [`Self::with_loss_rate`]).
-    #[inline]
-    pub fn loss_rate(&self) -> T {
-        self.loss.0
-    }
-
-    /// Whether an arrival also truncates `u` to "no region" (default `true`). `false` gives
-    /// the ablation "exact dropout update, plain Kalman arrival update".
+    /// Whether an arrival also truncates `u` to "no region" (default `true`).
     #[must_use]
     pub fn with_arrival_truncation(mut self, on: bool) -> Self {
         self.truncate_on_arrival = on;
         self
     }
 
-    /// Current estimate and covariance.
-    #[inline]
-    pub fn estimate(&self) -> &Estimate<T, NX> {
-        &self.est
+    /// Selects the covariance form of the Kalman part of the arrival update (Joseph by
+    /// default).
+    #[must_use]
+    pub fn with_covariance_update(mut self, form: CovarianceUpdate) -> Self {
+        self.form = form;
+        self
     }
 
-    /// The most probable region at the last dropout (1..=S; 0 after an arrival, and after a
-    /// dropout more probably a loss, see [`Self::with_loss_rate`]).
+    /// The occlusion model.
     #[inline]
-    pub fn label(&self) -> usize {
-        self.label
-    }
-
-    /// `ln P(u_k ∈ R_i | prediction)` per region at the last dropout (0 before any). The step
-    /// evaluates only the regions that can change its result, so these are computed here,
-    /// from the dropout's predicted marginal of `u`.
-    pub fn region_log_probs(&self) -> [T; S] {
-        let (m, s) = self.dropout_marginal;
-        core::array::from_fn(|i| {
-            if s == T::zero() {
-                return T::zero();
-            }
-            let (lo, hi) = self.region(i);
-            truncated_std_normal((lo - m) / s, (hi - m) / s).0
-        })
+    pub fn occlusion(&self) -> &Occlusion<T, NX, 1, S> {
+        &self.occ
     }
 
     /// Region `i` as the interval `(ζ_i − r_i, ζ_i + r_i)`.
@@ -181,74 +153,6 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
         let c = self.occ.regions.centre(i)[0];
         let r = self.occ.regions.radius(i);
         (c - r, c + r)
-    }
-
-    /// One instant `k ≥ 1`: predict, then the exact-likelihood moment-matching update for
-    /// `y = Some(z_k)` (arrival) or `None` (dropout). Returns the most probable label.
-    /// On error nothing changes.
-    pub fn step<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-        y: Option<&SVector<T, NY>>,
-    ) -> Result<usize> {
-        self.advance(model, k, Some(y))?;
-        Ok(self.label)
-    }
-
-    /// Instant `k ≥ 1` without information (a packet lost in transport,
-    /// [`Packet::Lost`]): the prediction (11) only; the label and the region probabilities keep
-    /// the values of the last update. On error nothing changes.
-    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-    ) -> Result<()> {
-        self.advance(model, k, None)
-    }
-
-    /// Instant `k`: `y` is `Some(Some(z_k))` on arrival, `Some(None)` on a dropout, `None`
-    /// for a loss (prediction only). The one place that predicts, so that the prediction is
-    /// inlined once into every step.
-    #[inline(always)]
-    fn advance<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-        y: Option<Option<&SVector<T, NY>>>,
-    ) -> Result<()> {
-        if let Some(Some(y)) = y {
-            check_finite(y, "measurement")?;
-        }
-        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
-        match y {
-            Some(Some(y)) => {
-                let (x1, p1, _) = kalman_update(
-                    &xp,
-                    &pp,
-                    &model.c(k),
-                    &model.measurement_cov(k),
-                    y,
-                    self.form,
-                )?;
-                let (x, p) = if self.truncate_on_arrival {
-                    let (x, p, _, _) = self.truncate(&x1, &p1, true)?;
-                    (x, p)
-                } else {
-                    (x1, p1)
-                };
-                self.est = Estimate::trusted(x, p);
-                self.label = 0;
-            }
-            Some(None) => {
-                let (x, p, label, marginal) = self.truncate(&xp, &pp, false)?;
-                self.est = Estimate::trusted(x, p);
-                self.label = label;
-                self.dropout_marginal = marginal;
-            }
-            None => self.est = Estimate::trusted(xp, pp),
-        }
-        Ok(())
     }
 
     /// Moments of `N(mx, p)` conditioned on `u = E x + n` lying in one of the disjoint
@@ -375,50 +279,130 @@ impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
     }
 }
 
-/// Delivered: the arrival update; dropped: the exact dropout update; lost: prediction only.
-impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
-    Estimator<T, NX> for OnModel<M, AssumedDensityFilter<T, NX, S>, NY>
-{
-    type Measurement = Packet<T, NY>;
+impl<T: Real, const NX: usize, const S: usize> OcclusionUpdate<T, NX> for AdfConfig<T, NX, S> {
+    type State = AdfState<T>;
+    type Output = usize;
 
-    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        let y = match y {
-            Packet::Delivered(y) => Some(Some(y)),
-            Packet::Dropped => Some(None),
-            Packet::Lost => None,
-        };
-        self.filter.advance(&self.model, k, y)
+    fn initial_state(&self) -> AdfState<T> {
+        AdfState {
+            label: 0,
+            dropout_marginal: (T::zero(), T::zero()),
+        }
     }
 
     #[inline]
-    fn estimate(&self) -> &Estimate<T, NX> {
-        self.filter.estimate()
+    fn output(state: &AdfState<T>) -> usize {
+        state.label
+    }
+
+    /// The dropout update becomes the exact moments of the two-component posterior (module
+    /// docs, "A known loss rate").
+    fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
+        let p = check_loss_rate(p_loss)?;
+        self.loss = (p, p.ln(), (-p).ln_1p());
+        Ok(self)
+    }
+
+    #[inline]
+    fn loss_rate(&self) -> T {
+        self.loss.0
+    }
+
+    /// The Kalman update (18), then (by default) the truncation of `u` to the gaps between
+    /// the regions; label 0.
+    #[inline(always)]
+    fn arrival_update<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+        y: &SVector<T, NY>,
+        state: &AdfState<T>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, AdfState<T>)> {
+        let (x1, p1, _) =
+            kalman_update(xp, pp, &model.c(k), &model.measurement_cov(k), y, self.form)?;
+        let (x, p) = if self.truncate_on_arrival {
+            let (x, p, _, _) = self.truncate(&x1, &p1, true)?;
+            (x, p)
+        } else {
+            (x1, p1)
+        };
+        Ok((
+            x,
+            p,
+            AdfState {
+                label: 0,
+                dropout_marginal: state.dropout_marginal,
+            },
+        ))
+    }
+
+    /// The exact moments of the prediction truncated to the regions.
+    #[inline(always)]
+    fn dropout_update<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        _model: &M,
+        _k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+        _state: &AdfState<T>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, AdfState<T>)> {
+        let (x, p, label, dropout_marginal) = self.truncate(xp, pp, false)?;
+        Ok((
+            x,
+            p,
+            AdfState {
+                label,
+                dropout_marginal,
+            },
+        ))
     }
 }
 
-/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
-/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
-/// region).
-impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
-    GatedStep<T, NX> for OnModel<M, AssumedDensityFilter<T, NX, S>, NY>
-{
-    fn step_gated(
-        &mut self,
-        k: usize,
-        y: &Packet<T, NY>,
-        gate: &InnovationGate<T>,
-    ) -> Result<GateCounts> {
-        let Packet::Delivered(z) = y else {
-            return self.step(k, y).map(|()| GateCounts::NONE);
-        };
-        let est = self.filter.estimate();
-        let used = admits_linear(gate, &self.model, k, est.state(), est.covariance(), z)?;
-        if used {
-            self.step(k, y)?;
-        } else {
-            self.filter.predict_to(&self.model, k)?;
-        }
-        Ok(GateCounts::one(used))
+impl<T: Real, const NX: usize, const S: usize> AssumedDensityFilter<T, NX, S> {
+    /// Starts from `x̂_0 = x0`, `P_0 = p0`.
+    pub fn new(
+        x0: SVector<T, NX>,
+        p0: SMatrix<T, NX, NX>,
+        occ: Occlusion<T, NX, 1, S>,
+    ) -> Result<Self> {
+        Self::from_config(x0, p0, AdfConfig::new(occ))
+    }
+
+    /// Whether an arrival also truncates `u` to "no region" (default `true`). `false` gives
+    /// the ablation "exact dropout update, plain Kalman arrival update".
+    #[must_use]
+    pub fn with_arrival_truncation(self, on: bool) -> Self {
+        self.map_config(|c| c.with_arrival_truncation(on))
+    }
+
+    /// Selects the covariance form of the Kalman part of the arrival update (Joseph by
+    /// default).
+    #[must_use]
+    pub fn with_covariance_update(self, form: CovarianceUpdate) -> Self {
+        self.map_config(|c| c.with_covariance_update(form))
+    }
+
+    /// The most probable region at the last dropout (1..=S; 0 after an arrival, and after a
+    /// dropout more probably a loss, see [`OcclusionFilter::with_loss_rate`]).
+    #[inline]
+    pub fn label(&self) -> usize {
+        self.state().label
+    }
+
+    /// `ln P(u_k ∈ R_i | prediction)` per region at the last dropout (0 before any). The step
+    /// evaluates only the regions that can change its result, so these are computed here,
+    /// from the dropout's predicted marginal of `u`.
+    pub fn region_log_probs(&self) -> [T; S] {
+        let (m, s) = self.state().dropout_marginal;
+        core::array::from_fn(|i| {
+            if s == T::zero() {
+                return T::zero();
+            }
+            let (lo, hi) = self.config().region(i);
+            truncated_std_normal((lo - m) / s, (hi - m) / s).0
+        })
     }
 }
 

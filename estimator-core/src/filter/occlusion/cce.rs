@@ -46,33 +46,34 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::estimate::Estimate;
-use crate::estimator::{Estimator, OnModel};
-use crate::filter::gate::{admits_linear, GateCounts, GatedStep, InnovationGate};
+use super::skeleton::{OcclusionFilter, OcclusionUpdate};
 use crate::filter::kalman::kalman_update;
-use crate::filter::time_update::predict;
 use crate::gauss::LN_SQRT_2PI;
 use crate::gsum::GaussSum;
 use crate::linalg::small::{self as small, SmallLdl};
 use crate::linalg::{check_finite, symmetrize};
 use crate::model::LinearSystem;
-use crate::packet::{check_loss_rate, Packet};
+use crate::packet::check_loss_rate;
 use crate::protocol::occlusion::Occlusion;
 use crate::CovarianceUpdate;
 use crate::{Error, Real, Result};
 
 /// Cross-coupled region-label / state estimator (seed 001) on `NX` states, with `S` occlusion
-/// regions in an `NE`-dimensional space, each approximated by `N` Gaussians.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CrossCoupledEstimator<
-    T: Real,
+/// regions in an `NE`-dimensional space, each approximated by `N` Gaussians: the
+/// [`OcclusionFilter`] of a [`CceConfig`].
+pub type CrossCoupledEstimator<
+    T,
     const NX: usize,
     const NE: usize,
     const S: usize,
     const N: usize,
-> {
-    est: Estimate<T, NX>,
-    label: usize,
+> = OcclusionFilter<T, NX, CceConfig<T, NX, NE, S, N>>;
+
+/// The configuration of a [`CrossCoupledEstimator`]: the occlusion model, the Gaussian-sum
+/// table scaled onto every region, the covariance form of the arrival update and the loss
+/// rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CceConfig<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize> {
     occ: Occlusion<T, NX, NE, S>,
     /// `ũ_i^s`: component means scaled onto each region.
     means: [[SVector<T, NE>; N]; S],
@@ -80,28 +81,28 @@ pub struct CrossCoupledEstimator<
     sigma: [SMatrix<T, NE, NE>; S],
     /// `ln |R_i|`.
     ln_vol: [T; S],
-    /// `ln Σ_s ω_{ik}^s` of the last dropout (eq. 16 up to the common `1/N`).
-    region_log_weights: [T; S],
     form: CovarianceUpdate,
-    /// `p_loss` of [`Self::with_loss_rate`].
+    /// `p_loss` of [`CceConfig::with_loss_rate`].
     loss_rate: T,
     /// `ln N + ln p_loss − ln(1 − p_loss)`: the "lost" hypothesis's label score (−∞ at
     /// `p_loss = 0`).
     lost_score: T,
 }
 
+/// The running state of a [`CrossCoupledEstimator`] beside its estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CceState<T: Real, const S: usize> {
+    /// `ĥ_k`: 0 on arrival, `1..=S` on a dropout, 0 on a dropout read as a loss.
+    pub label: usize,
+    /// `ln Σ_s ω_{ik}^s` of the last dropout (eq. 16 up to the common `1/N`).
+    pub region_log_weights: [T; S],
+}
+
 impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
-    CrossCoupledEstimator<T, NX, NE, S, N>
+    CceConfig<T, NX, NE, S, N>
 {
-    /// Starts from `x̂_0 = x0`, `P_0 = p0` with the occlusion model and the Gaussian-sum table
-    /// (scaled here, once, onto every region).
-    pub fn new(
-        x0: SVector<T, NX>,
-        p0: SMatrix<T, NX, NX>,
-        occ: Occlusion<T, NX, NE, S>,
-        gsum: &GaussSum<T, NE, N>,
-    ) -> Result<Self> {
-        let est = Estimate::new(x0, p0)?;
+    /// The occlusion model with the Gaussian-sum table scaled here, once, onto every region.
+    pub fn new(occ: Occlusion<T, NX, NE, S>, gsum: &GaussSum<T, NE, N>) -> Self {
         let mut means = [[SVector::<T, NE>::zeros(); N]; S];
         let mut sigma = [SMatrix::<T, NE, NE>::zeros(); S];
         let mut ln_vol = [T::zero(); S];
@@ -114,40 +115,15 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             sigma[i] = symmetrize(&(SMatrix::<T, NE, NE>::identity() * (sd * sd) + occ.psi));
             ln_vol[i] = occ.regions.volume(i).ln();
         }
-        Ok(Self {
-            est,
-            label: 0,
+        Self {
             occ,
             means,
             sigma,
             ln_vol,
-            region_log_weights: [T::zero(); S],
             form: CovarianceUpdate::Joseph,
             loss_rate: T::zero(),
             lost_score: -T::one() / T::zero(),
-        })
-    }
-
-    /// A dropout may also be a packet lost in transport with the known probability `p_loss`
-    /// (independent of the state), which the receiver cannot tell from an occlusion dropout:
-    /// the label scoring gains the hypothesis "lost" beside the regions (module docs, "A known
-    /// loss rate"). `p_loss = 0` (the default) is the paper's estimator. Refuses a `p_loss`
-    /// that is not finite or not in `[0, 1)`.
-    pub fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
-        let p = check_loss_rate(p_loss)?;
-        self.loss_rate = p;
-        self.lost_score = if p > T::zero() {
-            T::lit(libm::log(N as f64)) + p.ln() - (-p).ln_1p()
-        } else {
-            -T::one() / T::zero()
-        };
-        Ok(self)
-    }
-
-    /// `p_loss` (0 unless set by [`Self::with_loss_rate`]).
-    #[inline]
-    pub fn loss_rate(&self) -> T {
-        self.loss_rate
+        }
     }
 
     /// Selects the covariance form of the arrival update (Joseph by default).
@@ -157,91 +133,15 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         self
     }
 
-    /// Current estimate `x̂_k` and covariance `P_k`.
+    /// The occlusion model.
     #[inline]
-    pub fn estimate(&self) -> &Estimate<T, NX> {
-        &self.est
-    }
-
-    /// Last region-label estimate `ĥ_k` (0 on arrival, `1..=S` on a dropout; 0 on a dropout
-    /// read as a loss, see [`Self::with_loss_rate`]).
-    #[inline]
-    pub fn label(&self) -> usize {
-        self.label
-    }
-
-    /// `ln Σ_s ω_{ik}^s` for every region at the last dropout: the label's log-score
-    /// (eq. 16 times `N`). Regions whose score provably lies below the winner's are not
-    /// summed and read −∞.
-    #[inline]
-    pub fn region_log_weights(&self) -> &[T; S] {
-        &self.region_log_weights
-    }
-
-    /// One instant `k ≥ 1`: predict from `k − 1` (eq. 11), then Algorithm 1 and 2 with
-    /// `y = Some(z_k)` on arrival or `None` on a dropout. Returns the label `ĥ_k`.
-    /// On error nothing changes.
-    pub fn step<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-        y: Option<&SVector<T, NY>>,
-    ) -> Result<usize> {
-        self.advance(model, k, Some(y))?;
-        Ok(self.label)
-    }
-
-    /// Instant `k ≥ 1` without information (a packet lost in transport,
-    /// [`Packet::Lost`]): the prediction (11) only; the label and the region weights keep the values of the last update. On error nothing changes.
-    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-    ) -> Result<()> {
-        self.advance(model, k, None)
-    }
-
-    /// Instant `k`: `y` is `Some(Some(z_k))` on arrival, `Some(None)` on a dropout, `None`
-    /// for a loss (prediction only). The one place that predicts (eq. 11), so that the
-    /// prediction is inlined once into every step.
-    #[inline(always)]
-    fn advance<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-        y: Option<Option<&SVector<T, NY>>>,
-    ) -> Result<()> {
-        if let Some(Some(y)) = y {
-            check_finite(y, "measurement")?;
-        }
-        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
-        match y {
-            Some(Some(y)) => {
-                let (x, p, _) = kalman_update(
-                    &xp,
-                    &pp,
-                    &model.c(k),
-                    &model.measurement_cov(k),
-                    y,
-                    self.form,
-                )?;
-                self.est = Estimate::trusted(x, p);
-                self.label = 0;
-            }
-            Some(None) => {
-                let (x, p, label, lw) = self.dropout_update(&xp, &pp)?;
-                self.est = Estimate::trusted(x, p);
-                self.label = label;
-                self.region_log_weights = lw;
-            }
-            None => self.est = Estimate::trusted(xp, pp),
-        }
-        Ok(())
+    pub fn occlusion(&self) -> &Occlusion<T, NX, NE, S> {
+        &self.occ
     }
 
     /// Algorithm 1 (dropout branch) and Algorithm 2 steps 5-6 on the prediction.
     #[allow(clippy::type_complexity)]
-    fn dropout_update(
+    fn region_update(
         &self,
         xp: &SVector<T, NX>,
         pp: &SMatrix<T, NX, NX>,
@@ -338,65 +238,120 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
     }
 }
 
-/// Delivered: arrival (Kalman update, label 0); dropped: the dropout update of Algorithms 1-2;
-/// lost: prediction only.
-impl<
-        T: Real,
-        const NX: usize,
-        const NE: usize,
-        const S: usize,
-        const N: usize,
-        const NY: usize,
-        M: LinearSystem<T, NX, NY>,
-    > Estimator<T, NX> for OnModel<M, CrossCoupledEstimator<T, NX, NE, S, N>, NY>
+impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
+    OcclusionUpdate<T, NX> for CceConfig<T, NX, NE, S, N>
 {
-    type Measurement = Packet<T, NY>;
+    type State = CceState<T, S>;
+    type Output = usize;
 
-    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        let y = match y {
-            Packet::Delivered(y) => Some(Some(y)),
-            Packet::Dropped => Some(None),
-            Packet::Lost => None,
-        };
-        self.filter.advance(&self.model, k, y)
+    fn initial_state(&self) -> CceState<T, S> {
+        CceState {
+            label: 0,
+            region_log_weights: [T::zero(); S],
+        }
     }
 
     #[inline]
-    fn estimate(&self) -> &Estimate<T, NX> {
-        self.filter.estimate()
+    fn output(state: &CceState<T, S>) -> usize {
+        state.label
+    }
+
+    /// The label scoring gains the hypothesis "lost" beside the regions (module docs, "A
+    /// known loss rate").
+    fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
+        let p = check_loss_rate(p_loss)?;
+        self.loss_rate = p;
+        self.lost_score = if p > T::zero() {
+            T::lit(libm::log(N as f64)) + p.ln() - (-p).ln_1p()
+        } else {
+            -T::one() / T::zero()
+        };
+        Ok(self)
+    }
+
+    #[inline]
+    fn loss_rate(&self) -> T {
+        self.loss_rate
+    }
+
+    /// The Kalman update (18), label 0; the region weights keep their values.
+    #[inline(always)]
+    fn arrival_update<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+        y: &SVector<T, NY>,
+        state: &CceState<T, S>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, CceState<T, S>)> {
+        let (x, p, _) =
+            kalman_update(xp, pp, &model.c(k), &model.measurement_cov(k), y, self.form)?;
+        Ok((
+            x,
+            p,
+            CceState {
+                label: 0,
+                region_log_weights: state.region_log_weights,
+            },
+        ))
+    }
+
+    /// Algorithm 1 (dropout branch) and Algorithm 2.
+    #[inline(always)]
+    fn dropout_update<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        _model: &M,
+        _k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+        _state: &CceState<T, S>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, CceState<T, S>)> {
+        let (x, p, label, region_log_weights) = self.region_update(xp, pp)?;
+        Ok((
+            x,
+            p,
+            CceState {
+                label,
+                region_log_weights,
+            },
+        ))
     }
 }
 
-/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
-/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
-/// region).
-impl<
-        T: Real,
-        const NX: usize,
-        const NE: usize,
-        const S: usize,
-        const N: usize,
-        const NY: usize,
-        M: LinearSystem<T, NX, NY>,
-    > GatedStep<T, NX> for OnModel<M, CrossCoupledEstimator<T, NX, NE, S, N>, NY>
+impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
+    CrossCoupledEstimator<T, NX, NE, S, N>
 {
-    fn step_gated(
-        &mut self,
-        k: usize,
-        y: &Packet<T, NY>,
-        gate: &InnovationGate<T>,
-    ) -> Result<GateCounts> {
-        let Packet::Delivered(z) = y else {
-            return self.step(k, y).map(|()| GateCounts::NONE);
-        };
-        let est = self.filter.estimate();
-        let used = admits_linear(gate, &self.model, k, est.state(), est.covariance(), z)?;
-        if used {
-            self.step(k, y)?;
-        } else {
-            self.filter.predict_to(&self.model, k)?;
-        }
-        Ok(GateCounts::one(used))
+    /// Starts from `x̂_0 = x0`, `P_0 = p0` with the occlusion model and the Gaussian-sum table
+    /// (scaled here, once, onto every region).
+    pub fn new(
+        x0: SVector<T, NX>,
+        p0: SMatrix<T, NX, NX>,
+        occ: Occlusion<T, NX, NE, S>,
+        gsum: &GaussSum<T, NE, N>,
+    ) -> Result<Self> {
+        Self::from_config(x0, p0, CceConfig::new(occ, gsum))
+    }
+
+    /// Selects the covariance form of the arrival update (Joseph by default).
+    #[must_use]
+    pub fn with_covariance_update(self, form: CovarianceUpdate) -> Self {
+        self.map_config(|c| c.with_covariance_update(form))
+    }
+
+    /// Last region-label estimate `ĥ_k` (0 on arrival, `1..=S` on a dropout; 0 on a dropout
+    /// read as a loss, see [`OcclusionFilter::with_loss_rate`]).
+    #[inline]
+    pub fn label(&self) -> usize {
+        self.state().label
+    }
+
+    /// `ln Σ_s ω_{ik}^s` for every region at the last dropout: the label's log-score
+    /// (eq. 16 times `N`). Regions whose score provably lies below the winner's are not
+    /// summed and read −∞.
+    #[inline]
+    pub fn region_log_weights(&self) -> &[T; S] {
+        &self.state().region_log_weights
     }
 }
 
@@ -586,10 +541,10 @@ mod tests {
         let m = paper_model();
         for far in [-600.0, 700.0] {
             let mut f = cce(vector![far, 0.0, 0.0], SMatrix::identity() * 0.01);
-            let sd = (f.occ.e
+            let sd = (f.config().occlusion().e
                 * (m.a * f.estimate().covariance() * m.a.transpose()
                     + m.b * m.q * m.b.transpose())
-                * f.occ.e.transpose())[(0, 0)]
+                * f.config().occlusion().e.transpose())[(0, 0)]
                 .sqrt();
             let dist = if far < 0.0 {
                 15.0 - far * 1.01

@@ -35,74 +35,50 @@ use core::cmp::Ordering;
 
 use nalgebra::{SMatrix, SVector};
 
+use super::skeleton::{OcclusionFilter, OcclusionUpdate};
 use crate::estimate::Estimate;
-use crate::estimator::{Estimator, OnModel};
-use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
+use crate::filter::gate::InnovationGate;
 use crate::filter::time_update::predict;
 use crate::gauss::{ln_interval_prob_each, ln_interval_prob_one, LogSumExp};
 use crate::linalg::{all_finite, check_finite, solve_spd_right, symmetrize};
 use crate::model::LinearSystem;
-use crate::packet::{check_loss_rate, Packet};
+use crate::packet::check_loss_rate;
 use crate::protocol::occlusion::Occlusion;
 use crate::{Error, Real, Result};
 
-/// Gaps of [`KfIo::prob_outside`] evaluated together (as many as
+/// Gaps of [`KfIoConfig::prob_outside`] evaluated together (as many as
 /// [`ln_interval_prob_each`] takes side by side).
 const GAPS: usize = crate::gauss::side_by_side::LANES / 2;
 
-/// The KF-IO-style linear MMSE filter on `NX` states with `S` occlusion intervals.
+/// The KF-IO-style linear MMSE filter on `NX` states with `S` occlusion intervals: the
+/// [`OcclusionFilter`] of a [`KfIoConfig`]. Its running state is the arrival probability `p_k`
+/// of the last update.
+pub type KfIo<T, const NX: usize, const S: usize> = OcclusionFilter<T, NX, KfIoConfig<T, NX, S>>;
+
+/// The configuration of a [`KfIo`]: the occlusion model, its regions as sorted intervals and
+/// the loss rate.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct KfIo<T: Real, const NX: usize, const S: usize> {
-    est: Estimate<T, NX>,
+pub struct KfIoConfig<T: Real, const NX: usize, const S: usize> {
     occ: Occlusion<T, NX, 1, S>,
     sorted: [(T, T, usize); S],
-    arrival_prob: T,
-    /// `p_loss` of [`Self::with_loss_rate`].
+    /// `p_loss` of [`KfIoConfig::with_loss_rate`].
     loss_rate: T,
 }
 
-impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
-    /// Starts from `x̂_0 = x0`, `P_0 = p0`.
-    pub fn new(
-        x0: SVector<T, NX>,
-        p0: SMatrix<T, NX, NX>,
-        occ: Occlusion<T, NX, 1, S>,
-    ) -> Result<Self> {
-        let est = Estimate::new(x0, p0)?;
-        Ok(Self {
-            est,
+impl<T: Real, const NX: usize, const S: usize> KfIoConfig<T, NX, S> {
+    /// The occlusion model (its regions sorted here, once).
+    pub fn new(occ: Occlusion<T, NX, 1, S>) -> Self {
+        Self {
             sorted: occ.regions.sorted_intervals(),
             occ,
-            arrival_prob: T::one(),
             loss_rate: T::zero(),
-        })
+        }
     }
 
-    /// A packet may also be lost in transport with the known probability `p_loss`
-    /// (independent of the state), which the receiver cannot tell from a dropout: the arrival
-    /// probability becomes `p_k (1 − p_loss)` (module docs). `p_loss = 0` (the default) is the
-    /// filter of docs/design.md. Refuses a `p_loss` that is not finite or not in `[0, 1)`.
-    pub fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
-        self.loss_rate = check_loss_rate(p_loss)?;
-        Ok(self)
-    }
-
-    /// `p_loss` (0 unless set by [`Self::with_loss_rate`]).
+    /// The occlusion model.
     #[inline]
-    pub fn loss_rate(&self) -> T {
-        self.loss_rate
-    }
-
-    /// Current estimate and covariance (the filter's own, unconditional-in-γ recursion).
-    #[inline]
-    pub fn estimate(&self) -> &Estimate<T, NX> {
-        &self.est
-    }
-
-    /// `p_k` used by the last step (with a loss rate: `P(u_k in no region) · (1 − p_loss)`).
-    #[inline]
-    pub fn arrival_prob(&self) -> T {
-        self.arrival_prob
+    pub fn occlusion(&self) -> &Occlusion<T, NX, 1, S> {
+        &self.occ
     }
 
     /// `P(u in no region)` for `u ~ N(m, s²)`: the log-sum-exp of the gaps' `ln P` in gap
@@ -185,62 +161,6 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         total.value().exp().min(T::one())
     }
 
-    /// One instant `k ≥ 1`: predict, then the linear MMSE update with `ỹ = z_k` (arrival) or
-    /// `ỹ = 0` (dropout). On error nothing changes.
-    pub fn step<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-        y: Option<&SVector<T, NY>>,
-    ) -> Result<()> {
-        self.advance(model, k, Some(y))
-    }
-
-    /// Instant `k ≥ 1` without information (a packet lost in transport,
-    /// [`Packet::Lost`]): the prediction only; the arrival probability keeps its last value. On error nothing changes.
-    pub fn predict_to<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-    ) -> Result<()> {
-        self.advance(model, k, None)
-    }
-
-    /// Instant `k`: `y` is `Some(Some(z_k))` on arrival, `Some(None)` on a dropout, `None`
-    /// for a loss (prediction only). The one place that predicts, so that the prediction is
-    /// inlined once into every step.
-    #[inline(always)]
-    fn advance<const NY: usize, M: LinearSystem<T, NX, NY>>(
-        &mut self,
-        model: &M,
-        k: usize,
-        y: Option<Option<&SVector<T, NY>>>,
-    ) -> Result<()> {
-        let y_tilde = match y {
-            Some(Some(y)) => {
-                check_finite(y, "measurement")?;
-                *y
-            }
-            _ => SVector::<T, NY>::zeros(),
-        };
-        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
-        if y.is_none() {
-            self.est = Estimate::trusted(xp, pp);
-            return Ok(());
-        }
-        let (p, s_prime) = self.arrival(model, k, &xp, &pp)?;
-        let c = model.c(k);
-        let pct = pp * c.transpose();
-        let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
-        let x = xp + gain * (y_tilde - c * xp * p);
-        let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
-        check_finite(&x, "updated state")?;
-        check_finite(&p_new, "updated covariance")?;
-        self.est = Estimate::trusted(x, p_new);
-        self.arrival_prob = p;
-        Ok(())
-    }
-
     /// The prediction of instant `k`, the arrival probability `p_k` and `S' = S_y / p_k`
     /// (module docs).
     ///
@@ -252,16 +172,17 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
     #[allow(clippy::type_complexity)]
     fn prior<const NY: usize, M: LinearSystem<T, NX, NY>>(
         &self,
+        est: &Estimate<T, NX>,
         model: &M,
         k: usize,
     ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T, SMatrix<T, NY, NY>)> {
-        let (xp, pp) = predict(model, k, self.est.state(), self.est.covariance())?;
-        let (p, s_prime) = self.arrival(model, k, &xp, &pp)?;
+        let (xp, pp) = predict(model, k, est.state(), est.covariance())?;
+        let (p, s_prime) = self.bernoulli(model, k, &xp, &pp)?;
         Ok((xp, pp, p, s_prime))
     }
 
     /// `p_k` and `S'` from the prediction `(x̂⁻, P⁻)` of instant `k` ([`Self::prior`]).
-    fn arrival<const NY: usize, M: LinearSystem<T, NX, NY>>(
+    fn bernoulli<const NY: usize, M: LinearSystem<T, NX, NY>>(
         &self,
         model: &M,
         k: usize,
@@ -292,11 +213,87 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
         Ok((p, s_prime))
     }
 
+    /// The linear MMSE update of the prediction with `ỹ` (`z_k` on an arrival, 0 on a
+    /// dropout); returns `p_k` as the new state.
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    fn update<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+        y_tilde: &SVector<T, NY>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
+        let (xp, pp) = (*xp, *pp);
+        let (p, s_prime) = self.bernoulli(model, k, &xp, &pp)?;
+        let c = model.c(k);
+        let pct = pp * c.transpose();
+        let gain = solve_spd_right(&pct, &s_prime, "KF-IO innovation covariance")?;
+        let x = xp + gain * (y_tilde - c * xp * p);
+        let p_new = symmetrize(&(pp - gain * s_prime * gain.transpose() * p));
+        check_finite(&x, "updated state")?;
+        check_finite(&p_new, "updated covariance")?;
+        Ok((x, p_new, p))
+    }
+}
+
+/// Delivered or dropped: the linear MMSE update (`ỹ = z_k` or `0`); the state beside the
+/// estimate is the arrival probability `p_k`.
+impl<T: Real, const NX: usize, const S: usize> OcclusionUpdate<T, NX> for KfIoConfig<T, NX, S> {
+    type State = T;
+    type Output = ();
+
+    fn initial_state(&self) -> T {
+        T::one()
+    }
+
+    #[inline]
+    fn output(_: &T) {}
+
+    /// The arrival probability becomes `p_k (1 − p_loss)` (module docs).
+    fn with_loss_rate(mut self, p_loss: T) -> Result<Self> {
+        self.loss_rate = check_loss_rate(p_loss)?;
+        Ok(self)
+    }
+
+    #[inline]
+    fn loss_rate(&self) -> T {
+        self.loss_rate
+    }
+
+    #[inline(always)]
+    fn arrival_update<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+        y: &SVector<T, NY>,
+        _state: &T,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
+        self.update(model, k, xp, pp, y)
+    }
+
+    #[inline(always)]
+    fn dropout_update<const NY: usize, M: LinearSystem<T, NX, NY>>(
+        &self,
+        model: &M,
+        k: usize,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+        _state: &T,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, T)> {
+        self.update(model, k, xp, pp, &SVector::<T, NY>::zeros())
+    }
+
     /// Whether `gate` admits the delivered `y_k`: the NIS of the filter's own innovation
     /// `ỹ − p_k C x̂⁻` with `ỹ = y_k` against `S_y = p_k S'` (docs/gate.md). A delivery at
     /// `p_k = 0` (certainly occluded) is never admitted. The off gate admits without a test.
-    pub fn admits<const NY: usize, M: LinearSystem<T, NX, NY>>(
+    fn admits<const NY: usize, M: LinearSystem<T, NX, NY>>(
         &self,
+        est: &Estimate<T, NX>,
+        _state: &T,
         model: &M,
         k: usize,
         y: &SVector<T, NY>,
@@ -306,7 +303,7 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
             return Ok(true);
         }
         check_finite(y, "measurement")?;
-        let (xp, _, p, s_prime) = self.prior(model, k)?;
+        let (xp, _, p, s_prime) = self.prior(est, model, k)?;
         if p <= T::zero() {
             return Ok(false);
         }
@@ -315,12 +312,29 @@ impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
     }
 }
 
-/// How far below the skip margin of the anchor's bound [`KfIo::prob_outside`] still
+impl<T: Real, const NX: usize, const S: usize> KfIo<T, NX, S> {
+    /// Starts from `x̂_0 = x0`, `P_0 = p0`.
+    pub fn new(
+        x0: SVector<T, NX>,
+        p0: SMatrix<T, NX, NX>,
+        occ: Occlusion<T, NX, 1, S>,
+    ) -> Result<Self> {
+        Self::from_config(x0, p0, KfIoConfig::new(occ))
+    }
+
+    /// `p_k` used by the last step (with a loss rate: `P(u_k in no region) · (1 − p_loss)`).
+    #[inline]
+    pub fn arrival_prob(&self) -> T {
+        *self.state()
+    }
+}
+
+/// How far below the skip margin of the anchor's bound [`KfIoConfig::prob_outside`] still
 /// evaluates a gap ahead: the bounds overstate `ln P` by about `ln(a √(2π))` for a tail gap
 /// from `a`, a few units here. Only the speed depends on it.
 const SPECULATION_SLACK: f64 = 8.0;
 
-/// The `ln P` of the gaps of one [`KfIo::prob_outside`] call, in standard units of
+/// The `ln P` of the gaps of one [`KfIoConfig::prob_outside`] call, in standard units of
 /// `u ~ N(m, s²)`: gap j (`0..=S`: below the first region, between regions, above the last)
 /// is (`upper[j − 1]`, `lower[j]`), the infinite ends `(±∞ − m)/s` (NaN for a NaN m or s,
 /// as every end). Each is evaluated once: ahead, with others, or when first asked for.
@@ -454,52 +468,6 @@ fn raises<T: Real>(x: T, top: T) -> bool {
     top.partial_cmp(&top).is_some() && (x > top || x.partial_cmp(&x).is_none())
 }
 
-/// Delivered or dropped: the linear MMSE update (`ỹ = z_k` or `0`); lost: prediction only.
-impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
-    Estimator<T, NX> for OnModel<M, KfIo<T, NX, S>, NY>
-{
-    type Measurement = Packet<T, NY>;
-
-    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        let y = match y {
-            Packet::Delivered(y) => Some(Some(y)),
-            Packet::Dropped => Some(None),
-            Packet::Lost => None,
-        };
-        self.filter.advance(&self.model, k, y)
-    }
-
-    #[inline]
-    fn estimate(&self) -> &Estimate<T, NX> {
-        self.filter.estimate()
-    }
-}
-
-/// Behind a gate (docs/gate.md): a delivered packet the gate rejects is stepped as
-/// [`Packet::Lost`] (prediction only; never as a dropout, which would say the state is in a
-/// region).
-impl<T: Real, const NX: usize, const S: usize, const NY: usize, M: LinearSystem<T, NX, NY>>
-    GatedStep<T, NX> for OnModel<M, KfIo<T, NX, S>, NY>
-{
-    fn step_gated(
-        &mut self,
-        k: usize,
-        y: &Packet<T, NY>,
-        gate: &InnovationGate<T>,
-    ) -> Result<GateCounts> {
-        let Packet::Delivered(z) = y else {
-            return self.step(k, y).map(|()| GateCounts::NONE);
-        };
-        let used = self.filter.admits(&self.model, k, z, gate)?;
-        if used {
-            self.step(k, y)?;
-        } else {
-            self.filter.predict_to(&self.model, k)?;
-        }
-        Ok(GateCounts::one(used))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -514,7 +482,7 @@ mod tests {
         let neg_inf = -T::one() / T::zero();
         let mut ends = [(T::zero(), T::zero()); 9];
         let mut lo = neg_inf;
-        for (e, &(a, b, _)) in ends.iter_mut().zip(&f.sorted) {
+        for (e, &(a, b, _)) in ends.iter_mut().zip(&f.config().sorted) {
             *e = (lo, a);
             lo = b;
         }
@@ -561,10 +529,13 @@ mod tests {
             for &s in &spreads {
                 for (got, want) in [
                     (
-                        example.prob_outside(m, s),
+                        example.config().prob_outside(m, s),
                         plain_prob_outside(&example, m, s),
                     ),
-                    (uneven.prob_outside(m, s), plain_prob_outside(&uneven, m, s)),
+                    (
+                        uneven.config().prob_outside(m, s),
+                        plain_prob_outside(&uneven, m, s),
+                    ),
                 ] {
                     assert_eq!(
                         got.to_bits(),
@@ -577,7 +548,7 @@ mod tests {
         }
         for m in [f64::NAN, f64::INFINITY, -f64::INFINITY, 1e300] {
             let (got, want) = (
-                example.prob_outside(m, 1.0),
+                example.config().prob_outside(m, 1.0),
                 plain_prob_outside(&example, m, 1.0),
             );
             assert_eq!(got.to_bits(), want.to_bits(), "m {m}");
@@ -587,7 +558,10 @@ mod tests {
             let m = i as f32 * 0.5 - 20.0;
             for &s in &spreads {
                 let s = s as f32;
-                let (got, want) = (narrow.prob_outside(m, s), plain_prob_outside(&narrow, m, s));
+                let (got, want) = (
+                    narrow.config().prob_outside(m, s),
+                    plain_prob_outside(&narrow, m, s),
+                );
                 assert_eq!(got.to_bits(), want.to_bits(), "f32 m {m}, s {s}");
             }
         }

@@ -5,14 +5,20 @@
 //! * [`adf`]: an assumed-density filter with the exact interval likelihood;
 //! * [`kf_io`]: the linear MMSE baseline that treats arrival as a Bernoulli variable.
 //!
+//! All three are one [`OcclusionFilter`] ([`skeleton`]: predict, then the member's arrival or
+//! dropout update, or prediction only for a packet lost in transport) with the member's
+//! configuration ([`CceConfig`], [`AdfConfig`], [`KfIoConfig`]).
+//!
 //! The occlusion model is [`crate::protocol::occlusion`], the example
 //! [`crate::papers::Seed001Example`].
 
 pub mod adf;
 pub mod cce;
 pub mod kf_io;
+pub mod skeleton;
 mod truncnorm;
 
-pub use adf::AssumedDensityFilter;
-pub use cce::CrossCoupledEstimator;
-pub use kf_io::KfIo;
+pub use adf::{AdfConfig, AdfState, AssumedDensityFilter};
+pub use cce::{CceConfig, CceState, CrossCoupledEstimator};
+pub use kf_io::{KfIo, KfIoConfig};
+pub use skeleton::{OcclusionFilter, OcclusionUpdate};

@@ -8,7 +8,7 @@
 //! without a measurement does is [`Silence`]: the paper's update with the held measurement
 //! (the default), or the product's prediction only.
 
-use nalgebra::SVector;
+use nalgebra::{SMatrix, SVector};
 
 use crate::linalg::check_finite;
 use crate::protocol::event_trigger::EventTriggerConfig;
@@ -191,4 +191,30 @@ impl<T: Real, const NY: usize> TobitFilterConfig<T, NY> {
         .with_placement(self.placement)
         .with_silence(self.silence))
     }
+}
+
+/// The variances of a diagonal measurement covariance; refuses correlated noise, which the
+/// per-component Tobit model (eqs. 5-7) cannot represent.
+pub fn diagonal_variances<T: Real, const NY: usize>(
+    r: &SMatrix<T, NY, NY>,
+) -> Result<SVector<T, NY>> {
+    check_finite(r, "measurement covariance")?;
+    let tol = T::EPS.sqrt();
+    for i in 0..NY {
+        for j in 0..NY {
+            if i != j && r[(i, j)].abs() > tol * (r[(i, i)] * r[(j, j)]).abs().sqrt() {
+                return Err(Error::InvalidConfig {
+                    field: "measurement covariance",
+                    reason: "the Tobit model (eqs. 5-7) needs independent components (diagonal R)",
+                });
+            }
+        }
+    }
+    let d = r.diagonal();
+    if d.iter().any(|&v| v <= T::zero()) {
+        return Err(Error::NotPositiveDefinite {
+            what: "measurement covariance",
+        });
+    }
+    Ok(d)
 }

@@ -18,8 +18,9 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use super::config::diagonal_variances;
 use super::config::TobitFilterConfig;
-use super::local::{diagonal_variances, TobitFilter};
+use super::local::TobitFilter;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};

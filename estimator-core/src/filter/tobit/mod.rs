@@ -1,7 +1,8 @@
 //! Seed 004: Tobit Kalman filtering of censored measurements under a dynamic event trigger
 //! and a shared token bucket, one local filter per sensor node and their federated fusion.
 //!
-//! * [`config`]: what configures a local filter (ε and κ of Theorem 1, τ, Ξ, where Υ enters);
+//! * [`config`]: what configures a local filter (ε and κ of Theorem 1, τ, Ξ, where Υ enters)
+//!   and the measurement covariances it accepts;
 //! * [`gain`]: the bound (30) as a quadratic in the gain and its minimiser (37);
 //! * [`local`]: the local filter (21)-(23), (29)-(30) of one node;
 //! * [`fusion`]: the federated fusion (50)-(51) of `L` local filters.
@@ -14,7 +15,9 @@ pub mod fusion;
 pub mod gain;
 pub mod local;
 
-pub use config::{BoundScalars, Kappas, Silence, TobitFilterConfig, UpsilonPlacement};
+pub use config::{
+    diagonal_variances, BoundScalars, Kappas, Silence, TobitFilterConfig, UpsilonPlacement,
+};
 pub use fusion::{federated_fuse, TobitFusion};
 pub use gain::GainProblem;
-pub use local::{diagonal_variances, LocalStepPlan, TobitFilter};
+pub use local::{LocalStepPlan, TobitFilter};
