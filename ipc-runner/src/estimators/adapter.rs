@@ -1,78 +1,97 @@
 //! The application's dynamic [`Estimator`] over a core one: a name, the estimate and its
-//! covariance as `f64`s, diagnostics, the stepping of [`Fed`] and, with `--gate P`, the
-//! innovation gate (docs/gate.md).
+//! covariance as `f64`s, diagnostics, and the stepping: the slot observations become the core
+//! measurement ([`FromSlots`]), the core's [`CatchUp`](estimator_core::CatchUp) fills missed
+//! instants ([`Fed`]) and, with `--gate P`, the core's [`Gated`] runs the innovation gate with
+//! its lock-out rule (docs/gate.md). Nothing here re-implements a step.
 
-use std::sync::Mutex;
-
-use estimator_core::filter::gate::GateState;
-use estimator_core::filter::{GateCounts, GatedStep, InnovationGate};
-use estimator_core::Error;
+use estimator_core::filter::{Gated, GatedStep, InnovationGate};
+use estimator_core::{Error, LostMeasurement};
 use estpipe_wire::Observation;
 
 use super::fed::Fed;
 use super::slots::FromSlots;
 use crate::{CovarianceKind, Estimator};
 
-/// The gated step of a [`Fed`] estimator, with the estimator's measurement type erased.
-type GatedFedStep<E> =
-    fn(&mut Fed<E>, u32, &[Observation], &InnovationGate<f64>) -> Result<GateCounts, Error>;
-
-/// An estimator's gate: the configuration, its step, and the counts of the run so far.
-struct Gate<E> {
-    gate: InnovationGate<f64>,
-    step: GatedFedStep<E>,
-    state: GateState,
+/// An estimator's name and its name behind the gate (`<name>+gate`, so that no report can be
+/// mistaken for the ungated estimator's), both fixed at compile time by [`name!`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Name {
+    /// Without a gate.
+    pub(crate) plain: &'static str,
+    /// Behind the gate.
+    pub(crate) gated: &'static str,
 }
 
-fn gated_fed_step<E, const NX: usize>(
-    fed: &mut Fed<E>,
-    k: u32,
-    obs: &[Observation],
-    gate: &InnovationGate<f64>,
-) -> Result<GateCounts, Error>
-where
-    E: GatedStep<f64, NX> + Clone,
-    E::Measurement: FromSlots,
-{
-    fed.step_by::<NX>(k, obs, |e, k, y| e.step_gated(k, y, gate))
+/// The [`Name`] of an estimator named by the literal `$n`.
+macro_rules! name {
+    ($n:literal) => {
+        $crate::estimators::adapter::Name {
+            plain: $n,
+            gated: concat!($n, "+gate"),
+        }
+    };
 }
-
-/// `name` with the suffix `+gate`, so that no report can be mistaken for the ungated
-/// estimator's. Interned: the names are a small fixed set, each leaked once.
-pub(crate) fn gated_name(name: &'static str) -> &'static str {
-    static NAMES: Mutex<Vec<(&'static str, &'static str)>> = Mutex::new(Vec::new());
-    let mut names = NAMES.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some((_, g)) = names.iter().find(|(n, _)| *n == name) {
-        return g;
-    }
-    let g: &'static str = Box::leak(format!("{name}+gate").into_boxed_str());
-    names.push((name, g));
-    g
-}
+pub(crate) use name;
 
 /// Reports an estimator's per-step diagnostics (see [`Estimator::diagnostics`]).
 pub(crate) type Diagnostics<E> = fn(&E, &mut dyn FnMut(&'static str, f64));
 
+/// The gated step of a [`Fed`] estimator on an instant's observations, taken where `E`'s
+/// bounds say it has one (an estimator without an innovation, such as `nn`, runs ungated).
+type GatedFedStep<E> = fn(&mut Gated<f64, Fed<E>>, usize, &[Observation]) -> Result<(), Error>;
+
+fn gated_fed_step<E, const NX: usize>(
+    g: &mut Gated<f64, Fed<E>>,
+    k: usize,
+    obs: &[Observation],
+) -> Result<(), Error>
+where
+    E: GatedStep<f64, NX> + Clone,
+    E::Measurement: FromSlots + LostMeasurement,
+{
+    use estimator_core::Estimator as _;
+    g.step(k, &E::Measurement::from_slots(obs))
+}
+
+/// How a [`Fed`] estimator steps: on its own, or behind the core's gate.
+enum Stepping<E> {
+    Plain(Fed<E>),
+    Gated(Gated<f64, Fed<E>>, GatedFedStep<E>),
+}
+
+impl<E> Stepping<E> {
+    fn fed(&self) -> &Fed<E> {
+        match self {
+            Self::Plain(f) => f,
+            Self::Gated(g, _) => &g.estimator,
+        }
+    }
+    fn fed_mut(&mut self) -> &mut Fed<E> {
+        match self {
+            Self::Plain(f) => f,
+            Self::Gated(g, _) => &mut g.estimator,
+        }
+    }
+}
+
 /// A core estimator `E` on `NX` states under a name.
 pub(crate) struct Adapted<E, const NX: usize> {
-    name: &'static str,
-    fed: Fed<E>,
+    name: Name,
+    stepping: Stepping<E>,
     diagnostics: Diagnostics<E>,
     full_information: bool,
     cov_kind: CovarianceKind,
-    gate: Option<Gate<E>>,
 }
 
 impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
     /// `fed` named `name`, reporting `trace_p`, the trace of the estimate's covariance.
-    pub(crate) fn new(name: &'static str, fed: Fed<E>) -> Self {
+    pub(crate) fn new(name: Name, fed: Fed<E>) -> Self {
         Self {
             name,
-            fed,
+            stepping: Stepping::Plain(fed),
             diagnostics: trace_p,
             full_information: false,
             cov_kind: CovarianceKind::Estimate,
-            gate: None,
         }
     }
 
@@ -94,23 +113,29 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
         self.full_information = full_information;
         self
     }
+
+    /// The core estimator.
+    fn core(&self) -> &E {
+        &self.stepping.fed().estimator
+    }
 }
 
 impl<E, const NX: usize> Adapted<E, NX>
 where
     E: GatedStep<f64, NX> + Clone,
-    E::Measurement: FromSlots,
+    E::Measurement: FromSlots + LostMeasurement,
 {
-    /// Behind the χ² innovation gate of probability `p` when `gate` is `Some(p)`, renamed
-    /// `<name>+gate` (docs/gate.md); unchanged with `None`.
+    /// Behind the χ² innovation gate of probability `p` when `gate` is `Some(p)`, under its
+    /// gated name (docs/gate.md); unchanged with `None`.
     pub(crate) fn with_gate(mut self, gate: Option<f64>) -> Result<Self, Error> {
         if let Some(p) = gate {
-            self.gate = Some(Gate {
-                gate: InnovationGate::chi2(p)?,
-                step: gated_fed_step::<E, NX>,
-                state: GateState::default(),
-            });
-            self.name = gated_name(self.name);
+            let gate = InnovationGate::chi2(p)?;
+            self.stepping = match self.stepping {
+                Stepping::Plain(fed) => {
+                    Stepping::Gated(Gated::new(fed, gate), gated_fed_step::<E, NX>)
+                }
+                gated @ Stepping::Gated(..) => gated,
+            };
         }
         Ok(self)
     }
@@ -139,50 +164,53 @@ fn trace_p<E: estimator_core::Estimator<f64, NX>, const NX: usize>(
 impl<E, const NX: usize> Estimator for Adapted<E, NX>
 where
     E: estimator_core::Estimator<f64, NX> + Clone + Send,
-    E::Measurement: FromSlots,
+    E::Measurement: FromSlots + LostMeasurement,
 {
     fn name(&self) -> &'static str {
-        self.name
+        match self.stepping {
+            Stepping::Plain(_) => self.name.plain,
+            Stepping::Gated(..) => self.name.gated,
+        }
     }
 
     /// The estimator's step (behind its gate, with `--gate`). A refused step (a
     /// measurement whose update overflows, such as 1e300) is then taken as the instant's
-    /// slot lost in transport, the prediction only, so that the estimator stays on time (it
-    /// used to keep x̂_{k−1} and predict one instant short from there); the error is still
-    /// returned, and counted by the commands. Nothing changes in a run without errors.
+    /// slot lost in transport, the prediction only, so that the estimator stays on time; the
+    /// error is still returned, and counted by the commands. Nothing changes in a run without
+    /// errors.
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let done = match &mut self.gate {
-            None => self.fed.step::<NX>(k, obs),
-            Some(g) => {
-                let gate = g.state.gate_for_next(&g.gate);
-                (g.step)(&mut self.fed, k, obs, &gate).map(|c| g.state.record(c, &gate))
-            }
+        use estimator_core::Estimator as _;
+        let k = k as usize;
+        let done = match &mut self.stepping {
+            Stepping::Plain(f) => f.step(k, &E::Measurement::from_slots(obs)),
+            Stepping::Gated(g, step) => step(g, k, obs),
         };
         if let Err(e) = done {
             if !matches!(e, Error::OutOfOrder { .. }) {
                 // Still an error if even the prediction fails: the state is then kept.
-                let _ = self.fed.step::<NX>(k, &[]);
+                let _ = self.stepping.fed_mut().step(k, &E::Measurement::lost());
             }
         }
         done
     }
 
     fn estimate(&self, out: &mut [f64]) {
-        out[..NX].copy_from_slice(self.fed.get().estimate().state().as_slice());
+        out[..NX].copy_from_slice(self.core().estimate().state().as_slice());
     }
 
     fn covariance(&self, out: &mut [f64]) -> CovarianceKind {
-        write_row_major(self.fed.get().estimate().covariance(), out);
+        write_row_major(self.core().estimate().covariance(), out);
         self.cov_kind
     }
 
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
-        (self.diagnostics)(self.fed.get(), sink);
+        (self.diagnostics)(self.core(), sink);
         // Counts so far: eval's mean over runs at k = T times the valid runs is the total.
-        if let Some(g) = &self.gate {
-            sink("gate_tested", f64::from(g.state.counts.tested));
-            sink("gate_rejected", f64::from(g.state.counts.rejected));
-            sink("gate_forced", f64::from(g.state.forced));
+        if let Stepping::Gated(g, _) = &self.stepping {
+            let s = g.state();
+            sink("gate_tested", f64::from(s.counts.tested));
+            sink("gate_rejected", f64::from(s.counts.rejected));
+            sink("gate_forced", f64::from(s.forced));
         }
     }
 

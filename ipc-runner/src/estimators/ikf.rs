@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use estpipe_spec::EstimatorSpec;
 
+use super::adapter::name;
 use super::kf::linear_kf;
 use super::{EvalOptions, RunStart};
 use crate::Estimator;
@@ -22,7 +23,7 @@ pub fn build(
     options: &EvalOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(spec, "ikf", false, options.gate)?
+    Ok(linear_kf(spec, name!("ikf"), false, options.gate)?
         .into_iter()
         .collect())
 }

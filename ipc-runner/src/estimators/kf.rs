@@ -17,15 +17,13 @@
 
 use std::sync::Arc;
 
-use estimator_core::filter::{GateCounts, GatedStep, InnovationGate, KalmanFilter};
-use estimator_core::linalg::symmetrize;
-use estimator_core::{Error, Estimate, Packet};
+use estimator_core::filter::{KalmanFilter, SequentialKf};
 use estpipe_spec::{EstimatorSpec, LinearModel};
 use estpipe_wire::MAX_NODES;
 use nalgebra::SVector;
 
-use super::adapter::Adapted;
-use super::fed::{linear, Fed};
+use super::adapter::{name, Adapted, Name};
+use super::fed::{linear, on_model};
 use super::snapshot::{fixed, Snapshot};
 use super::{EvalOptions, RunStart};
 use crate::Estimator;
@@ -36,7 +34,7 @@ pub fn build(
     options: &EvalOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    Ok(linear_kf(spec, "kf", true, options.gate)?
+    Ok(linear_kf(spec, name!("kf"), true, options.gate)?
         .into_iter()
         .collect())
 }
@@ -44,9 +42,9 @@ pub fn build(
 /// A Kalman filter on `spec`'s linear model named `name`, or `None` when the spec has none.
 /// `full_information` selects the oracle (`kf`) or the channel-fed filter; `gate`, the
 /// innovation gate's probability (`--gate`, docs/gate.md).
-pub fn linear_kf(
+pub(crate) fn linear_kf(
     spec: &Arc<EstimatorSpec>,
-    name: &'static str,
+    name: Name,
     full_information: bool,
     gate: Option<f64>,
 ) -> anyhow::Result<Option<Box<dyn Estimator>>> {
@@ -67,7 +65,7 @@ pub fn linear_kf(
                 2 => boxed::<$nx, 2>(spec),
                 3 => boxed::<$nx, 3>(spec),
                 4 => boxed::<$nx, 4>(spec),
-                _ => anyhow::bail!("{name}: measurement dimension {ny} not supported"),
+                _ => anyhow::bail!("{}: measurement dimension {ny} not supported", name.plain),
             }
         };
     }
@@ -80,109 +78,22 @@ pub fn linear_kf(
         6 => by_ny!(6),
         7 => by_ny!(7),
         8 => by_ny!(8),
-        _ => anyhow::bail!("{name}: state dimension {nx} not supported"),
+        _ => anyhow::bail!("{}: state dimension {nx} not supported", name.plain),
     }?;
     Ok(Some(kf))
 }
 
 struct Spec<'a> {
-    name: &'static str,
+    name: Name,
     full_information: bool,
     gate: Option<f64>,
     spec: &'a Arc<EstimatorSpec>,
 }
 
-/// The Kalman filter on every node's packet of an instant: one prediction, then an update
-/// with each delivered measurement, node by node. A core [`estimator_core::Estimator`] of its
-/// own because the core's Kalman filter takes one measurement per step.
-#[derive(Clone, Copy)]
-struct NodeByNode<const NX: usize, const NY: usize> {
-    /// The plant's model per node (entries from `nodes` on unused).
-    model: [Snapshot<NX, NY>; MAX_NODES],
-    nodes: usize,
-    kf: KalmanFilter<f64, NX>,
-    /// Node 0's `B Q Bᵀ` and `D R Dᵀ` are their own symmetric parts, bit for bit (what
-    /// `predict_with` and `update_with` would symmetrise): a one-node instant may then take
-    /// the core's fused step, which computes the same bits ([`fused_ok`]).
-    fused: bool,
-}
-
-/// Whether node 0's covariances are unchanged by `predict_with`'s and `update_with`'s
-/// symmetrisation, so that `KalmanFilter::step` on them gives the same bits as the two calls.
-fn fused_ok<const NX: usize, const NY: usize>(m: &Snapshot<NX, NY>) -> bool {
-    symmetrize(&m.q) == m.q && symmetrize(&m.r) == m.r
-}
-
-impl<const NX: usize, const NY: usize> estimator_core::Estimator<f64, NX> for NodeByNode<NX, NY> {
-    type Measurement = [Packet<f64, NY>; MAX_NODES];
-
-    fn step(&mut self, k: usize, y: &Self::Measurement) -> Result<(), Error> {
-        // One node delivering a finite measurement: the fused predict + update of the core
-        // (the same arithmetic, one pass; on error it leaves the filter untouched). A
-        // non-finite y takes the path below, which reports the prediction's error first.
-        if self.fused && self.nodes == 1 && y[1..].iter().all(|p| p.delivered().is_none()) {
-            if let Some(y0) = y[0].delivered().filter(|v| v.iter().all(|e| e.is_finite())) {
-                return self.kf.step(&self.model[0], k, y0);
-            }
-        }
-        // Work on a copy and commit at the end: an error leaves the filter untouched.
-        let mut kf = self.kf;
-        let m0 = &self.model[0];
-        match &m0.u {
-            None => kf.predict_with(&m0.a, &m0.q)?,
-            Some(u) => kf.predict_with_input(&m0.a, &m0.q, u)?,
-        }
-        for (node, y) in y.iter().enumerate() {
-            if let Some(y) = y.delivered() {
-                if node >= self.nodes {
-                    return Err(Error::InvalidConfig {
-                        field: "node",
-                        reason: "observation from a node the model does not have",
-                    });
-                }
-                let m = &self.model[node];
-                kf.update_with::<NY>(&m.c, &m.r, y)?;
-            }
-        }
-        self.kf = kf;
-        Ok(())
-    }
-
-    fn estimate(&self) -> &Estimate<f64, NX> {
-        self.kf.estimate()
-    }
-}
-
-/// Behind a gate: each delivered measurement is tested against the estimate it would update
-/// (after the prediction and the earlier nodes' updates); a rejected one is skipped.
-impl<const NX: usize, const NY: usize> GatedStep<f64, NX> for NodeByNode<NX, NY> {
-    fn step_gated(
-        &mut self,
-        _k: usize,
-        y: &Self::Measurement,
-        gate: &InnovationGate<f64>,
-    ) -> Result<GateCounts, Error> {
-        let mut kf = self.kf;
-        kf.predict_with(&self.model[0].a, &self.model[0].q)?;
-        let mut counts = GateCounts::NONE;
-        for (node, y) in y.iter().enumerate() {
-            if let Some(y) = y.delivered() {
-                if node >= self.nodes {
-                    return Err(Error::InvalidConfig {
-                        field: "node",
-                        reason: "observation from a node the model does not have",
-                    });
-                }
-                let m = &self.model[node];
-                counts.add(GateCounts::one(
-                    kf.update_gated_with::<NY>(&m.c, &m.r, y, gate)?,
-                ));
-            }
-        }
-        self.kf = kf;
-        Ok(counts)
-    }
-}
+/// The core's sequential Kalman filter on every node's packet of an instant (one prediction,
+/// then an update with each delivered measurement, node by node), on the spec's model per node.
+type NodeByNode<const NX: usize, const NY: usize> =
+    SequentialKf<f64, NX, NY, MAX_NODES, Snapshot<NX, NY>>;
 
 /// `NodeByNode`'s model at instant `k`: its input term (the matrices are constant).
 fn remodel<const NX: usize, const NY: usize>(
@@ -190,7 +101,8 @@ fn remodel<const NX: usize, const NY: usize>(
     model: &LinearModel,
     k: usize,
 ) {
-    for m in &mut e.model[..e.nodes] {
+    let nodes = e.nodes();
+    for m in &mut e.models_mut()[..nodes] {
         m.set_input(model, k);
     }
 }
@@ -202,17 +114,13 @@ fn boxed<const NX: usize, const NY: usize>(spec: Spec<'_>) -> anyhow::Result<Box
         SVector::from_column_slice(prior.mean.as_slice()),
         fixed(&prior.cov),
     )
-    .map_err(|e| anyhow::anyhow!("{}: prior.cov: {e}", spec.name))?;
+    .map_err(|e| anyhow::anyhow!("{}: prior.cov: {e}", spec.name.plain))?;
     let nodes = spec.spec.nodes();
     let model = Snapshot::nodes(linear(spec.spec)?, nodes, 1);
-    let est = NodeByNode::<NX, NY> {
-        fused: fused_ok(&model[0]),
-        model,
-        nodes,
-        kf,
-    };
+    let est = NodeByNode::<NX, NY>::new(model, nodes, kf)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", spec.name.plain))?;
     Ok(Box::new(
-        Adapted::<_, NX>::new(spec.name, Fed::on_model(est, spec.spec, remodel))
+        Adapted::<_, NX>::new(spec.name, on_model(est, spec.spec, remodel))
             .with_full_information(spec.full_information)
             .with_gate(spec.gate)?,
     ))

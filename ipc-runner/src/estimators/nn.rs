@@ -49,8 +49,8 @@ use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::OnModel;
 use nalgebra::{matrix, SMatrix, SVector};
 
-use super::adapter::Adapted;
-use super::fed::Fed;
+use super::adapter::{name, Adapted};
+use super::fed::fixed;
 use super::{EvalOptions, RunStart};
 use crate::Estimator;
 use estpipe_spec::{EstimatorSpec, Model};
@@ -115,21 +115,21 @@ pub fn build(
     let kf = base("kf", Linearisation::None)?;
     let mut all: Vec<Box<dyn Estimator>> = vec![
         Box::new(
-            Adapted::<_, 3>::new("nn", Fed::fixed(OnModel::new(Seed003Example, nn)))
+            Adapted::<_, 3>::new(name!("nn"), fixed(OnModel::new(Seed003Example, nn)))
                 .with_diagnostics(nn_diagnostics)
                 .with_covariance_bound(),
         ),
         Box::new(
             Adapted::<_, 3>::new(
-                "kf",
-                Fed::fixed(OnModel::new((Seed003Example, NoNonlinearity), kf)),
+                name!("kf"),
+                fixed(OnModel::new((Seed003Example, NoNonlinearity), kf)),
             )
             .with_gate(options.gate)?,
         ),
         Box::new(
             Adapted::<_, 3>::new(
-                "ekf",
-                Fed::fixed(OnModel::new(
+                name!("ekf"),
+                fixed(OnModel::new(
                     (Seed003Example, Seed003Example),
                     base("ekf", Linearisation::PaperJacobian)?,
                 )),
@@ -138,8 +138,8 @@ pub fn build(
         ),
         Box::new(
             Adapted::<_, 3>::new(
-                "ekf-std",
-                Fed::fixed(OnModel::new(
+                name!("ekf-std"),
+                fixed(OnModel::new(
                     (Seed003Example, Seed003Example),
                     base("ekf-std", Linearisation::Ekf)?,
                 )),
@@ -148,8 +148,8 @@ pub fn build(
         ),
         Box::new(
             Adapted::<_, 3>::new(
-                "kf-indep",
-                Fed::fixed(OnModel::new(
+                name!("kf-indep"),
+                fixed(OnModel::new(
                     (Seed003Example, NoNonlinearity),
                     indep("kf-indep", IndependentMode::Kf)?,
                 )),
@@ -158,8 +158,8 @@ pub fn build(
         ),
         Box::new(
             Adapted::<_, 3>::new(
-                "ekf-indep",
-                Fed::fixed(OnModel::new(
+                name!("ekf-indep"),
+                fixed(OnModel::new(
                     (Seed003Example, Seed003Example),
                     indep("ekf-indep", IndependentMode::Ekf)?,
                 )),

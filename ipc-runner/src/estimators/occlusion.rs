@@ -25,8 +25,8 @@ use estimator_core::{OnModel, Packet};
 use estpipe_spec::{EstimatorSpec, LinearModel};
 use nalgebra::{SMatrix, SVector};
 
-use super::adapter::Adapted;
-use super::fed::{linear, Fed};
+use super::adapter::{name, Adapted, Name};
+use super::fed::{linear, on_model};
 use super::snapshot::{fixed, Snapshot};
 use super::{EvalOptions, RunStart};
 use crate::Estimator;
@@ -97,9 +97,9 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
     let adf = AssumedDensityFilter::new(x0, p0, occ).map_err(|e| anyhow::anyhow!("adf: {e}"))?;
     let model = Snapshot::<NX, NY>::at(linear(spec)?, 1);
     let mut out = vec![
-        adapted("cce", spec, OnModel::new(model, cce), gate)?,
-        adapted("kf-io", spec, OnModel::new(model, kfio), gate)?,
-        adapted("adf", spec, OnModel::new(model, adf), gate)?,
+        adapted(name!("cce"), spec, OnModel::new(model, cce), gate)?,
+        adapted(name!("kf-io"), spec, OnModel::new(model, kfio), gate)?,
+        adapted(name!("adf"), spec, OnModel::new(model, adf), gate)?,
     ];
     if loss_rate > 0.0 {
         let bad = |name: &str, e: estimator_core::Error| anyhow::anyhow!("{name}: {e}");
@@ -113,9 +113,9 @@ fn family<const NX: usize, const NY: usize, const S: usize>(
             .with_loss_rate(loss_rate)
             .map_err(|e| bad("adf-mix", e))?;
         out.extend([
-            adapted("cce-mix", spec, OnModel::new(model, cce), gate)?,
-            adapted("kf-io-mix", spec, OnModel::new(model, kfio), gate)?,
-            adapted("adf-mix", spec, OnModel::new(model, adf), gate)?,
+            adapted(name!("cce-mix"), spec, OnModel::new(model, cce), gate)?,
+            adapted(name!("kf-io-mix"), spec, OnModel::new(model, kfio), gate)?,
+            adapted(name!("adf-mix"), spec, OnModel::new(model, adf), gate)?,
         ]);
     }
     Ok(out)
@@ -132,7 +132,7 @@ fn set_input<const NX: usize, const NY: usize, F>(
 
 /// `on` (a filter on node 0's model) under `name`.
 fn adapted<const NX: usize, const NY: usize, F>(
-    name: &'static str,
+    name: Name,
     spec: &Arc<EstimatorSpec>,
     on: OnModel<Snapshot<NX, NY>, F, NY>,
     gate: Option<f64>,
@@ -143,10 +143,10 @@ where
         + Send
         + 'static,
 {
-    let fed = Fed::on_model(on, spec, set_input);
+    let fed = on_model(on, spec, set_input);
     let a = Adapted::<_, NX>::new(name, fed)
         .with_gate(gate)
-        .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("{}: {e}", name.plain))?;
     Ok(Box::new(a))
 }
 

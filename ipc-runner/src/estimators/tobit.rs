@@ -27,17 +27,17 @@
 
 use std::sync::{Arc, Mutex};
 
-use estimator_core::filter::gate::GateState;
 use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
-use estimator_core::filter::{GatedStep as _, InnovationGate, TobitFusion};
+use estimator_core::filter::{Gated, InnovationGate, TobitFusion};
 use estimator_core::{Error, Estimator as _, OnModel};
 use estpipe_spec::channel::{TobitCensoring, TriggeredTokenBucket};
 use estpipe_spec::{EstimatorSpec, LinearModel};
 use estpipe_wire::Observation;
 use nalgebra::SVector;
 
-use super::adapter::{gated_name, write_row_major};
-use super::fed::{linear, Fed};
+use super::adapter::{name, write_row_major, Name};
+use super::fed::{linear, on_model, Fed};
+use super::slots::FromSlots;
 use super::snapshot::{fixed, Snapshot};
 use super::{EvalOptions, RunStart};
 use crate::{CovarianceKind, Estimator};
@@ -61,6 +61,29 @@ pub const LOCAL_PREDICT_NAMES: [&str; 8] = [
 ];
 /// The fused view of the filter with [`Silence::Predict`].
 pub const FUSED_PREDICT_NAME: &str = "fused-predict";
+/// The views' names with their gated names, in the order of the name constants above.
+const LOCAL: [Name; 8] = [
+    name!("tobit-1"),
+    name!("tobit-2"),
+    name!("tobit-3"),
+    name!("tobit-4"),
+    name!("tobit-5"),
+    name!("tobit-6"),
+    name!("tobit-7"),
+    name!("tobit-8"),
+];
+const FUSED: Name = name!("fused");
+const LOCAL_PREDICT: [Name; 8] = [
+    name!("tobit-1-predict"),
+    name!("tobit-2-predict"),
+    name!("tobit-3-predict"),
+    name!("tobit-4-predict"),
+    name!("tobit-5-predict"),
+    name!("tobit-6-predict"),
+    name!("tobit-7-predict"),
+    name!("tobit-8-predict"),
+];
+const FUSED_PREDICT: Name = name!("fused-predict");
 /// χ²_n(0.95) for n = 1, 2, 3 degrees of freedom.
 pub const CHI2_95: [f64; 3] = [
     3.841_458_820_694_124,
@@ -186,7 +209,7 @@ fn fed_fusion<const NX: usize, const NY: usize, const L: usize>(
 ) -> anyhow::Result<Fed<OnNodes<NX, NY, L>>> {
     let model = Snapshot::nodes(linear(&parts.spec)?, L, 1);
     let on = OnModel::new(model, fusion_for::<NX, NY, L>(parts, silence)?);
-    Ok(Fed::on_model(on, &parts.spec, set_inputs))
+    Ok(on_model(on, &parts.spec, set_inputs))
 }
 
 /// The input term of instant `k` in every node's model.
@@ -203,17 +226,17 @@ fn set_inputs<const NX: usize, const NY: usize, const L: usize>(
 /// The views' one filter: stepped by whichever view asks first at an instant, its result
 /// kept for the others.
 struct Shared<const NX: usize, const NY: usize, const L: usize> {
-    fed: Fed<OnNodes<NX, NY, L>>,
+    /// The filter, behind the core's gate with `--gate` (its counts are all nodes').
+    fed: Gated<f64, Fed<OnNodes<NX, NY, L>>>,
+    gated: bool,
     done_k: u32,
     last: Result<(), Error>,
-    /// `--gate`: the gate and the measurements it tested and rejected so far (all nodes).
-    gate: Option<(InnovationGate<f64>, GateState)>,
 }
 
 impl<const NX: usize, const NY: usize, const L: usize> Shared<NX, NY, L> {
     /// The fusion filter.
     fn fusion(&self) -> &TobitFusion<f64, NX, NY, L> {
-        &self.fed.get().filter
+        &self.fed.estimator.estimator.filter
     }
 }
 
@@ -230,22 +253,26 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
     gate: Option<f64>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let gate = match gate {
-        Some(p) => Some(InnovationGate::chi2(p).map_err(|e| anyhow::anyhow!("tobit: {e}"))?),
-        None => None,
+    // Without `--gate` the views take the plain step (the gate held is never asked).
+    let (gate, gated) = match gate {
+        Some(p) => (
+            InnovationGate::chi2(p).map_err(|e| anyhow::anyhow!("tobit: {e}"))?,
+            true,
+        ),
+        None => (InnovationGate::off(), false),
     };
     // Gated views are named `<name>+gate` (docs/gate.md).
-    let named = |n: &'static str| if gate.is_some() { gated_name(n) } else { n };
+    let named = |n: Name| if gated { n.gated } else { n.plain };
     let mut out: Vec<Box<dyn Estimator>> = Vec::with_capacity(2 * (L + 1));
     for (silence, locals, fused) in [
-        (Silence::HeldMeasurement, &LOCAL_NAMES, FUSED_NAME),
-        (Silence::Predict, &LOCAL_PREDICT_NAMES, FUSED_PREDICT_NAME),
+        (Silence::HeldMeasurement, &LOCAL, FUSED),
+        (Silence::Predict, &LOCAL_PREDICT, FUSED_PREDICT),
     ] {
         let shared = Arc::new(Mutex::new(Shared {
-            fed: fed_fusion::<NX, NY, L>(parts, silence)?,
+            fed: Gated::new(fed_fusion::<NX, NY, L>(parts, silence)?, gate),
+            gated,
             done_k: 0,
             last: Ok(()),
-            gate: gate.map(|g| (g, GateState::default())),
         }));
         for m in 0..L {
             out.push(Box::new(View {
@@ -271,15 +298,11 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
         let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         if s.done_k != k {
-            let s = &mut *s;
-            s.last = match &mut s.gate {
-                None => s.fed.step::<NX>(k, obs),
-                Some((gate, state)) => {
-                    let gate = state.gate_for_next(gate);
-                    s.fed
-                        .step_by::<NX>(k, obs, |e, k, y| e.step_gated(k, y, &gate))
-                        .map(|c| state.record(c, &gate))
-                }
+            let y = FromSlots::from_slots(obs);
+            s.last = if s.gated {
+                s.fed.step(k as usize, &y)
+            } else {
+                s.fed.estimator.step(k as usize, &y)
             };
             s.done_k = k;
         }
@@ -290,7 +313,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let x = match self.node {
             Some(m) => s.fusion().local_estimate(m).map(|e| *e.state()),
-            None => Some(*s.fed.get().estimate().state()),
+            None => Some(*s.fed.estimate().state()),
         };
         match x {
             Some(x) => out[..NX].copy_from_slice(x.as_slice()),
@@ -303,7 +326,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let p = match self.node {
             Some(m) => s.fusion().local_estimate(m).map(|e| *e.covariance()),
-            None => Some(*s.fed.get().estimate().covariance()),
+            None => Some(*s.fed.estimate().covariance()),
         };
         match p {
             Some(p) => {
@@ -324,7 +347,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
                 Some(e) => e.into_parts(),
                 None => return,
             },
-            None => s.fed.get().estimate().into_parts(),
+            None => s.fed.estimate().into_parts(),
         };
         let e = SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
         if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "bound") {
@@ -337,7 +360,8 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn diagnostics(&self, sink: &mut dyn FnMut(&'static str, f64)) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         // The views share one filter: every view reports its counts over all nodes.
-        if let Some((_, g)) = &s.gate {
+        if s.gated {
+            let g = s.fed.state();
             sink("gate_tested", f64::from(g.counts.tested));
             sink("gate_rejected", f64::from(g.counts.rejected));
             sink("gate_forced", f64::from(g.forced));
@@ -349,7 +373,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
                 }
             }
             None => {
-                let p = s.fed.get().estimate().covariance();
+                let p = s.fed.estimate().covariance();
                 sink("trace_p", p.trace());
                 if NX == 2 {
                     sink("p11", p[(0, 0)]);
