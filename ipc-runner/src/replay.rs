@@ -2,6 +2,7 @@
 //! instead of live shared memory — for sensor logs recorded elsewhere, or to re-examine a run
 //! offline.
 
+use crate::estimator_args::EstimatorArgs;
 use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use crate::run::select;
 use crate::slot_log::{read_slots_within, LoggedInstant};
@@ -25,20 +26,9 @@ pub struct ReplayArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Estimators to run, comma-separated (default: all real-time ones that apply to the
-    /// scenario; `pf` only with `--particles N` or when named here).
-    #[arg(long, value_delimiter = ',')]
-    pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (as `run --particles`).
-    #[arg(long)]
-    pub particles: Option<usize>,
-    /// Known loss rate P for the occlusion estimators' `-mix` variants (as `run --loss-rate`).
-    #[arg(long, default_value_t = 0.0, value_name = "P",
-          value_parser = crate::eval::cli::loss_probability)]
-    pub loss_rate: f64,
-    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
-    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
-    pub gate: Option<f64>,
+    /// The estimators and their options (as in `run`).
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
     /// Experiment seed the estimators are built for (as `eval --seed`).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -91,25 +81,20 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     }
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
     let (nx, ny, nodes) = (scenario.nx(), scenario.ny(), scenario.nodes());
-    let choice =
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let particles = args.estimator.particle_count();
     let budget = Budget::mib(args.max_memory);
-    let pf = product(&[
-        choice.particles as u64,
-        crate::eval::pf_bytes_per_particle(nx),
-    ]);
-    budget.check(&format!("--particles {}", choice.particles), pf)?;
+    let pf = product(&[particles as u64, crate::eval::pf_bytes_per_particle(nx)]);
+    budget.check(&format!("--particles {}", particles), pf)?;
     let scenario: std::sync::Arc<dyn channel_sim::Scenario> = scenario.into();
     let factory = |horizon: u32| {
         select::estimators_with(
             scenario.clone(),
-            &args.estimators,
+            &args.estimator,
             select::Experiment {
                 seed: args.seed,
                 run: args.run,
                 horizon,
             },
-            choice,
         )
         .map_err(|e| BadInput(format!("{e:#}")))
     };
@@ -119,7 +104,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     // The particles must leave room for at least one instant, or the log's first row would
     // be refused as "beyond the row limit" without a word about the particles.
     budget.check(
-        &format!("--particles {} and one instant", choice.particles),
+        &format!("--particles {} and one instant", particles),
         pf.saturating_add(per_instant),
     )?;
     let max_instants = budget.bytes.saturating_sub(pf) / per_instant;

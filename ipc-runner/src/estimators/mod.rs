@@ -16,6 +16,7 @@ pub mod ikf;
 pub mod kf;
 pub mod nn;
 pub mod occlusion;
+mod particles_rng;
 pub mod pf;
 mod slots;
 mod snapshot;

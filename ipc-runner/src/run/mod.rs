@@ -72,24 +72,22 @@ use std::sync::Arc;
 pub fn main(args: &RunArgs) -> Result<i32> {
     args.check_outputs()?;
     let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
-    let choice =
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let particles = args.estimator.particle_count();
     // Before any estimator is built: the particle filter allocates its particles at once.
-    args.check_memory(scenario.nx(), scenario.nodes(), 0, choice.particles)?;
+    args.check_memory(scenario.nx(), scenario.nodes(), 0, particles)?;
     let scenario: Arc<dyn channel_sim::Scenario> = scenario.into();
     let make = select::estimators_with(
         scenario.clone(),
-        &args.estimators,
+        &args.estimator,
         select::Experiment {
             seed: args.seed,
             run: args.run,
             horizon: args.steps,
         },
-        choice,
     )
     .map_err(|e| limits::BadInput(format!("{e:#}")))?;
     let n_est = make()?.len();
-    args.check_memory(scenario.nx(), scenario.nodes(), n_est, choice.particles)?;
+    args.check_memory(scenario.nx(), scenario.nodes(), n_est, particles)?;
     let (report, traj) = run_loop(
         args,
         scenario.nx(),
