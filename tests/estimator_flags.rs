@@ -128,7 +128,7 @@ fn a_selection_that_runs_nothing_is_refused_in_every_command() {
     let cases: [(&[&str], &str); 3] = [
         (
             &["--estimators", "nn", "--gate", "0.99"],
-            "estimator \"nn\" does not apply to scenario \"occlusion\"; available: ikf+gate",
+            "estimator \"nn\" does not apply to scenario \"occlusion\"; available: ",
         ),
         (
             &["--estimators", "pf", "--particles", "0"],
