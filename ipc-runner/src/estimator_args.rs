@@ -85,8 +85,11 @@ impl EstimatorArgs {
         scenario: &str,
         source: Source,
     ) -> Result<Vec<String>, BadInput> {
-        let runs = |e: &&Box<dyn Estimator>| source == Source::Simulation || !e.full_information();
-        let available: Vec<&'static str> = built.iter().filter(runs).map(|e| e.name()).collect();
+        let available: Vec<&'static str> = built
+            .iter()
+            .filter(|e| source == Source::Simulation || !e.full_information())
+            .map(|e| e.name())
+            .collect();
         let listed = || {
             if available.is_empty() {
                 "none".to_string()
