@@ -77,6 +77,7 @@ pub struct BridgeArgs {
     pub parent_pid: Option<u32>,
     /// Test hook (sensor side): break the version byte of every Nth slot message after this
     /// side's own check, so the far side must refuse it.
+    #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true, value_name = "N")]
     pub debug_corrupt_every: Option<u64>,
     /// No progress or summary lines on stderr.
@@ -85,6 +86,18 @@ pub struct BridgeArgs {
 }
 
 impl BridgeArgs {
+    /// `--debug-corrupt-every N` (feature `test-hooks`).
+    #[cfg(feature = "test-hooks")]
+    pub(crate) fn corrupt_every(&self) -> Option<u64> {
+        self.debug_corrupt_every
+    }
+
+    /// A shipped build parses no test hook.
+    #[cfg(not(feature = "test-hooks"))]
+    pub(crate) fn corrupt_every(&self) -> Option<u64> {
+        None
+    }
+
     /// The flags' own ranges and the files they name (exit 2 on a violation, as every bad
     /// flag), before anything starts: also the `--zenoh-config` file, read and applied.
     pub fn check(&self) -> Result<()> {

@@ -151,7 +151,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             }
             sent += 1;
             if args
-                .debug_corrupt_every
+                .corrupt_every()
                 .is_some_and(|n| n > 0 && sent.is_multiple_of(n))
             {
                 msg[3] ^= 0x80;

@@ -80,13 +80,16 @@ pub struct PublisherArgs {
     #[arg(long, default_value_t = 5.0, value_parser = crate::flags::seconds)]
     pub linger: f64,
     /// Test hook: write this format version into every slot.
+    #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true)]
     pub debug_wire_version: Option<u32>,
     /// Test hook: replace the first measurement entry of every N-th delivered slot by NaN.
+    #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true)]
     pub debug_nan_every: Option<u64>,
     /// Test hook: publish the truth of instant K with its first component NaN (what a
     /// foreign publisher's bug would send; the runner must count it, not average it).
+    #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true, value_name = "K")]
     pub debug_nan_truth_at: Option<u32>,
     /// Stop (as on SIGTERM: ABORT marker, exit 0) as soon as the process PID is no longer
@@ -96,6 +99,31 @@ pub struct PublisherArgs {
     /// Suppress progress messages on stderr.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// The test hooks a command line gave (feature `test-hooks`: a shipped build parses none,
+/// and this is all `None`).
+#[derive(Clone, Copy, Debug, Default)]
+struct TestHooks {
+    wire_version: Option<u32>,
+    nan_every: Option<u64>,
+    nan_truth_at: Option<u32>,
+}
+
+impl PublisherArgs {
+    #[cfg(feature = "test-hooks")]
+    fn test_hooks(&self) -> TestHooks {
+        TestHooks {
+            wire_version: self.debug_wire_version,
+            nan_every: self.debug_nan_every,
+            nan_truth_at: self.debug_nan_truth_at,
+        }
+    }
+
+    #[cfg(not(feature = "test-hooks"))]
+    fn test_hooks(&self) -> TestHooks {
+        TestHooks::default()
+    }
 }
 
 /// What a publisher run did.
@@ -372,7 +400,8 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     } else {
         0
     };
-    let wire_version = args.debug_wire_version.unwrap_or(wire::WIRE_VERSION);
+    let hooks = args.test_hooks();
+    let wire_version = hooks.wire_version.unwrap_or(wire::WIRE_VERSION);
     let mut report = PublisherReport::default();
     let n_subs = || slots.dynamic_config().number_of_subscribers();
     let mut sender = SlotSender {
@@ -446,7 +475,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
         let inst = sim.next_instant();
         let mut x = inst.truth;
-        if args.debug_nan_truth_at == Some(inst.k) {
+        if hooks.nan_truth_at == Some(inst.k) {
             x[0] = f64::NAN;
         }
         send_truth(Truth::new(inst.k, sid, nx, &x))?;
@@ -463,7 +492,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             slot.version = wire_version;
             if obs.delivered {
                 delivered_count += 1;
-                if let Some(n) = args.debug_nan_every {
+                if let Some(n) = hooks.nan_every {
                     if n > 0 && delivered_count.is_multiple_of(n) && usize::from(obs.ny) <= MAX_NY {
                         slot.y[0] = f64::NAN;
                     }

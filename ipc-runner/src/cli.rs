@@ -111,3 +111,61 @@ pub fn main(name: &str) -> ! {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// The hidden flags that only the end-to-end tests use.
+    fn is_test_hook(long: &str) -> bool {
+        long.starts_with("debug") || long == "progress-every"
+    }
+
+    /// Every long flag of `cmd` and its subcommands, as `subcommand --flag`.
+    fn flags(cmd: &clap::Command, path: &str, out: &mut Vec<String>) {
+        for a in cmd.get_arguments() {
+            if let Some(long) = a.get_long() {
+                out.push(format!("{path} --{long}"));
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            flags(sub, sub.get_name(), out);
+        }
+    }
+
+    /// The shipped build (default features) has no test hook in its parser, so none in any
+    /// help; the `test-hooks` build, which the end-to-end tests run, has all six.
+    #[test]
+    fn test_hooks_exist_only_with_their_feature() {
+        let mut all = Vec::new();
+        flags(&Cli::command(), "ipc-runner", &mut all);
+        let hooks: Vec<&String> = all
+            .iter()
+            .filter(|f| f.split_once(" --").is_some_and(|(_, l)| is_test_hook(l)))
+            .collect();
+        if cfg!(feature = "test-hooks") {
+            assert_eq!(
+                hooks,
+                [
+                    "eval --progress-every",
+                    "run --debug-slow-us",
+                    "bridge --debug-corrupt-every",
+                    "channel-sim --debug-wire-version",
+                    "channel-sim --debug-nan-every",
+                    "channel-sim --debug-nan-truth-at",
+                ]
+            );
+        } else {
+            assert!(hooks.is_empty(), "{hooks:?}");
+            let e = Cli::try_parse_from(["ipc-runner", "run", "--debug-slow-us", "1"]).unwrap_err();
+            assert_eq!(e.kind(), clap::error::ErrorKind::UnknownArgument);
+        }
+        let mut cmd = Cli::command();
+        cmd.build();
+        for sub in cmd.get_subcommands_mut() {
+            let help = sub.render_long_help().to_string();
+            assert!(!help.to_lowercase().contains("debug"), "{}", sub.get_name());
+        }
+    }
+}

@@ -17,6 +17,7 @@
 //! [`run::PEER_CHECK_NS`], also while it waits for the first slot), so a child that exits or
 //! crashes is noticed at once and named with its exit status.
 
+use crate::estimator_args::EstimatorArgs;
 use crate::run::{self, select, Hooks, RunArgs, WaitMode};
 use crate::source::Source;
 use anyhow::{anyhow, bail, Context, Result};
@@ -55,23 +56,9 @@ pub struct DemoArgs {
     /// Run index within the seed.
     #[arg(long, default_value_t = 0)]
     pub run: u64,
-    /// Estimators, comma-separated (default: all real-time ones that apply; `pf` only with
-    /// `--particles N` or when named here).
-    #[arg(long, value_delimiter = ',')]
-    pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
-    /// a preset or a TOML file, and `nn-token-bucket`; far slower per step than the other
-    /// estimators). Default: not run, as in `eval`, unless `--estimators` names it
-    /// (then 5000).
-    #[arg(long)]
-    pub particles: Option<usize>,
-    /// Known loss rate P for the occlusion estimators' `-mix` variants (as `run --loss-rate`).
-    #[arg(long, default_value_t = 0.0, value_name = "P",
-          value_parser = crate::eval::cli::loss_probability)]
-    pub loss_rate: f64,
-    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
-    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
-    pub gate: Option<f64>,
+    /// The estimators and their options (as in `run`).
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
     /// How the loop waits for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
@@ -315,28 +302,21 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     };
     // Without --steps, the default horizon of `channel-sim` and `eval`.
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
-    let choice =
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
-    args.check_outputs(scenario.nx(), choice.particles)?;
+    let particles = args.estimator.particle_count();
+    args.check_outputs(scenario.nx(), particles)?;
     let source = std::sync::Arc::new(Source::of_scenario(&*scenario, args.seed, args.run));
     let spec = std::sync::Arc::clone(&source.spec);
     let make = select::estimators_with(
         source,
-        &args.estimators,
+        &args.estimator,
         select::Experiment {
             seed: args.seed,
             run: args.run,
             horizon: steps,
         },
-        choice,
     )
     .map_err(|e| crate::limits::BadInput(format!("{e:#}")))?;
-    args.check_memory(
-        scenario.nx(),
-        scenario.nodes(),
-        make()?.len(),
-        choice.particles,
-    )?;
+    args.check_memory(spec.nx(), spec.nodes(), make()?.len(), particles)?;
     let prefix = args
         .prefix
         .clone()
@@ -377,10 +357,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
 
     let mut rargs = RunArgs::new(&scenario_name, &prefix);
     rargs.config = args.config.clone();
-    rargs.estimators = args.estimators.clone();
-    rargs.particles = args.particles;
-    rargs.loss_rate = args.loss_rate;
-    rargs.gate = args.gate;
+    rargs.estimator = args.estimator.clone();
     rargs.wait = args.wait;
     rargs.cpu = args.cpu;
     rargs.latest_estimates = args.latest_estimates;
@@ -473,7 +450,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             }
         }
     }
-    run::finish(&rargs, &report, &traj, scenario.ny())?;
+    run::finish(&rargs, &report, &traj, spec.ny())?;
     let plot = args.out.join(&args.plot);
     if let Err(e) = plot_trajectories(&traj, &plot, scenario.name()) {
         channel_sim::errln!("demo: no plot ({e:#})");

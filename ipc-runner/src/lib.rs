@@ -6,6 +6,7 @@ pub mod estimator;
 pub use estimator::{CovarianceKind, Estimator};
 pub mod cli;
 pub mod demo;
+pub mod estimator_args;
 pub mod estimators;
 pub mod eval;
 pub mod latency;

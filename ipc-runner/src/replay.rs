@@ -2,6 +2,7 @@
 //! instead of live shared memory — for sensor logs recorded elsewhere, or to re-examine a run
 //! offline.
 
+use crate::estimator_args::EstimatorArgs;
 use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use crate::run::select;
 use crate::slot_log::{read_slots_within, LoggedInstant};
@@ -29,20 +30,9 @@ pub struct ReplayArgs {
     /// Estimator spec TOML file (as `run --estimator-spec`), instead of a scenario.
     #[arg(long, value_name = "FILE", conflicts_with = "config")]
     pub estimator_spec: Option<PathBuf>,
-    /// Estimators to run, comma-separated (default: all real-time ones that apply to the
-    /// scenario; `pf` only with `--particles N` or when named here).
-    #[arg(long, value_delimiter = ',')]
-    pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (as `run --particles`).
-    #[arg(long)]
-    pub particles: Option<usize>,
-    /// Known loss rate P for the occlusion estimators' `-mix` variants (as `run --loss-rate`).
-    #[arg(long, default_value_t = 0.0, value_name = "P",
-          value_parser = crate::eval::cli::loss_probability)]
-    pub loss_rate: f64,
-    /// Innovation gate of probability P (as `run --gate`, docs/gate.md).
-    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
-    pub gate: Option<f64>,
+    /// The estimators and their options (as in `run`).
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
     /// Experiment seed the estimators are built for (as `eval --seed`).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -103,24 +93,19 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     )?);
     let spec = &source.spec;
     let (nx, ny, nodes) = (spec.nx(), spec.ny(), spec.nodes());
-    let choice =
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let particles = args.estimator.particle_count();
     let budget = Budget::mib(args.max_memory);
-    let pf = product(&[
-        choice.particles as u64,
-        crate::eval::pf_bytes_per_particle(nx),
-    ]);
-    budget.check(&format!("--particles {}", choice.particles), pf)?;
+    let pf = product(&[particles as u64, crate::eval::pf_bytes_per_particle(nx)]);
+    budget.check(&format!("--particles {}", particles), pf)?;
     let factory = |horizon: u32| {
         select::estimators_with(
             source.clone(),
-            &args.estimators,
+            &args.estimator,
             select::Experiment {
                 seed: args.seed,
                 run: args.run,
                 horizon,
             },
-            choice,
         )
         .map_err(|e| BadInput(format!("{e:#}")))
     };
@@ -130,7 +115,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     // The particles must leave room for at least one instant, or the log's first row would
     // be refused as "beyond the row limit" without a word about the particles.
     budget.check(
-        &format!("--particles {} and one instant", choice.particles),
+        &format!("--particles {} and one instant", particles),
         pf.saturating_add(per_instant),
     )?;
     let max_instants = budget.bytes.saturating_sub(pf) / per_instant;

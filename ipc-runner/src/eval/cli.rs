@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use channel_sim::scenario;
 
 use super::{evaluate_with, Control, EvalEnding, RunConfig};
+use crate::estimator_args::{EstimatorArgs, Feed};
 use crate::estimators::{EvalOptions, FACTORIES};
 use crate::limits::{check_outputs, given, Budget};
 
@@ -49,24 +50,10 @@ pub struct EvalArgs {
           value_parser = clap::value_parser!(u64).range(1..))]
     pub max_memory: u64,
     /// Test hook: seconds between the progress lines written when stderr is not a terminal.
+    #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true, default_value_t = crate::limits::PROGRESS_LINE_EVERY.as_secs_f64(),
           value_parser = channel_sim::flags::seconds)]
     pub progress_every: f64,
-    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
-    /// a preset or a TOML file, and `nn-token-bucket`). Off by default in
-    /// `eval` (unless `--estimators` names `pf` or `pf-mix`: then 5000): at 5000 particles it
-    /// costs ~3 CPU-ms per step, 100× the other estimators together, so a 2000-run
-    /// evaluation would take minutes instead of seconds. Typical: `--particles 5000 --runs 200`.
-    #[arg(long)]
-    pub particles: Option<usize>,
-    /// Estimators to evaluate, comma-separated (default: all that apply to the scenario).
-    #[arg(long, value_delimiter = ',')]
-    pub estimators: Vec<String>,
-    /// Known loss rate P of the occlusion estimators' mixture option: `cce-mix`,
-    /// `kf-io-mix`, `adf-mix` (and `pf-mix`) read a dropout as "occluded, or lost in
-    /// transport with probability P" (docs/occlusion.md, "Losses"). 0 (default): not built.
-    #[arg(long, default_value_t = 0.0, value_name = "P", value_parser = loss_probability)]
-    pub loss_rate: f64,
     /// A transport stage after the channel that loses every slot with probability P (its own
     /// random stream: the channel's randomness is unchanged); the lost slots reach the
     /// estimators marked lost (no information).
@@ -75,11 +62,24 @@ pub struct EvalArgs {
     /// The transport losses look like channel dropouts (the receiver sees only "no packet").
     #[arg(long, requires = "transport_loss")]
     pub transport_loss_unmarked: bool,
-    /// Innovation gate of probability P (docs/gate.md): every estimator with an innovation
-    /// ignores a measurement whose NIS exceeds the χ² quantile of P, and is named
-    /// `<name>+gate`; the summary and JSON count the rejections. Default: off.
-    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
-    pub gate: Option<f64>,
+    /// The estimators and their options (as in `run`, `demo` and `replay`); the summary and
+    /// JSON count the gate's rejections.
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
+}
+
+impl EvalArgs {
+    /// `--progress-every` (feature `test-hooks`).
+    #[cfg(feature = "test-hooks")]
+    fn progress_every(&self) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(self.progress_every)
+    }
+
+    /// A shipped build parses no test hook: the progress lines' own interval.
+    #[cfg(not(feature = "test-hooks"))]
+    fn progress_every(&self) -> std::time::Duration {
+        crate::limits::PROGRESS_LINE_EVERY
+    }
 }
 
 /// Most worker threads `--threads` accepts (each holds a run's records).
@@ -109,17 +109,6 @@ pub fn default_threads(env: Option<&std::ffi::OsStr>) -> Result<usize, String> {
 /// A probability in `[0, 1)` (a loss rate).
 pub fn loss_probability(s: &str) -> Result<f64, String> {
     channel_sim::flags::probability_below_one(s)
-}
-
-/// The particle count of `pf`: `--particles` when given, else 0 unless `names` asks for `pf`
-/// or `pf-mix` by name (then the default count). The particle filter is opt-in for every
-/// command: it is the one estimator too slow for the others' time budget.
-pub fn particles(explicit: Option<usize>, names: &[String]) -> usize {
-    explicit.unwrap_or(if names.iter().any(|n| n == "pf" || n == "pf-mix") {
-        crate::estimators::pf::DEFAULT_PARTICLES
-    } else {
-        0
-    })
 }
 
 /// A failed command: exit code 2 for bad input (flags, scenario, configuration), 1 otherwise.
@@ -178,8 +167,8 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         None => default_threads(std::env::var_os("RAYON_NUM_THREADS").as_deref())
             .map_err(CommandError::usage)?,
     };
-    let particles = particles(args.particles, &args.estimators);
-    // Before any estimator is built (the name check below builds them): a particle filter
+    let particles = args.estimator.particle_count();
+    // Before any estimator is built (the selection below builds them): a particle filter
     // allocates its particles at once.
     budget
         .check(
@@ -191,30 +180,21 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
             ]),
         )
         .map_err(CommandError::usage)?;
-    // Estimator families add fields (with their flags) to EvalOptions; the rest default.
-    #[allow(clippy::needless_update)]
-    let options = EvalOptions {
+    let mut options = EvalOptions {
         runs: args.runs,
         horizon: args.horizon,
         seed: args.seed,
-        particles,
-        estimators: args.estimators.clone(),
-        loss_rate: args.loss_rate,
         transport_loss: args.transport_loss,
         transport_loss_unmarked: args.transport_loss_unmarked,
-        gate: args.gate,
+        ..args.estimator.options()
     };
     // Every estimator that applies, built once for run 0 before any work: what refuses to
     // build (a P0 that is not positive definite, a model no occlusion filter has a size
     // for) is the scenario's fault, so it is bad input (exit 2) naming its origin.
-    let all = EvalOptions {
-        estimators: Vec::new(),
-        ..options.clone()
-    };
-    let available: Vec<&str> = crate::estimators::build_all(
+    let all = crate::estimators::build_all(
         FACTORIES,
         &scenario.estimator_spec(),
-        &all,
+        &options,
         &crate::estimators::RunStart {
             seed: options.seed,
             run: 0,
@@ -227,29 +207,11 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
             None => format!("--scenario {}", scenario.name()),
         };
         CommandError::usage(format!("{origin}: {e:#}"))
-    })?
-    .iter()
-    .map(|e| e.name())
-    .collect();
-    if !options.estimators.is_empty() {
-        for n in &options.estimators {
-            if !available
-                .iter()
-                .any(|a| crate::estimators::names_match(a, n))
-            {
-                let hint = if n.ends_with("-mix") && options.loss_rate == 0.0 {
-                    " (the -mix estimators need --loss-rate P)"
-                } else {
-                    ""
-                };
-                return Err(CommandError::usage(format!(
-                    "estimator {n:?} does not apply to scenario {:?}{hint}; available: {}",
-                    scenario.name(),
-                    available.join(", ")
-                )));
-            }
-        }
-    }
+    })?;
+    options.estimators = args
+        .estimator
+        .select(&all, scenario.name(), Feed::Simulation)
+        .map_err(CommandError::usage)?;
     let run_config = RunConfig {
         // Always a count: rayon would read RAYON_NUM_THREADS again, unchecked.
         threads: Some(threads),
@@ -261,7 +223,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     let stop = channel_sim::signal::termination_requested;
     let control = Control {
         budget,
-        progress_every: std::time::Duration::from_secs_f64(args.progress_every),
+        progress_every: args.progress_every(),
         stop: Some(&stop),
     };
     let mut result = evaluate_with(&*scenario, &options, FACTORIES, &run_config, &control)

@@ -1,5 +1,6 @@
 //! The options of `ipc-runner run` (shared with `demo`).
 
+use crate::estimator_args::EstimatorArgs;
 use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use estpipe_wire as wire;
 use serde::Serialize;
@@ -48,27 +49,9 @@ pub struct RunArgs {
     /// announce the same model. Instead of `--scenario`/`--config`.
     #[arg(long, value_name = "FILE", conflicts_with = "config")]
     pub estimator_spec: Option<PathBuf>,
-    /// Estimators to run, comma-separated (default: all real-time ones that apply to the
-    /// scenario; `pf` only with `--particles N` or when named here).
-    #[arg(long, value_delimiter = ',')]
-    pub estimators: Vec<String>,
-    /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
-    /// a preset or a TOML file, and `nn-token-bucket`; far slower per step than the other
-    /// estimators). Default: `pf` is not run unless `--estimators` names it (then
-    /// 5000).
-    #[arg(long)]
-    pub particles: Option<usize>,
-    /// Known loss rate P for the occlusion estimators' mixture option: adds `cce-mix`,
-    /// `kf-io-mix`, `adf-mix` (and `pf-mix`), which read a dropout as "occluded, or lost in
-    /// transport with probability P" (docs/occlusion.md, "Losses").
-    #[arg(long, default_value_t = 0.0, value_name = "P",
-          value_parser = crate::eval::cli::loss_probability)]
-    pub loss_rate: f64,
-    /// Innovation gate of probability P (docs/gate.md): every estimator with an innovation
-    /// ignores a measurement whose NIS exceeds the χ² quantile of P, and is named
-    /// `<name>+gate`; the summary counts the rejections. Default: off.
-    #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
-    pub gate: Option<f64>,
+    /// The estimators and their options (as in `eval`, `demo` and `replay`).
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
     /// Service-name prefix (must match channel-sim's).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
@@ -143,6 +126,7 @@ pub struct RunArgs {
     #[arg(long, conflicts_with = "no_publish_estimates")]
     pub latest_estimates: bool,
     /// Test hook: sleep this many µs after each slot (a deliberately slow consumer).
+    #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true)]
     pub debug_slow_us: Option<u64>,
     /// Suppress progress messages.
@@ -171,10 +155,7 @@ impl RunArgs {
             scenario: scenario.to_string(),
             config: None,
             estimator_spec: None,
-            estimators: Vec::new(),
-            particles: None,
-            loss_rate: 0.0,
-            gate: None,
+            estimator: EstimatorArgs::default(),
             prefix: prefix.to_string(),
             wait: WaitMode::Spin,
             deadline_ms: 100.0,
@@ -195,10 +176,25 @@ impl RunArgs {
             json: None,
             no_publish_estimates: false,
             latest_estimates: false,
+            #[cfg(feature = "test-hooks")]
             debug_slow_us: None,
             quiet: false,
             max_memory: crate::limits::DEFAULT_MAX_MEMORY_MIB,
         }
+    }
+
+    /// `--debug-slow-us` (feature `test-hooks`).
+    #[cfg(feature = "test-hooks")]
+    #[inline]
+    pub fn slow_consumer_us(&self) -> Option<u64> {
+        self.debug_slow_us
+    }
+
+    /// A shipped build parses no test hook.
+    #[cfg(not(feature = "test-hooks"))]
+    #[inline]
+    pub fn slow_consumer_us(&self) -> Option<u64> {
+        None
     }
 
     /// Checks, before the loop starts, that every output file can be written (a file that

@@ -80,23 +80,21 @@ pub fn main(args: &RunArgs) -> Result<i32> {
         args.run,
     )?);
     let spec = Arc::clone(&source.spec);
-    let choice =
-        select::Choice::of(args.particles, &args.estimators, args.loss_rate).gated(args.gate);
+    let particles = args.estimator.particle_count();
     // Before any estimator is built: the particle filter allocates its particles at once.
-    args.check_memory(spec.nx(), spec.nodes(), 0, choice.particles)?;
+    args.check_memory(spec.nx(), spec.nodes(), 0, particles)?;
     let make = select::estimators_with(
         source,
-        &args.estimators,
+        &args.estimator,
         select::Experiment {
             seed: args.seed,
             run: args.run,
             horizon: args.steps,
         },
-        choice,
     )
     .map_err(|e| limits::BadInput(format!("{e:#}")))?;
     let n_est = make()?.len();
-    args.check_memory(spec.nx(), spec.nodes(), n_est, choice.particles)?;
+    args.check_memory(spec.nx(), spec.nodes(), n_est, particles)?;
     let (report, traj) = run_loop(args, &spec, &make, Hooks::default())?;
     conclude(args, &report, &traj, spec.ny())
 }

@@ -2,10 +2,11 @@
 //! as `eval`, so the commands can never disagree about what a name means, built from the
 //! estimators' [`Source`] (a spec, from a scenario or a spec file) alone.
 
+use crate::estimator_args::{EstimatorArgs, Feed};
 use crate::estimators::{build_all, EvalOptions, FACTORIES};
 use crate::source::Source;
 use crate::Estimator;
-use anyhow::{bail, Result};
+use anyhow::Result;
 use std::sync::Arc;
 
 /// A factory for a fresh set of estimators (called again when a stream restarts).
@@ -23,47 +24,9 @@ pub struct Experiment {
     pub horizon: u32,
 }
 
-/// What the commands choose beside the names: `--particles` and `--loss-rate`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Choice {
-    /// Particles of `pf` (0: not built).
-    pub particles: usize,
-    /// `p_loss` of the occlusion estimators' `-mix` variants (0: not built).
-    pub loss_rate: f64,
-    /// `--gate P`: the innovation gate's probability (None: off; docs/gate.md).
-    pub gate: Option<f64>,
-}
-
-impl Choice {
-    /// What [`estimators`] builds: `pf` at its default particle count, no `-mix` variants.
-    pub const EVERY: Self = Self {
-        particles: crate::estimators::pf::DEFAULT_PARTICLES,
-        loss_rate: 0.0,
-        gate: None,
-    };
-
-    /// The choice of `run`, `replay` and `demo`: `pf` only when asked for (`--particles N`,
-    /// or named in `--estimators`), as in `eval`, and the `-mix` estimators with
-    /// `--loss-rate P`.
-    pub fn of(particles: Option<usize>, names: &[String], loss_rate: f64) -> Self {
-        Self {
-            particles: crate::eval::cli::particles(particles, names),
-            loss_rate,
-            gate: None,
-        }
-    }
-
-    /// With the innovation gate of `--gate P` (docs/gate.md).
-    #[must_use]
-    pub fn gated(mut self, gate: Option<f64>) -> Self {
-        self.gate = gate;
-        self
-    }
-}
-
 /// The estimators that can run on live data for `source`: `names` (all when empty), with
-/// `pf` and without the `-mix` variants ([`Choice::EVERY`]; the commands use
-/// [`estimators_with`]). The full-information oracles of `eval`
+/// `pf` at its default particle count and without the `-mix` variants (the commands use
+/// [`estimators_with`] and their flags). The full-information oracles of `eval`
 /// (`Estimator::full_information`) read observations from before the channel, which a
 /// real-time loop does not have; they are left out.
 pub fn estimators(
@@ -71,77 +34,38 @@ pub fn estimators(
     names: &[String],
     exp: Experiment,
 ) -> Result<EstimatorFactory> {
-    estimators_with(source, names, exp, Choice::EVERY)
+    let every = EstimatorArgs {
+        estimators: names.to_vec(),
+        particles: Some(crate::estimators::pf::DEFAULT_PARTICLES),
+        ..EstimatorArgs::default()
+    };
+    estimators_with(source, &every, exp)
 }
 
-/// [`estimators`] with the particle count and loss rate of `choice`.
+/// [`estimators`] as the estimator flags `args` select them ([`EstimatorArgs::select`]);
+/// what they select is checked here, once, and every call of the factory builds the same
+/// estimators.
 pub fn estimators_with(
     source: Arc<Source>,
-    names: &[String],
+    args: &EstimatorArgs,
     exp: Experiment,
-    choice: Choice,
 ) -> Result<EstimatorFactory> {
-    // Estimator families add fields to EvalOptions; the rest default, as in `eval`.
-    #[allow(clippy::needless_update)]
-    let options = EvalOptions {
+    let mut options = EvalOptions {
         runs: 1,
         horizon: exp.horizon,
         seed: exp.seed,
-        particles: choice.particles,
-        loss_rate: choice.loss_rate,
-        gate: choice.gate,
-        ..EvalOptions::default()
+        ..args.options()
     };
-    let all = build_all(
-        FACTORIES,
-        &source.spec,
-        &options,
-        &source.start(exp.seed, exp.run),
-    )?;
-    let available: Vec<&'static str> = all
-        .iter()
-        .filter(|e| !e.full_information())
-        .map(|e| e.name())
-        .collect();
-    for n in names {
-        if !available
-            .iter()
-            .any(|a| crate::estimators::names_match(a, n))
-        {
-            let oracle = all.iter().any(|e| e.name() == n && e.full_information());
-            bail!(
-                "estimator {n:?} {} for scenario {:?}; available: {}",
-                if oracle {
-                    "is a full-information oracle (offline `eval` only)"
-                } else if n.ends_with("-mix") && choice.loss_rate == 0.0 {
-                    "needs --loss-rate P"
-                } else {
-                    "does not exist"
-                },
-                source.spec.name,
-                available.join(", ")
-            );
-        }
-    }
-    if available.is_empty() {
-        bail!(
-            "no real-time estimator applies to scenario {:?}",
-            source.spec.name
-        );
-    }
-    let names = names.to_vec();
+    let start = source.start(exp.seed, exp.run);
+    let all = build_all(FACTORIES, &source.spec, &options, &start)?;
+    options.estimators = args.select(&all, &source.spec.name, Feed::Slots)?;
     Ok(Box::new(move || {
-        let built = build_all(
+        build_all(
             FACTORIES,
             &source.spec,
             &options,
             &source.start(exp.seed, exp.run),
-        )?;
-        Ok(built
-            .into_iter()
-            .filter(|e| !e.full_information())
-            .filter(|e| names.is_empty() || names.iter().any(|n| n == e.name()))
-            .collect())
+        )
     }))
 }
 
@@ -157,8 +81,13 @@ mod tests {
             run: 0,
             horizon: 10,
         };
-        let choice = Choice::of(particles, &names, loss_rate);
-        let make = estimators_with(scenario, &names, exp, choice)?;
+        let args = EstimatorArgs {
+            estimators: names,
+            particles,
+            loss_rate,
+            gate: None,
+        };
+        let make = estimators_with(scenario, &args, exp)?;
         Ok(make()?.iter().map(|e| e.name().to_string()).collect())
     }
 

@@ -323,7 +323,7 @@ impl Loop<'_> {
             if let Some(e) = self.runner.out.take_error() {
                 return Err(e);
             }
-            if let Some(us) = self.args.debug_slow_us {
+            if let Some(us) = self.args.slow_consumer_us() {
                 std::thread::sleep(Duration::from_micros(us));
             }
             self.allocs

@@ -53,7 +53,7 @@
 //! the run's start as for the others. Diagnostics: `ess` (effective sample size / N after the
 //! last sent instant's weighting, before resampling). Random numbers: xoshiro256++ seeded from `(seed, run)`, a stream of its own.
 
-use crate::estimators::seed::splitmix64;
+use crate::estimators::particles_rng::splitmix64;
 use estimator_core::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use estimator_core::gauss::log_sum_exp;
 use estimator_core::linalg::cholesky;
@@ -63,6 +63,7 @@ use estimator_core::Error;
 use estpipe_wire::Observation;
 use nalgebra::{SMatrix, SVector};
 
+use crate::estimators::particles_rng::Rng;
 use crate::Estimator;
 
 type V2 = SVector<f64, 2>;
@@ -295,54 +296,6 @@ impl std::fmt::Debug for CoupledPf {
             .field("eps", &self.eps)
             .field("mean", &self.mean)
             .finish_non_exhaustive()
-    }
-}
-
-/// xoshiro256++ (Blackman & Vigna) with Box–Muller normals, as the occlusion `pf` draws them.
-struct Rng {
-    s: [u64; 4],
-    spare: Option<f64>,
-}
-
-impl Rng {
-    fn new(seed: u64) -> Self {
-        let mut x = seed;
-        let mut s = [0u64; 4];
-        for v in &mut s {
-            x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            *v = splitmix64(x);
-        }
-        Self { s, spare: None }
-    }
-
-    fn next_u64(&mut self) -> u64 {
-        let r = (self.s[0].wrapping_add(self.s[3]))
-            .rotate_left(23)
-            .wrapping_add(self.s[0]);
-        let t = self.s[1] << 17;
-        self.s[2] ^= self.s[0];
-        self.s[3] ^= self.s[1];
-        self.s[1] ^= self.s[2];
-        self.s[0] ^= self.s[3];
-        self.s[2] ^= t;
-        self.s[3] = self.s[3].rotate_left(45);
-        r
-    }
-
-    /// Uniform in (0, 1).
-    fn uniform(&mut self) -> f64 {
-        ((self.next_u64() >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
-    }
-
-    fn normal(&mut self) -> f64 {
-        if let Some(v) = self.spare.take() {
-            return v;
-        }
-        let (u1, u2) = (self.uniform(), self.uniform());
-        let r = (-2.0 * u1.ln()).sqrt();
-        let t = 2.0 * std::f64::consts::PI * u2;
-        self.spare = Some(r * t.sin());
-        r * t.cos()
     }
 }
 
