@@ -50,3 +50,45 @@ pub fn available() -> Result<(), estpipe_process::flags::BadInput> {
         Err(estpipe_process::flags::BadInput(NOT_BUILT.into()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, clap::Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        command: Command,
+    }
+
+    #[derive(Debug, clap::Subcommand)]
+    enum Command {
+        Bridge(BridgeArgs),
+    }
+
+    /// Any `bridge` command line reaches [`main`], which a build without the bridge answers
+    /// with the one line of how to get it, as bad input (exit code 2).
+    #[test]
+    fn a_build_without_the_bridge_says_how_to_get_it() {
+        use clap::Parser as _;
+        let parsed = Cli::try_parse_from(["ipc-runner", "bridge", "--side", "sensor"]);
+        if cfg!(feature = "bridge") {
+            assert!(available().is_ok());
+            assert!(parsed.is_ok());
+            return;
+        }
+        for line in [
+            &["bridge"][..],
+            &["bridge", "--help"],
+            &["bridge", "--side", "x", "-q"],
+        ] {
+            let Command::Bridge(a) = Cli::try_parse_from(["ipc-runner"].iter().chain(line))
+                .unwrap_or_else(|e| panic!("{line:?}: {e}"))
+                .command;
+            let e = main(&a).unwrap_err();
+            assert!(estpipe_process::flags::BadInput::is_in(&e), "{e:#}");
+            assert_eq!(format!("{e:#}"), NOT_BUILT);
+        }
+        assert!(NOT_BUILT.contains("cargo build --release -p ipc-runner --features bridge"));
+    }
+}
