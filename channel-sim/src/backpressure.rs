@@ -98,9 +98,9 @@ impl Gate {
         self.parent.store(pid, Ordering::Relaxed);
     }
 
-    /// Whether SIGINT/SIGTERM/SIGHUP arrived ([`estpipe_process::signal`]) or the `--parent-pid` process is
-    /// gone, seen here or by the handler during a blocked send; latched. Nothing else stops
-    /// a run: any other signal only ends a wait early.
+    /// Whether SIGINT/SIGTERM/SIGHUP arrived ([`estpipe_process::signal`]) or the
+    /// `--parent-pid` process is gone, seen here or by the handler during a blocked send;
+    /// latched. Nothing else stops a run: any other signal only ends a wait early.
     pub fn stop_requested(&self) -> bool {
         if !self.stop.load(Ordering::Relaxed) {
             let parent = self.parent.load(Ordering::Relaxed);

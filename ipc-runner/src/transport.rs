@@ -96,10 +96,10 @@ impl Transport {
     }
 
     /// Whether slot publisher `origin` (a sample's [`UniquePublisherId`] value) belongs to
-    /// the estimator side of a bridge (a node named [`estpipe_process::node::BRIDGE_NODE_NAME`]): a relay,
-    /// which may go away and come back with the same stream (docs/bridge.md, "A bridge that
-    /// goes away"). Lists the service's publishers and the nodes: a cold path, asked once per
-    /// new publisher.
+    /// the estimator side of a bridge (a node named
+    /// [`estpipe_process::node::BRIDGE_NODE_NAME`]): a relay, which may go away and come back
+    /// with the same stream (docs/bridge.md, "A bridge that goes away"). Lists the service's
+    /// publishers and the nodes: a cold path, asked once per new publisher.
     ///
     /// [`UniquePublisherId`]: iceoryx2::identifiers::UniquePublisherId
     pub fn is_bridge(&self, origin: u128) -> bool {
