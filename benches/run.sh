@@ -21,5 +21,6 @@ export IOX2_LOG_LEVEL=Error
 # builds the plain-release variants of kf_interleaved into target/plain-release and
 # target/x86-64-v3 itself.
 cargo build --profile bench -p benches --bins
-cargo build --release -p ipc-runner
+# With the bridge: the part `bridge` runs `ipc-runner demo --via zenoh`.
+cargo build --release -p ipc-runner --features bridge
 exec target/release/report "$@"

@@ -36,10 +36,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         key: key.clone(),
         ..Default::default()
     };
-    let node = NodeBuilder::new()
-        .name(&NodeName::new(crate::NODE_NAME).map_err(|e| anyhow!("{e:?}"))?)
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    let node = estpipe_process::node::create(crate::NODE_NAME)?;
     let _ = node.try_cleanup_dead_nodes();
     let slots = wire::slot_service(&node, &args.prefix)?;
     let truth = wire::truth_service(&node, &args.prefix)?;
@@ -75,7 +72,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .map_err(|e| anyhow!("cannot notify on {}/slots-ready: {e:?}", args.prefix))?;
 
     if !args.quiet {
-        errln!(
+        estpipe_process::errln!(
             "bridge: estimator side of {}: waiting for a runner",
             args.prefix
         );
@@ -129,7 +126,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .wait()
         .map_err(|e| anyhow!("zenoh subscriber {key}/slots: {e}"))?;
     if !args.quiet {
-        errln!(
+        estpipe_process::errln!(
             "bridge: estimator side of {}: listening on {key}",
             args.prefix
         );
@@ -229,14 +226,14 @@ impl FarSide {
             match s.kind() {
                 zenoh::sample::SampleKind::Put => {
                     if self.seen && !quiet {
-                        errln!("bridge: sensor side back");
+                        estpipe_process::errln!("bridge: sensor side back");
                     }
                     self.seen = true;
                 }
                 zenoh::sample::SampleKind::Delete => {
                     report.far_side_lost += 1;
                     if !quiet {
-                        errln!(
+                        estpipe_process::errln!(
                             "bridge: sensor side gone (its slots count as lost on the network \
                              until it returns)"
                         );

@@ -17,16 +17,8 @@
 //! | [`report`] | counts by reason and the bridge's latency histograms |
 //!
 //! The message encoding and its checks are the wire crate's (`estpipe_wire::net`): the bridge
-//! never writes into shared memory a message that those checks refused.
-
-/// `eprintln!` that drops the line when stderr cannot take it (a pipe whose reader went
-/// away): the bridge goes on, where `eprintln!` would panic (as `channel_sim::errln!`).
-macro_rules! errln {
-    ($($arg:tt)*) => {{
-        use ::std::io::Write as _;
-        let _ = ::std::writeln!(::std::io::stderr().lock(), $($arg)*);
-    }};
-}
+//! never writes into shared memory a message that those checks refused. Its lines on stderr,
+//! its stop signals and its iceoryx2 node are the product's (`estpipe_process`).
 
 pub mod args;
 pub mod estimator;
@@ -38,18 +30,16 @@ mod stop;
 
 pub use args::{BridgeArgs, Side};
 pub use report::BridgeReport;
-pub use stop::also_stop_when;
 
-/// The name of a bridge's iceoryx2 node (both sides). The runner tells by it that its slot
-/// publisher is a bridge's estimator side, a relay that may go away and come back with the
-/// same stream (docs/bridge.md, "A bridge that goes away").
-pub const NODE_NAME: &str = "estpipe-bridge";
+/// The name of a bridge's iceoryx2 node (both sides), by which the runner tells a relay
+/// ([`estpipe_process::node::BRIDGE_NODE_NAME`]).
+pub const NODE_NAME: &str = estpipe_process::node::BRIDGE_NODE_NAME;
 
 /// `ipc-runner bridge`: runs the bridge, prints its one-line summary, writes `--report`.
 pub fn main(args: &BridgeArgs) -> anyhow::Result<i32> {
     let report = run(args)?;
     if !args.quiet {
-        errln!("bridge: {}", report.summary());
+        estpipe_process::errln!("bridge: {}", report.summary());
     }
     if let Some(p) = &args.report {
         let json = serde_json::to_string_pretty(&report)?;

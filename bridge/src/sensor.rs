@@ -35,10 +35,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         key: key.clone(),
         ..Default::default()
     };
-    let node = NodeBuilder::new()
-        .name(&NodeName::new(crate::NODE_NAME).map_err(|e| anyhow!("{e:?}"))?)
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    let node = estpipe_process::node::create(crate::NODE_NAME)?;
     let _ = node.try_cleanup_dead_nodes();
     let slots = wire::slot_service(&node, &args.prefix)?;
     let truth = wire::truth_service(&node, &args.prefix)?;
@@ -75,7 +72,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .map_err(|e| anyhow!("zenoh subscriber {key}/estimates: {e}"))?;
 
     if !args.quiet {
-        errln!(
+        estpipe_process::errln!(
             "bridge: sensor side of {}: waiting for the estimator side on {key}",
             args.prefix
         );
@@ -117,7 +114,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .create()
         .map_err(|e| anyhow!("cannot subscribe to {}/slots: {e:?}", args.prefix))?;
     if !args.quiet {
-        errln!("bridge: sensor side of {}: forwarding", args.prefix);
+        estpipe_process::errln!("bridge: sensor side of {}: forwarding", args.prefix);
     }
     // A put blocked on a congested link returns when a stop closes the session.
     let close_on_stop = CloseOnStop::new(&session, &stop);

@@ -98,9 +98,9 @@ impl Gate {
         self.parent.store(pid, Ordering::Relaxed);
     }
 
-    /// Whether SIGINT/SIGTERM/SIGHUP arrived ([`crate::signal`]) or the `--parent-pid` process is
-    /// gone, seen here or by the handler during a blocked send; latched. Nothing else stops
-    /// a run: any other signal only ends a wait early.
+    /// Whether SIGINT/SIGTERM/SIGHUP arrived ([`estpipe_process::signal`]) or the
+    /// `--parent-pid` process is gone, seen here or by the handler during a blocked send;
+    /// latched. Nothing else stops a run: any other signal only ends a wait early.
     pub fn stop_requested(&self) -> bool {
         if !self.stop.load(Ordering::Relaxed) {
             let parent = self.parent.load(Ordering::Relaxed);
@@ -108,7 +108,7 @@ impl Gate {
             if orphaned {
                 self.orphaned.store(true, Ordering::Relaxed);
             }
-            if orphaned || crate::signal::termination_requested() {
+            if orphaned || estpipe_process::signal::termination_requested() {
                 self.stop.store(true, Ordering::Relaxed);
             }
         }
@@ -127,7 +127,7 @@ impl Gate {
                 self.parent.load(Ordering::Relaxed)
             ));
         }
-        Some(match crate::signal::termination_signal() {
+        Some(match estpipe_process::signal::termination_signal() {
             Some(name) => format!("stopped by signal ({name})"),
             None => "stopped by signal".to_string(),
         })

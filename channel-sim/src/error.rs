@@ -2,6 +2,8 @@
 //!
 //! The bottom of the crate: plants, channel stages, presets and the TOML loader all report
 //! through this one type, so it imports nothing from them.
+//!
+//! A scenario that cannot be built is bad input, as a bad flag is ([`is_bad_input`]).
 
 use std::fmt;
 
@@ -63,5 +65,30 @@ impl From<estpipe_spec::SpecError> for ScenarioError {
             }
             estpipe_spec::SpecError::File { path, reason } => ScenarioError::File { path, reason },
         }
+    }
+}
+
+/// Whether an error chain was caused by bad input ([`estpipe_process::flags::BadInput`] or a
+/// scenario that could not be built, [`ScenarioError`]): such a command exits with code 2.
+pub fn is_bad_input(e: &anyhow::Error) -> bool {
+    estpipe_process::flags::BadInput::is_in(e) || e.chain().any(|c| c.is::<ScenarioError>())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_input_is_found_anywhere_in_the_chain() {
+        use anyhow::Context as _;
+        let e = Err::<(), _>(estpipe_process::flags::BadInput("x".into()))
+            .context("outer")
+            .unwrap_err();
+        assert!(is_bad_input(&e));
+        let e = Err::<(), _>(ScenarioError::invalid("a", "b"))
+            .context("outer")
+            .unwrap_err();
+        assert!(is_bad_input(&e));
+        assert!(!is_bad_input(&anyhow::anyhow!("io")));
     }
 }

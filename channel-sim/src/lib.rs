@@ -12,24 +12,18 @@
 //!
 //! [`scenario`] puts a plant, its channel stages and the initial distribution under a name
 //! (presets or TOML); [`scenario::resolve`] is what both processes call to get one. Beneath
-//! everything: [`error`] (the one error type of scenario construction), [`rng`] (the run's
-//! random streams), [`validate`] (parameter checks naming the field) and [`flags`] (the
-//! command-line values of both binaries, and what counts as bad input). [`signal`] lets the
-//! publisher and `ipc-runner` ask for Ctrl-C without sleeping (and makes every other signal
-//! harmless); [`node`] creates their iceoryx2 node and says what to do when the iceoryx2
-//! directories belong to another user.
+//! everything: [`error`] (the one error type of scenario construction, and what counts as
+//! bad input), [`rng`] (the run's random streams) and [`validate`] (parameter checks naming
+//! the field). The process plumbing (console lines, the signal flag, checked flags, the
+//! iceoryx2 node) is `estpipe_process`'s, shared with `ipc-runner` and the bridge.
 
 pub mod backpressure;
 pub mod channel;
-pub mod console;
 pub mod error;
-pub mod flags;
-pub mod node;
 pub mod plant;
 pub mod publisher;
 pub mod rng;
 pub mod scenario;
-pub mod signal;
 pub mod sim;
 pub mod validate;
 pub mod wire;

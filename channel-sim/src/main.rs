@@ -16,7 +16,7 @@ struct Cli {
 }
 
 fn main() {
-    channel_sim::console::set_iceoryx2_log_level("channel-sim");
+    estpipe_process::console::set_iceoryx2_log_level("channel-sim");
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {
@@ -29,21 +29,21 @@ fn main() {
             ) {
                 e.exit();
             }
-            channel_sim::errln!(
+            estpipe_process::errln!(
                 "channel-sim: error: {} (see --help)",
-                channel_sim::flags::one_line(&e)
+                estpipe_process::flags::one_line(&e)
             );
             std::process::exit(2);
         }
     };
     if let Err(e) = channel_sim::publisher::run(&cli.args) {
-        channel_sim::errln!(
+        estpipe_process::errln!(
             "channel-sim: error: {}",
-            channel_sim::console::one_line(&format!("{e:#}"))
+            estpipe_process::console::one_line(&format!("{e:#}"))
         );
         // 2 for bad input and for a refusal (a peer outside the contract, iceoryx2
         // directories of another user: docs/security.md), as `ipc-runner`; 1 for anything else.
-        let code = if channel_sim::flags::is_bad_input(&e) {
+        let code = if channel_sim::error::is_bad_input(&e) {
             2
         } else {
             e.downcast_ref::<estpipe_wire::ContractError>()

@@ -60,7 +60,7 @@ pub struct PublisherArgs {
     #[arg(long)]
     pub steps: Option<u32>,
     /// Sampling rate in Hz; 0 publishes as fast as possible.
-    #[arg(long, default_value_t = 1000.0, value_parser = crate::flags::rate_hz)]
+    #[arg(long, default_value_t = 1000.0, value_parser = estpipe_process::flags::rate_hz)]
     pub rate: f64,
     /// What a full subscriber queue does: `block` waits (nothing is lost), `discard` drops the
     /// slot (the runner counts the gap); `auto` blocks at `--rate 0` and discards when paced.
@@ -74,10 +74,10 @@ pub struct PublisherArgs {
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
     /// Seconds to wait for a subscriber (at start and after losing one); 0 = forever.
-    #[arg(long, default_value_t = 30.0, value_parser = crate::flags::seconds)]
+    #[arg(long, default_value_t = 30.0, value_parser = estpipe_process::flags::seconds)]
     pub connect_timeout: f64,
     /// Seconds to wait after the END marker for the subscriber to drain and detach.
-    #[arg(long, default_value_t = 5.0, value_parser = crate::flags::seconds)]
+    #[arg(long, default_value_t = 5.0, value_parser = estpipe_process::flags::seconds)]
     pub linger: f64,
     /// Test hook: write this format version into every slot.
     #[cfg(feature = "test-hooks")]
@@ -302,17 +302,17 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         (
             "--rate",
             args.rate,
-            crate::flags::rate_hz as fn(&str) -> Result<f64, String>,
+            estpipe_process::flags::rate_hz as fn(&str) -> Result<f64, String>,
         ),
         (
             "--connect-timeout",
             args.connect_timeout,
-            crate::flags::seconds,
+            estpipe_process::flags::seconds,
         ),
-        ("--linger", args.linger, crate::flags::seconds),
+        ("--linger", args.linger, estpipe_process::flags::seconds),
     ] {
         if let Err(e) = check(&value.to_string()) {
-            return Err(crate::flags::BadInput(format!("{flag}: {e}")).into());
+            return Err(estpipe_process::flags::BadInput(format!("{flag}: {e}")).into());
         }
     }
     let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
@@ -334,13 +334,13 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let nx = scenario.nx();
     let say = |m: &str| {
         if !args.quiet {
-            crate::errln!("channel-sim: {m}");
+            estpipe_process::errln!("channel-sim: {m}");
         }
     };
 
     // Before anything can wait: SIGINT/SIGTERM/SIGHUP set a flag from here on, nothing else stops.
-    crate::signal::install();
-    let node = crate::node::create("channel-sim")?;
+    estpipe_process::signal::install();
+    let node = estpipe_process::node::create("channel-sim")?;
     // A SIGKILLed predecessor leaves its ports registered; remove them before we claim ours.
     let _ = node.try_cleanup_dead_nodes();
 

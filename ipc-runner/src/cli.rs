@@ -34,8 +34,8 @@ enum Command {
     /// Run the estimators over a recorded slot log (CSV, see docs/replay.md).
     Replay(crate::replay::ReplayArgs),
     /// Carry a prefix's services over zenoh to another host, every message checked on
-    /// arrival (docs/bridge.md).
-    Bridge(estpipe_bridge::BridgeArgs),
+    /// arrival (docs/bridge.md; in builds with `--features bridge`).
+    Bridge(crate::bridge::BridgeArgs),
     /// Print the stream header a publisher of this scenario must write into every slot
     /// (JSON; see docs/wire.md).
     StreamHeader(crate::stream_header::StreamHeaderArgs),
@@ -57,22 +57,10 @@ fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
     }
 }
 
-/// `ipc-runner bridge`: its flags (and the files they name) are checked first; what they
-/// refuse is bad input, exit code 2, before any port or session is opened.
-fn bridge(a: &estpipe_bridge::BridgeArgs) -> anyhow::Result<i32> {
-    a.check()
-        .map_err(|e| anyhow::Error::new(channel_sim::flags::BadInput(format!("{e:#}"))))?;
-    // The product's stop signals (SIGHUP too, which killed the bridge without its report)
-    // and ignored stray killers, as for every other subcommand.
-    channel_sim::signal::install();
-    estpipe_bridge::also_stop_when(channel_sim::signal::termination_requested);
-    estpipe_bridge::main(a)
-}
-
 /// Parses the command line, runs the subcommand and exits; `name` prefixes the one-line
 /// error messages.
 pub fn main(name: &str) -> ! {
-    channel_sim::console::set_iceoryx2_log_level(name);
+    estpipe_process::console::set_iceoryx2_log_level(name);
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {
@@ -85,9 +73,9 @@ pub fn main(name: &str) -> ! {
             ) {
                 e.exit();
             }
-            channel_sim::errln!(
+            estpipe_process::errln!(
                 "{name}: error: {} (see --help)",
-                channel_sim::flags::one_line(&e)
+                estpipe_process::flags::one_line(&e)
             );
             std::process::exit(2);
         }
@@ -97,7 +85,7 @@ pub fn main(name: &str) -> ! {
         Command::Demo(a) => pipeline(crate::demo::main(&a)),
         Command::Run(a) => pipeline(crate::run::main(&a)),
         Command::Replay(a) => pipeline(crate::replay::main(&a)),
-        Command::Bridge(a) => pipeline(bridge(&a)),
+        Command::Bridge(a) => pipeline(crate::bridge::main(&a)),
         Command::StreamHeader(a) => pipeline(crate::stream_header::main(&a)),
         Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
     };
@@ -105,8 +93,8 @@ pub fn main(name: &str) -> ! {
         Ok(()) => std::process::exit(0),
         Err(CommandError { code, message }) => {
             // One line, whatever a message quoted from a file or a peer contained.
-            let message = channel_sim::console::one_line(&message);
-            channel_sim::errln!("{name}: error: {message}");
+            let message = estpipe_process::console::one_line(&message);
+            estpipe_process::errln!("{name}: error: {message}");
             std::process::exit(code);
         }
     }

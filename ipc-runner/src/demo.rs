@@ -48,7 +48,7 @@ pub struct DemoArgs {
     /// occlusion scenario's particle filter when it is asked for (`--particles`, ≈ 19 ms per
     /// step on the loaded 2-core build machine); faster rates queue slots behind it, which
     /// the latency table then shows.
-    #[arg(long, default_value_t = 20.0, value_parser = channel_sim::flags::rate_hz)]
+    #[arg(long, default_value_t = 20.0, value_parser = estpipe_process::flags::rate_hz)]
     pub rate: f64,
     /// Experiment seed (same meaning and default as `eval --seed`).
     #[arg(long, default_value_t = 0)]
@@ -73,7 +73,8 @@ pub struct DemoArgs {
     pub prefix: Option<String>,
     /// `shm`: publisher and runner share one prefix. `zenoh`: the publisher on
     /// `<prefix>-sensor`, the runner on `<prefix>`, joined only by two `ipc-runner bridge`
-    /// processes over zenoh on loopback (docs/bridge.md); the summary adds the network hop.
+    /// processes over zenoh on loopback (docs/bridge.md; in builds with `--features
+    /// bridge`); the summary adds the network hop.
     #[arg(long, value_enum, default_value_t = Via::Shm)]
     pub via: Via,
     /// Publisher executable (default: this executable's hidden `channel-sim` subcommand).
@@ -283,8 +284,11 @@ fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
 
 /// `ipc-runner demo`. Returns the exit code.
 pub fn main(args: &DemoArgs) -> Result<i32> {
+    if args.via == Via::Zenoh {
+        crate::bridge::available()?;
+    }
     // SIGINT/SIGTERM/SIGHUP set a flag from here on (the loop ends, the child is told).
-    channel_sim::signal::install();
+    estpipe_process::signal::install();
     let (scenario_name, scenario) = match (&args.scenario, &args.config) {
         (Some(n), _) => (n.clone(), resolve(n, None)?),
         (None, Some(c)) => (c.display().to_string(), resolve(DEFAULT_SCENARIO, Some(c))?),
@@ -292,7 +296,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
             Ok(s) => (DEFAULT_SCENARIO.to_string(), s),
             Err(e) => {
                 let fallback = FALLBACK_SCENARIO;
-                channel_sim::errln!(
+                estpipe_process::errln!(
                     "demo: the default scenario {DEFAULT_SCENARIO:?} is not available in this \
                      build ({e:#}); running {fallback:?} instead"
                 );
@@ -372,7 +376,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.latency_csv = Some(args.out.join("latency.csv"));
     rargs.json = Some(args.out.join("report.json"));
 
-    channel_sim::errln!(
+    estpipe_process::errln!(
         "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
          (prefix {prefix}, publisher pid {child_pid})",
         if args.rate > 0.0 {
@@ -417,7 +421,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         // The publisher ended before its first slot: a `--channel-sim` that is no publisher,
         // or one that refused its arguments or its environment (its own error came first).
         Err(e) if exited.is_some() => {
-            channel_sim::errln!("demo: error: {e:#}");
+            estpipe_process::errln!("demo: error: {e:#}");
             return Ok(2);
         }
         Err(e) => return Err(e),
@@ -438,7 +442,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     };
     if let Some(s) = status {
         if !s.success() {
-            channel_sim::errln!("demo: {publisher} exited with {s}");
+            estpipe_process::errln!("demo: {publisher} exited with {s}");
         }
     }
     // The bridges leave by themselves once the stream ended and the estimates went quiet.
@@ -446,14 +450,14 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         if let Some(mut c) = g.0.take() {
             let s = end_child(&mut c, !completed, Duration::from_secs(3))?;
             if !s.success() {
-                channel_sim::errln!("demo: the {name} bridge exited with {s}");
+                estpipe_process::errln!("demo: the {name} bridge exited with {s}");
             }
         }
     }
     run::finish(&rargs, &report, &traj, spec.ny())?;
     let plot = args.out.join(&args.plot);
     if let Err(e) = plot_trajectories(&traj, &plot, scenario.name()) {
-        channel_sim::errln!("demo: no plot ({e:#})");
+        estpipe_process::errln!("demo: no plot ({e:#})");
     }
     let lat = &report.latency;
     let ladder = args.out.join("latency.svg");
@@ -475,7 +479,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         ],
         &ladder,
     ) {
-        channel_sim::errln!("demo: no latency plot ({e:#})");
+        estpipe_process::errln!("demo: no latency plot ({e:#})");
     }
     let points: Vec<_> = traj.timing.iter().map(|t| traj.latency_point(t)).collect();
     if let Err(e) = crate::plot::trace::plot_trace(
@@ -486,14 +490,14 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         &points,
         &args.out.join("latency-trace.svg"),
     ) {
-        channel_sim::errln!("demo: no latency trace ({e:#})");
+        estpipe_process::errln!("demo: no latency trace ({e:#})");
     }
 
-    channel_sim::outln!("{}", report.summary());
+    estpipe_process::outln!("{}", report.summary());
     if args.via == Via::Zenoh {
-        channel_sim::outln!("{}", bridge_summary(&args.out));
+        estpipe_process::outln!("{}", bridge_summary(&args.out));
     }
-    channel_sim::outln!(
+    estpipe_process::outln!(
         "wrote {} (true vs estimated), latency.svg (percentiles), latency-trace.svg (over \
          time), estimates.csv, latency.csv, slots.csv (replayable), report.json in {:?}",
         plot.file_name().and_then(|f| f.to_str()).unwrap_or(""),

@@ -4,6 +4,7 @@
 pub mod estimator;
 
 pub use estimator::{CovarianceKind, Estimator};
+pub mod bridge;
 pub mod cli;
 pub mod demo;
 pub mod estimator_args;
@@ -27,7 +28,7 @@ pub use plot::{latency as plot_latency, trace as plot_trace};
 
 /// The exit code of a failed pipeline command: [`estpipe_wire::ContractError::exit_code`]
 /// (2 for a peer outside the wire contract) when that is the cause, 2 for bad input
-/// ([`channel_sim::flags::is_bad_input`]: flags, scenario, file content, outputs, memory
+/// ([`channel_sim::error::is_bad_input`]: flags, scenario, file content, outputs, memory
 /// budget), the cause's code for a run that failed after it had written its report
 /// ([`run::ExitWith`]), else 1.
 pub fn exit_code_of(e: &anyhow::Error) -> i32 {
@@ -37,7 +38,7 @@ pub fn exit_code_of(e: &anyhow::Error) -> i32 {
     if let Some(run::ExitWith(code, _)) = e.downcast_ref::<run::ExitWith>() {
         return *code;
     }
-    if channel_sim::flags::is_bad_input(e) {
+    if channel_sim::error::is_bad_input(e) {
         2
     } else {
         1

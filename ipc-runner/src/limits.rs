@@ -20,7 +20,7 @@ use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-pub use channel_sim::flags::BadInput;
+pub use estpipe_process::flags::BadInput;
 
 /// Default of `--max-memory`, in MiB: a quarter of a small machine's RAM, far above what
 /// the papers' experiments need (seed 003's 500 × 300 eval holds a few MiB).
@@ -399,7 +399,7 @@ impl Progress {
             } else {
                 f64::NAN
             };
-            channel_sim::errln!(
+            estpipe_process::errln!(
                 "{}: {done}/{} {} ({:.1} %), {secs:.0} s elapsed, ETA {eta:.0} s",
                 l.what,
                 l.total,

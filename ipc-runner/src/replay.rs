@@ -135,7 +135,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     let net_lost = count(&|o| !o.delivered && o.flags & FLAG_NET_LOST != 0);
     let ipc_lost =
         count(&|o| !o.delivered && o.flags & FLAG_IPC_LOST != 0 && o.flags & FLAG_NET_LOST == 0);
-    channel_sim::outln!(
+    estpipe_process::outln!(
         "replayed {} instants × {nodes} node(s) from {:?}: {delivered} measurements delivered, \
          {} dropped by the channel, {ipc_lost} lost in the IPC (flagged or missing), \
          {net_lost} lost on the network",
@@ -149,14 +149,14 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             .len()
             .checked_sub(nx * ne)
             .map(|i| &est[i + e * nx..i + (e + 1) * nx]);
-        channel_sim::outln!(
+        estpipe_process::outln!(
             "{:<12} rejected {:>5}   final estimate {:?}",
             est_e.name(),
             rejected[e],
             last.unwrap_or(&[])
         );
         if let Some((tested, rejected)) = crate::estimators::gate_counts(&**est_e) {
-            channel_sim::outln!(
+            estpipe_process::outln!(
                 "{:<12} innovation gate rejected {rejected} of {tested} measurements",
                 est_e.name()
             );
@@ -182,7 +182,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         }
         // Dropping a BufWriter loses its last error: a full disk must fail the command.
         w.flush().with_context(|| format!("cannot write {p:?}"))?;
-        channel_sim::outln!("estimates written to {p:?}");
+        estpipe_process::outln!("estimates written to {p:?}");
     }
     Ok(0)
 }

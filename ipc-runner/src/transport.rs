@@ -45,7 +45,7 @@ impl Transport {
                 wire::MAX_SUBSCRIBER_BUFFER
             ));
         }
-        let node = channel_sim::node::create("ipc-runner")?;
+        let node = estpipe_process::node::create("ipc-runner")?;
         // Remove what SIGKILLed processes left behind (their ports would count as connected).
         let _ = node.try_cleanup_dead_nodes();
         let truth = wire::truth_service(&node, prefix)?;
@@ -96,10 +96,10 @@ impl Transport {
     }
 
     /// Whether slot publisher `origin` (a sample's [`UniquePublisherId`] value) belongs to
-    /// the estimator side of a bridge (a node named [`estpipe_bridge::NODE_NAME`]): a relay,
-    /// which may go away and come back with the same stream (docs/bridge.md, "A bridge that
-    /// goes away"). Lists the service's publishers and the nodes: a cold path, asked once per
-    /// new publisher.
+    /// the estimator side of a bridge (a node named
+    /// [`estpipe_process::node::BRIDGE_NODE_NAME`]): a relay, which may go away and come back
+    /// with the same stream (docs/bridge.md, "A bridge that goes away"). Lists the service's
+    /// publishers and the nodes: a cold path, asked once per new publisher.
     ///
     /// [`UniquePublisherId`]: iceoryx2::identifiers::UniquePublisherId
     pub fn is_bridge(&self, origin: u128) -> bool {
@@ -117,7 +117,7 @@ impl Transport {
             Ok(Some(NodeState::Alive(v))) => v
                 .details()
                 .as_ref()
-                .is_some_and(|d| d.name().as_str() == estpipe_bridge::NODE_NAME),
+                .is_some_and(|d| d.name().as_str() == estpipe_process::node::BRIDGE_NODE_NAME),
             _ => false,
         }
     }

@@ -77,7 +77,7 @@ mod tests {
             let mut s = [0u64; 4];
             for v in &mut s {
                 x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-                *v = channel_sim::rng::splitmix64(x);
+                *v = splitmix64(x);
             }
             Self(s)
         }

@@ -52,7 +52,7 @@ pub struct EvalArgs {
     /// Test hook: seconds between the progress lines written when stderr is not a terminal.
     #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true, default_value_t = crate::limits::PROGRESS_LINE_EVERY.as_secs_f64(),
-          value_parser = channel_sim::flags::seconds)]
+          value_parser = estpipe_process::flags::seconds)]
     pub progress_every: f64,
     /// A transport stage after the channel that loses every slot with probability P (its own
     /// random stream: the channel's randomness is unchanged); the lost slots reach the
@@ -108,7 +108,7 @@ pub fn default_threads(env: Option<&std::ffi::OsStr>) -> Result<usize, String> {
 
 /// A probability in `[0, 1)` (a loss rate).
 pub fn loss_probability(s: &str) -> Result<f64, String> {
-    channel_sim::flags::probability_below_one(s)
+    estpipe_process::flags::probability_below_one(s)
 }
 
 /// A failed command: exit code 2 for bad input (flags, scenario, configuration), 1 otherwise.
@@ -219,8 +219,8 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     };
     // The first call installs the handler (iceoryx2's, as `run` uses): from here on SIGINT
     // and SIGTERM stop the evaluation after the runs in progress instead of killing it.
-    let _ = channel_sim::signal::termination_requested();
-    let stop = channel_sim::signal::termination_requested;
+    let _ = estpipe_process::signal::termination_requested();
+    let stop = estpipe_process::signal::termination_requested;
     let control = Control {
         budget,
         progress_every: args.progress_every(),
@@ -228,7 +228,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     };
     let mut result = evaluate_with(&*scenario, &options, FACTORIES, &run_config, &control)
         .map_err(|e| {
-            if channel_sim::flags::is_bad_input(&e) {
+            if channel_sim::error::is_bad_input(&e) {
                 CommandError::usage(format!("{e:#}"))
             } else {
                 CommandError::failure(format!("{e:#}"))
@@ -247,7 +247,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     if let Err(e) = bound {
         failures.push(format!("{e:#}"));
     }
-    channel_sim::out!("{}", result.summary());
+    estpipe_process::out!("{}", result.summary());
     let mut wrote = Vec::new();
     if let Some(path) = &args.json {
         match write(path, &result.to_json()) {
@@ -274,7 +274,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         }
     }
     for path in &wrote {
-        channel_sim::outln!("wrote {}", path.display());
+        estpipe_process::outln!("wrote {}", path.display());
     }
     match result.ending {
         EvalEnding::Interrupted => {

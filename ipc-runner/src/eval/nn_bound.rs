@@ -73,11 +73,11 @@ pub fn after_eval(
     let Some(v) = verdict(scenario)? else {
         return Ok(());
     };
-    channel_sim::outln!("seed 003 assumption checker (before the run):\n{v}");
+    estpipe_process::outln!("seed 003 assumption checker (before the run):\n{v}");
     let Some(check) = add_empirical_trace(result) else {
         return Ok(());
     };
-    channel_sim::outln!(
+    estpipe_process::outln!(
         "bound check: tr E[e eᵀ] > tr P̄_k at {} of {} instants {:?}; min tr P̄/tr E[eeᵀ] over k ≥ 1: {:.3e}",
         check.exceeded_at.len(),
         result.horizon as usize + 1,
@@ -87,7 +87,7 @@ pub fn after_eval(
     if let Some((_, r)) = result.estimators.iter().find(|(n, _)| n == "nn") {
         if let Some((_, phi)) = r.diagnostics.iter().find(|(n, _)| n == "phi_exceeds") {
             let mean = phi.iter().skip(1).sum::<f64>() / (phi.len().max(2) - 1) as f64;
-            channel_sim::outln!(
+            estpipe_process::outln!(
                 "during the run: ||phi(x_hat_k)|| > phi_bar in {:.1} % of (run, k) pairs, k ≥ 1",
                 100.0 * mean
             );
@@ -102,7 +102,7 @@ pub fn after_eval(
                 format!("{:.4e}", v.iter().sum::<f64>() / v.len().max(1) as f64)
             })
             .collect();
-        channel_sim::outln!(
+        estpipe_process::outln!(
             "{name}: per-state MSE (mean over k = 1..T) [{}]",
             per_state.join(", ")
         );
@@ -118,7 +118,7 @@ pub fn after_eval(
             .unwrap_or_else(|| "plot".into());
         let out = path.with_file_name(format!("{stem}-bound.{ext}"));
         crate::plot::bound::plot_bound(result, &out)?;
-        channel_sim::outln!("wrote {}", out.display());
+        estpipe_process::outln!("wrote {}", out.display());
     }
     Ok(())
 }

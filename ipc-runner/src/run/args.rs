@@ -60,7 +60,7 @@ pub struct RunArgs {
     pub wait: WaitMode,
     /// Data deadline: this many ms after the expected slot the publisher is looked at: stalled
     /// if its iceoryx2 node is alive (waited for, see `--stall-limit`), else lost.
-    #[arg(long, default_value_t = 100.0, value_parser = channel_sim::flags::positive_millis)]
+    #[arg(long, default_value_t = 100.0, value_parser = estpipe_process::flags::positive_millis)]
     pub deadline_ms: f64,
     /// Instants a node's k (or its END/ABORT's) may advance past its last instant; the gap is
     /// filled with lost slots, a larger jump is a counted stream error (docs/wire.md).
@@ -72,12 +72,12 @@ pub struct RunArgs {
     #[arg(long, default_value_t = super::assemble::DEFAULT_INSTANT_DEADLINE_MS)]
     pub instant_deadline_ms: f64,
     /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
-    #[arg(long, default_value_t = 30.0, value_parser = channel_sim::flags::seconds)]
+    #[arg(long, default_value_t = 30.0, value_parser = estpipe_process::flags::seconds)]
     pub connect_timeout: f64,
     /// A publisher whose iceoryx2 node is alive but that sent nothing past the deadline is
     /// *stalled* (waited for, reported); it counts as lost after this many seconds of silence
     /// (0 = never). A dead node is lost at the deadline (docs/pipeline.md, "Stalled or lost").
-    #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = channel_sim::flags::seconds)]
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = estpipe_process::flags::seconds)]
     pub stall_limit: f64,
     /// After losing the publisher, wait for channel-sim to come back instead of failing.
     #[arg(long)]

@@ -18,7 +18,7 @@
 //! * the step, end-to-end and transport histograms are recorded after the instant's
 //!   estimates are published, not between receive and send (`instant.rs`, `slot_loop.rs`);
 //! * the spin loop reads the clock only every 256 empty polls and checks for signals through
-//!   `channel_sim::signal`, not `Node::wait(ZERO)` (`wait.rs`);
+//!   `estpipe_process::signal`, not `Node::wait(ZERO)` (`wait.rs`);
 //! * the functions on that path that live in other files are `#[inline]`: a call across
 //!   modules (codegen units) is otherwise not inlined, and the split into files would add
 //!   calls between a slot's arrival and its estimates' `send()`.

@@ -268,7 +268,7 @@ pub fn finish(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize
 /// cannot be written loses nothing the summary shows). Returns the exit code
 /// ([`exit_code`]), or the error of a run that failed or of a file that was not written.
 pub fn conclude(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize) -> Result<i32> {
-    channel_sim::outln!("{}", report.summary());
+    estpipe_process::outln!("{}", report.summary());
     let written = finish(args, report, traj, ny);
     if report.ending == Ending::Failed {
         let e = report.error.as_deref().unwrap_or("the loop failed");

@@ -110,7 +110,7 @@ pub fn run_loop(
     // Before announcing the wait: from here on SIGINT/SIGTERM/SIGHUP set the flag every wait mode
     // reads, and no other signal ends the run (docs/security.md, "Signals"). Earlier, a
     // signal takes its default action (the process ends without a report, as nothing ran).
-    channel_sim::signal::install();
+    estpipe_process::signal::install();
     lp.say(&format!(
         "waiting for channel-sim on prefix {:?} ({} wait)",
         args.prefix,
@@ -245,7 +245,7 @@ impl Relay {
 impl Loop<'_> {
     fn say(&self, m: &str) {
         if !self.args.quiet {
-            channel_sim::errln!("ipc-runner: {m}");
+            estpipe_process::errln!("ipc-runner: {m}");
         }
     }
 
@@ -255,7 +255,7 @@ impl Loop<'_> {
         loop {
             // Also between the slots of a long burst (a catch-up): a stop ends the run within
             // one slot's work, and what is still queued stays unread.
-            if channel_sim::signal::termination_requested() {
+            if estpipe_process::signal::termination_requested() {
                 return Ok(Some(Ending::Interrupted));
             }
             let sample = match self.t.slot_sub.receive() {
@@ -676,7 +676,7 @@ impl Machine {
         });
         if !args.quiet {
             for m in cpu_pinning.iter().chain(memory_lock.iter()) {
-                channel_sim::errln!("ipc-runner: {m}");
+                estpipe_process::errln!("ipc-runner: {m}");
             }
         }
         // After pinning: a warning, not a refusal (a machine with throttling off passes).
@@ -686,7 +686,7 @@ impl Machine {
             .into_iter()
             .collect();
         for w in &warnings {
-            channel_sim::errln!("ipc-runner: {w}");
+            estpipe_process::errln!("ipc-runner: {w}");
         }
         Self {
             cpu_pinning,

@@ -8,7 +8,7 @@
 //! A wake-up says only that something may be there: wake-ups can be spurious and one
 //! notification may stand for several slots, so the loop re-drains `receive()` after each.
 //!
-//! Only SIGINT/SIGTERM/SIGHUP stop a run: the flag of `channel_sim::signal`, read after every
+//! Only SIGINT/SIGTERM/SIGHUP stop a run: the flag of `estpipe_process::signal`, read after every
 //! wake-up. iceoryx2 reports every wait that a signal cut short as an interrupt (SIGCONT, a
 //! stop and continue, SIGUSR1 …); that is a wake-up like any other (docs/security.md,
 //! "Signals").
@@ -123,14 +123,14 @@ impl Spin {
         }
     }
 
-    /// Signals through `channel_sim::signal` (one atomic load), not `Node::wait(ZERO)`: its
+    /// Signals through `estpipe_process::signal` (one atomic load), not `Node::wait(ZERO)`: its
     /// `nanosleep(0)` would leave the loop deaf for the timer slack.
     #[inline]
     fn now(&mut self) -> Option<u64> {
         self.idle_polls = self.idle_polls.wrapping_add(1);
         if self.idle_polls.is_multiple_of(SPIN_CLOCK_EVERY) {
             self.clock = wire::monotonic_ns();
-            if channel_sim::signal::termination_requested() {
+            if estpipe_process::signal::termination_requested() {
                 return None;
             }
         }
@@ -141,7 +141,7 @@ impl Spin {
 /// After a wake-up (whatever its cause): a stop, or slots may be there.
 #[inline]
 fn woke() -> Woke {
-    if channel_sim::signal::termination_requested() {
+    if estpipe_process::signal::termination_requested() {
         Woke::Signal
     } else {
         Woke::Ready

@@ -14,7 +14,14 @@ use iceoryx2::prelude::*;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
-/// Creates this process's node named `name` (`"channel-sim"`, `"ipc-runner"`).
+/// The node name of both sides of a bridge (`ipc-runner bridge`, `estpipe_bridge`). The
+/// runner tells by it that its slot publisher is a bridge's estimator side, a relay that may go
+/// away and come back with the same stream (docs/bridge.md, "A bridge that goes away"); it is
+/// here, beneath both, so that a runner built without the bridge knows it too.
+pub const BRIDGE_NODE_NAME: &str = "estpipe-bridge";
+
+/// Creates this process's node named `name` (`"channel-sim"`, `"ipc-runner"`,
+/// [`BRIDGE_NODE_NAME`]).
 pub fn create(name: &str) -> Result<Node<ipc::Service>> {
     let node_name = NodeName::new(name).map_err(|e| anyhow!("node name {name:?}: {e:?}"))?;
     NodeBuilder::new()

@@ -5,7 +5,7 @@
 //! had yet to write. These write the line if they can, and otherwise drop it: the command
 //! goes on (its files, its exit status); only the reader that left misses lines. Every
 //! binary of the workspace prints through them (`channel-sim`, `ipc-runner` and its
-//! subcommands; the bridge has its own, having no dependency on this crate).
+//! subcommands, the bridge).
 
 /// `print!` to stdout that drops the text when stdout cannot take it.
 #[macro_export]

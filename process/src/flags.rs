@@ -30,17 +30,12 @@ impl fmt::Display for BadInput {
 impl std::error::Error for BadInput {}
 
 impl BadInput {
-    /// Whether `e`'s chain holds a [`BadInput`].
+    /// Whether `e`'s chain holds a [`BadInput`]. A command that builds scenarios asks
+    /// `channel_sim::error::is_bad_input`, which also counts a scenario that could not be
+    /// built.
     pub fn is_in(e: &anyhow::Error) -> bool {
         e.chain().any(|c| c.is::<BadInput>())
     }
-}
-
-/// Whether an error chain was caused by bad input ([`BadInput`] or a scenario that could
-/// not be built, [`crate::error::ScenarioError`]): such a command exits with code 2.
-pub fn is_bad_input(e: &anyhow::Error) -> bool {
-    e.chain()
-        .any(|c| c.is::<BadInput>() || c.is::<crate::error::ScenarioError>())
 }
 
 /// The problem clap reports, on one line: its message has paragraphs (problem, tips,
@@ -144,11 +139,7 @@ mod tests {
         let e = Err::<(), _>(BadInput("x".into()))
             .context("outer")
             .unwrap_err();
-        assert!(is_bad_input(&e));
-        let e = Err::<(), _>(crate::error::ScenarioError::invalid("a", "b"))
-            .context("outer")
-            .unwrap_err();
-        assert!(is_bad_input(&e));
-        assert!(!is_bad_input(&anyhow::anyhow!("io")));
+        assert!(BadInput::is_in(&e));
+        assert!(!BadInput::is_in(&anyhow::anyhow!("io")));
     }
 }
