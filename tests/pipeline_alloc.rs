@@ -41,7 +41,12 @@ const WARMUP: u64 = 20;
 
 /// Allocations of the estimators' own `step` + `estimate` over instants WARMUP+1..=STEPS.
 fn estimator_allocations(name: &str) -> usize {
-    let scenario = channel_sim::scenario::resolve(name, None).unwrap();
+    estimator_allocations_in(name, None)
+}
+
+/// [`estimator_allocations`] of the scenario file `config` when given.
+fn estimator_allocations_in(name: &str, config: Option<&std::path::Path>) -> usize {
+    let scenario = channel_sim::scenario::resolve(name, config).unwrap();
     let nx = scenario.nx();
     let mut sim = scenario.start(0, 0);
     let exp = select::Experiment {
@@ -114,6 +119,13 @@ fn steady_state_does_not_allocate_per_slot() {
             n, 0,
             "{name}: the estimators allocated {n} times after warm-up"
         );
+    }
+    // A model with a known control input steps without allocating too: only B_u u_{k−1} is
+    // written, in place, at each instant (every estimator family, the gated ones included).
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel-sim/scenarios");
+    for file in ["controlled.toml", "occlusion-user-controlled.toml"] {
+        let n = estimator_allocations_in(S, Some(&dir.join(file)));
+        assert_eq!(n, 0, "{file}: the estimators allocated {n} times after warm-up");
     }
     let est = estimator_allocations(S);
     let mut lines = vec![format!(

@@ -1,7 +1,7 @@
 //! The estimator interface shared by `eval` (in-process Monte Carlo), `run` (the real-time
 //! loop over shared memory) and `replay`: one dispatch, so the three can never disagree.
 
-use channel_sim::Observation;
+use estpipe_wire::Observation;
 
 /// What [`Estimator::covariance`] wrote.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -28,7 +28,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Estimator spec TOML file (as `run --estimator-spec`), instead of a scenario.
-    #[arg(long, value_name = "FILE", conflicts_with = "config")]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["config", "scenario"])]
     pub estimator_spec: Option<PathBuf>,
     /// The estimators and their options (as in `run`).
     #[command(flatten)]

@@ -47,7 +47,7 @@ pub struct RunArgs {
     /// Estimator spec TOML file: the model, prior and channel knowledge of your own sensors,
     /// with no simulation section (docs/pipeline.md, "Estimator specs"); the stream must
     /// announce the same model. Instead of `--scenario`/`--config`.
-    #[arg(long, value_name = "FILE", conflicts_with = "config")]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["config", "scenario"])]
     pub estimator_spec: Option<PathBuf>,
     /// The estimators and their options (as in `eval`, `demo` and `replay`).
     #[command(flatten)]
