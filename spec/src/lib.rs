@@ -41,6 +41,9 @@ use nalgebra::{DMatrix, DVector};
 use crate::validate::{check_pd, check_shape};
 
 /// The estimators' model of the plant and its sensors.
+// One per spec, built once and shared behind an `Arc`: the size of the small variant does not
+// matter, and boxing `Linear` would change every match on it in the workspace.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq)]
 pub enum Model {
     /// A linear-Gaussian model, possibly with a known control input.

@@ -82,7 +82,7 @@ fn cases() -> Vec<(&'static str, String, Names)> {
     let r = "r = [[0.25]]";
     let mean = "mean = [0.0, 0.0]";
     let cov = "cov = [[1.0, 0.0], [0.0, 1.0]]";
-    let nine_rows = |row: &str| format!("[{}]", vec![row; 9].join(", "));
+    let nine_rows = |row: &str| format!("[{}]", [row; 9].join(", "));
     vec![
         // Matrix sizes.
         ("A of one row", lin(a, "a = [[0.95, 0.10]]"), Field("model.a")),
