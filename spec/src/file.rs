@@ -36,7 +36,7 @@ use crate::control::{Control, Schedule};
 use crate::error::SpecError;
 use crate::linear::{LinearModel, Sensor};
 use crate::overflow::{self, FromPrior, Written};
-use crate::validate::check_finite;
+use crate::validate::{check_finite, check_shape};
 use crate::{EstimatorSpec, Model, Prior};
 
 /// A matrix as an array of rows.
@@ -379,6 +379,8 @@ pub fn build(file: SpecFile, default_name: &str) -> Result<EstimatorSpec, SpecEr
         ));
     }
     let cov = matrix(&file.prior.cov, "prior.cov")?;
+    // Before the overflow check, which multiplies by it (a 3×3 P₀ for n_x = 2 panicked there).
+    check_shape(cov.shape(), (nx, nx), "prior.cov")?;
     check_finite(
         &DMatrix::from_column_slice(nx, 1, mean.as_slice()),
         "prior.mean",

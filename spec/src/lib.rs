@@ -41,6 +41,9 @@ use nalgebra::{DMatrix, DVector};
 use crate::validate::{check_pd, check_shape};
 
 /// The estimators' model of the plant and its sensors.
+// One per spec, built once and shared behind an `Arc`: the size of the small variant does not
+// matter, and boxing `Linear` would change every match on it in the workspace.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq)]
 pub enum Model {
     /// A linear-Gaussian model, possibly with a known control input.
@@ -263,5 +266,203 @@ impl EstimatorSpec {
             .as_ref()
             .map(|t| t.warnings())
             .unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::channel::{Occlusion, TobitCensoring, TriggerParams, TriggeredTokenBucket};
+    use nalgebra::{dmatrix, dvector};
+
+    /// nx = 2; node 0 of ny = 1, node 1 of ny = 2.
+    fn model() -> Model {
+        let sensors = vec![
+            Sensor {
+                c: dmatrix![1.0, 0.0],
+                d: dmatrix![1.0],
+                r: dmatrix![0.25],
+            },
+            Sensor {
+                c: dmatrix![1.0, 0.0; 0.0, 1.0],
+                d: DMatrix::identity(2, 2),
+                r: dmatrix![0.5, 0.0; 0.0, 0.5],
+            },
+        ];
+        Model::Linear(
+            LinearModel::new(
+                dmatrix![0.95, 0.1; -0.1, 0.95],
+                DMatrix::identity(2, 2),
+                dmatrix![0.01, 0.0; 0.0, 0.04],
+                sensors,
+            )
+            .unwrap(),
+        )
+    }
+
+    fn prior() -> Prior {
+        Prior {
+            mean: dvector![0.0, 0.0],
+            cov: DMatrix::identity(2, 2),
+        }
+    }
+
+    fn trigger(references: Vec<Vec<f64>>) -> TriggeredTokenBucket {
+        let p = TriggerParams {
+            sigma: 0.5,
+            chi: 5.0,
+            lambda: 0.5,
+            eta0: 1.0,
+        };
+        let n = references.len();
+        TriggeredTokenBucket::new(&vec![p; n], references, 3, 2, 6, vec![1; n], false).unwrap()
+    }
+
+    fn refused(prior: Prior, channel: ChannelKnowledge, field: &str) {
+        let e = EstimatorSpec::new("t", model(), prior, channel)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(&format!("invalid `{field}`:")), "{field}: {e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn new_refuses_parts_that_do_not_fit_naming_the_field() {
+        let ok = EstimatorSpec::new("t", model(), prior(), ChannelKnowledge::default()).unwrap();
+        assert_eq!((ok.nx(), ok.nodes(), ok.node_ny(1), ok.ny()), (2, 2, 2, 2));
+        let none = ChannelKnowledge::default;
+        let p = |mean: DVector<f64>, cov: DMatrix<f64>| Prior { mean, cov };
+        refused(
+            p(dvector![0.0], DMatrix::identity(2, 2)),
+            none(),
+            "prior.mean",
+        );
+        refused(
+            p(dvector![0.0, 0.0, 0.0], DMatrix::identity(2, 2)),
+            none(),
+            "prior.mean",
+        );
+        refused(
+            p(dvector![f64::NAN, 0.0], DMatrix::identity(2, 2)),
+            none(),
+            "prior.mean",
+        );
+        refused(
+            p(dvector![0.0, 0.0], DMatrix::identity(3, 3)),
+            none(),
+            "prior.cov",
+        );
+        refused(
+            p(dvector![0.0, 0.0], DMatrix::identity(2, 3)),
+            none(),
+            "prior.cov",
+        );
+        refused(
+            p(dvector![0.0, 0.0], dmatrix![1.0, 2.0; 2.0, 1.0]),
+            none(),
+            "prior.cov",
+        );
+
+        let with = |f: &dyn Fn(&mut ChannelKnowledge)| {
+            let mut c = ChannelKnowledge::default();
+            f(&mut c);
+            c
+        };
+        // An occlusion E built for nx = 3.
+        let occ = Occlusion::new(vec![1.0, 0.0, 0.0], 0.1, vec![0.0], vec![1.0], 3).unwrap();
+        refused(
+            prior(),
+            with(&|c| c.occlusion = Some(occ.clone())),
+            "occlusion.e",
+        );
+        let tobit = |t: Vec<Vec<f64>>| TobitCensoring::new(t).unwrap();
+        refused(
+            prior(),
+            with(&|c| c.tobit = Some(tobit(vec![vec![0.0]]))),
+            "tobit.thresholds",
+        );
+        refused(
+            prior(),
+            with(&|c| c.tobit = Some(tobit(vec![vec![0.0], vec![0.0], vec![0.0]]))),
+            "tobit.thresholds",
+        );
+        refused(
+            prior(),
+            with(&|c| c.tobit = Some(tobit(vec![vec![0.0, 0.0], vec![0.0, 0.0]]))),
+            "tobit.thresholds[0]",
+        );
+        refused(
+            prior(),
+            with(&|c| c.tobit = Some(tobit(vec![vec![0.0], vec![0.0]]))),
+            "tobit.thresholds[1]",
+        );
+        refused(
+            prior(),
+            with(&|c| c.event_trigger = Some(trigger(vec![vec![0.0]]))),
+            "event_trigger.nodes",
+        );
+        refused(
+            prior(),
+            with(&|c| c.event_trigger = Some(trigger(vec![vec![0.0], vec![0.0]]))),
+            "event_trigger.nodes[1].reference",
+        );
+        // Fitting parts are accepted.
+        let fits = with(&|c| {
+            c.tobit = Some(tobit(vec![vec![0.0], vec![0.0, 1.0]]));
+            c.event_trigger = Some(trigger(vec![vec![0.0], vec![0.0, 0.0]]));
+        });
+        EstimatorSpec::new("t", model(), prior(), fits).unwrap();
+
+        // Seed 003: w̄² must be a positive variance; n_x = 3.
+        let seed = |w_var: f64| {
+            EstimatorSpec::new(
+                "s",
+                Model::Seed003 { w_var },
+                Prior {
+                    mean: DVector::zeros(3),
+                    cov: DMatrix::identity(3, 3),
+                },
+                ChannelKnowledge::default(),
+            )
+        };
+        assert_eq!(seed(0.5).unwrap().nx(), 3);
+        for w in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(seed(w).unwrap_err().to_string().contains("`model.w_var`"));
+        }
+    }
+
+    #[test]
+    fn loss_rate_and_gate_are_probabilities() {
+        let s = || EstimatorSpec::new("t", model(), prior(), ChannelKnowledge::default()).unwrap();
+        for p in [0.0, 0.5, 1.0 - f64::EPSILON] {
+            assert_eq!(s().with_loss_rate(Some(p)).unwrap().loss_rate, Some(p));
+        }
+        for p in [
+            -f64::MIN_POSITIVE,
+            -1e-300,
+            1.0,
+            f64::NAN,
+            f64::INFINITY,
+            1e308,
+        ] {
+            let e = s().with_loss_rate(Some(p)).unwrap_err().to_string();
+            assert!(e.contains("`loss_rate`"), "{p}: {e}");
+        }
+        for p in [f64::MIN_POSITIVE, 0.5, 1.0 - f64::EPSILON] {
+            assert_eq!(s().with_gate(Some(p)).unwrap().gate, Some(p));
+        }
+        for p in [0.0, -0.0, 1.0, -0.5, f64::NAN, f64::NEG_INFINITY] {
+            let e = s().with_gate(Some(p)).unwrap_err().to_string();
+            assert!(e.contains("`gate`"), "{p}: {e}");
+        }
+        assert_eq!(s().with_gate(None).unwrap().gate, None);
+    }
+
+    #[test]
+    fn the_stream_header_carries_the_dimensions_and_the_fingerprint() {
+        let s = EstimatorSpec::new("hdr", model(), prior(), ChannelKnowledge::default()).unwrap();
+        let h = s.stream_header();
+        let want = StreamHeader::new("hdr", 2, 2, &[1, 2], s.fingerprint());
+        assert_eq!(h, want);
     }
 }

@@ -181,3 +181,169 @@ impl LinearModel {
 pub fn symmetric(m: DMatrix<f64>) -> DMatrix<f64> {
     (&m + m.transpose()) * 0.5
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::Schedule;
+    use nalgebra::dmatrix;
+
+    /// `m₁ m₂ m₃ᵀ` by the definition, entry by entry.
+    fn congruence(m: &DMatrix<f64>, s: &DMatrix<f64>) -> DMatrix<f64> {
+        let (r, c) = m.shape();
+        DMatrix::from_fn(r, r, |i, j| {
+            let mut acc = 0.0;
+            for k in 0..c {
+                for l in 0..c {
+                    acc += m[(i, k)] * s[(k, l)] * m[(j, l)];
+                }
+            }
+            acc
+        })
+    }
+
+    fn close(a: &DMatrix<f64>, b: &DMatrix<f64>) {
+        assert_eq!(a.shape(), b.shape());
+        for (x, y) in a.iter().zip(b.iter()) {
+            assert!((x - y).abs() <= 1e-14 * (1.0 + y.abs()), "{a} vs {b}");
+        }
+    }
+
+    /// nx = 3, nw = 2 (B not square), one node of ny = 2 with nv = 3.
+    fn model() -> LinearModel {
+        let a = dmatrix![0.9, 0.1, 0.0; 0.0, 0.8, 0.2; 0.1, 0.0, 0.7];
+        let b = dmatrix![1.0, 0.5; -0.3, 2.0; 0.7, 0.0];
+        let q = dmatrix![0.4, 0.1; 0.1, 0.3];
+        let sensor = Sensor {
+            c: dmatrix![1.0, 0.0, 2.0; 0.0, 1.0, -1.0],
+            d: dmatrix![1.0, 0.2, 0.0; 0.0, 0.5, 1.5],
+            r: dmatrix![0.2, 0.05, 0.0; 0.05, 0.3, 0.01; 0.0, 0.01, 0.1],
+        };
+        LinearModel::new(a, b, q, vec![sensor]).unwrap()
+    }
+
+    #[test]
+    fn effective_covariances_are_the_symmetrised_congruences() {
+        let m = model();
+        let bqb = congruence(m.b(), m.q());
+        close(m.process_cov(), &((&bqb + bqb.transpose()) * 0.5));
+        // Exactly symmetric, as formed.
+        assert_eq!(m.process_cov(), &m.process_cov().transpose());
+        // By hand for the (0, 1) entry: Σ_kl B₀k Q_kl B₁l.
+        let hand = 1.0 * 0.4 * -0.3 + 1.0 * 0.1 * 2.0 + 0.5 * 0.1 * -0.3 + 0.5 * 0.3 * 2.0;
+        assert!((m.process_cov()[(0, 1)] - hand).abs() < 1e-15);
+        let s = &m.sensors()[0];
+        let drd = congruence(&s.d, &s.r);
+        close(m.measurement_cov(0), &((&drd + drd.transpose()) * 0.5));
+        assert_eq!((m.nx(), m.nodes(), m.node_ny(0)), (3, 1, 2));
+        assert!(m.time_invariant());
+    }
+
+    #[test]
+    fn input_into_is_b_u_times_u_k_for_every_schedule() {
+        let bu = dmatrix![1.0, -2.0; 0.5, 0.0; 0.0, 3.0];
+        // Reference: Σ_j B_u[r][j] u_j, with u_k given by the test's own formula.
+        let expect =
+            |u: [f64; 2]| -> [f64; 3] { [1.0 * u[0] - 2.0 * u[1], 0.5 * u[0], 3.0 * u[1]] };
+        let with = |schedule: Schedule| {
+            model()
+                .with_control(Control::new(bu.clone(), schedule, 3).unwrap())
+                .unwrap()
+        };
+        let check = |m: &LinearModel, k: usize, u: [f64; 2]| {
+            // A sentinel past n_x must be left alone.
+            let mut out = [f64::NAN, f64::NAN, f64::NAN, 42.0];
+            assert!(m.input_into(k, &mut out));
+            let want = expect(u);
+            for r in 0..3 {
+                assert!(
+                    (out[r] - want[r]).abs() < 1e-12,
+                    "k {k}: {out:?} vs {want:?}"
+                );
+            }
+            assert_eq!(out[3], 42.0);
+            assert!(!m.time_invariant());
+        };
+
+        let constant = with(Schedule::Constant(vec![2.0, -1.0]));
+        for k in [0, 1, 1000, usize::MAX] {
+            check(&constant, k, [2.0, -1.0]);
+        }
+        // u_k = offset + amplitude · sin(τ k / period + phase).
+        let sinusoid = with(Schedule::Sinusoid {
+            offset: vec![1.0, 0.0],
+            amplitude: vec![3.0, -2.0],
+            period: 8.0,
+            phase: 0.5,
+        });
+        for k in 0..20 {
+            let s = (std::f64::consts::TAU * k as f64 / 8.0 + 0.5).sin();
+            check(&sinusoid, k, [1.0 + 3.0 * s, -2.0 * s]);
+        }
+        // k = 2: sin(π/2 + 0.5) = cos(0.5).
+        check(
+            &sinusoid,
+            2,
+            [1.0 + 3.0 * 0.5_f64.cos(), -2.0 * 0.5_f64.cos()],
+        );
+        let list = with(Schedule::List(vec![
+            vec![1.0, 2.0],
+            vec![3.0, 4.0],
+            vec![5.0, 6.0],
+        ]));
+        for (k, u) in [
+            (0, [1.0, 2.0]),
+            (1, [3.0, 4.0]),
+            (2, [5.0, 6.0]),
+            (3, [1.0, 2.0]),
+            (7, [3.0, 4.0]),
+        ] {
+            check(&list, k, u);
+        }
+
+        // Without a control: false, nothing written.
+        let mut out = [7.0; 3];
+        assert!(!model().input_into(5, &mut out));
+        assert_eq!(out, [7.0; 3]);
+    }
+
+    #[test]
+    fn each_bad_part_is_named() {
+        let err = |r: Result<LinearModel, SpecError>| r.unwrap_err().to_string();
+        let m = model();
+        let s = m.sensors()[0].clone();
+        let new = |a: DMatrix<f64>, b: DMatrix<f64>, q: DMatrix<f64>, s: Vec<Sensor>| {
+            err(LinearModel::new(a, b, q, s))
+        };
+        let (a, b, q) = (m.a().clone(), m.b().clone(), m.q().clone());
+        assert!(new(
+            a.columns(0, 2).into(),
+            b.clone(),
+            q.clone(),
+            vec![s.clone()]
+        )
+        .contains("`model.a`"));
+        assert!(new(
+            a.clone(),
+            b.columns(0, 1).into(),
+            q.clone(),
+            vec![s.clone()]
+        )
+        .contains("`model.b`"));
+        assert!(new(a.clone(), b.clone(), -q.clone(), vec![s.clone()]).contains("`model.q`"));
+        assert!(new(a.clone(), b.clone(), q.clone(), vec![]).contains("`sensors`"));
+        let mut bad = s.clone();
+        bad.r[(0, 0)] = -1.0;
+        assert!(
+            new(a.clone(), b.clone(), q.clone(), vec![s.clone(), bad]).contains("`sensors[1].r`")
+        );
+        let mut bad = s.clone();
+        bad.c = dmatrix![1.0, 0.0; 0.0, 1.0];
+        assert!(new(a.clone(), b.clone(), q.clone(), vec![bad]).contains("`sensors[0].c`"));
+        let mut bad = s;
+        bad.d = dmatrix![1.0, 0.0; 0.0, 1.0];
+        assert!(new(a, b, q, vec![bad]).contains("`sensors[0].d`"));
+        let control = Control::new(dmatrix![1.0; 0.0], Schedule::Constant(vec![1.0]), 2).unwrap();
+        assert!(err(model().with_control(control)).contains("`control.b`"));
+    }
+}

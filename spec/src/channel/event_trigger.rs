@@ -49,7 +49,7 @@ impl TriggeredTokenBucket {
         let l = params.len();
         if l == 0 || l > MAX_NODES || references.len() != l || costs.len() != l {
             return Err(SpecError::invalid(
-                "trigger",
+                "trigger.nodes",
                 format!(
                     "need 1..={MAX_NODES} nodes with one parameter set, reference and cost \
                      each; got {l}, {}, {}",
@@ -71,14 +71,26 @@ impl TriggeredTokenBucket {
             let r = &references[m];
             if r.is_empty() || r.len() > MAX_NY || r.iter().any(|v| !v.is_finite()) {
                 return Err(SpecError::invalid(
-                    format!("trigger.references[{m}]"),
+                    format!("trigger.nodes[{m}].reference"),
                     format!("must have 1..={MAX_NY} finite entries"),
                 ));
             }
         }
         // The bucket's own validation (with the true node count).
-        check_bucket(l, initial_tokens, rate, capacity, &costs)
-            .map_err(|e| SpecError::invalid("bucket", e.to_string()))?;
+        // Named by the TOML keys (the core says "initial tokens"); `trigger.` is re-rooted at
+        // the table by the spec file and the scenario file alike.
+        check_bucket(l, initial_tokens, rate, capacity, &costs).map_err(|e| {
+            let key = match &e {
+                estimator_core::Error::InvalidConfig { field, .. } => match *field {
+                    "initial tokens" => ".initial_tokens",
+                    "capacity" => ".capacity",
+                    "nodes" => ".nodes",
+                    _ => "",
+                },
+                _ => "",
+            };
+            SpecError::invalid(format!("trigger{key}"), e.to_string())
+        })?;
         Ok(Self {
             triggers,
             references,

@@ -10,6 +10,10 @@ use crate::error::SpecError;
 /// The most occlusion regions a spec may declare (the estimators are compiled per count).
 pub const MAX_OCCLUSION_REGIONS: usize = 4;
 
+/// The largest `|ζ_i| + r_i` accepted: differences, sums and squares of centres and radii
+/// stay finite.
+pub const MAX_REGION_EXTENT: f64 = 1e150;
+
 /// The occlusion model: `E`, `Ψ` and the regions' centres and half-widths.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Occlusion {
@@ -60,6 +64,20 @@ impl Occlusion {
             return Err(SpecError::invalid(
                 "occlusion.radii",
                 format!("must have one entry per centre ({n}), got {}", radii.len()),
+            ));
+        }
+        // The core's overlap test subtracts centres and adds radii: beyond this bound those
+        // overflow to ∞ and `∞ < ∞` let overlapping regions through (centres ±1e308, radii
+        // 1.5e308); the estimators also square them.
+        if centres
+            .iter()
+            .zip(&radii)
+            .map(|(c, r)| c.abs() + r.abs())
+            .any(|x| !x.is_finite() || x > MAX_REGION_EXTENT)
+        {
+            return Err(SpecError::invalid(
+                "occlusion.regions",
+                format!("every |centre| + radius must be finite and at most {MAX_REGION_EXTENT:e}"),
             ));
         }
         let out = Self {
