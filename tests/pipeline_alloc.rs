@@ -125,7 +125,10 @@ fn steady_state_does_not_allocate_per_slot() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel-sim/scenarios");
     for file in ["controlled.toml", "occlusion-user-controlled.toml"] {
         let n = estimator_allocations_in(S, Some(&dir.join(file)));
-        assert_eq!(n, 0, "{file}: the estimators allocated {n} times after warm-up");
+        assert_eq!(
+            n, 0,
+            "{file}: the estimators allocated {n} times after warm-up"
+        );
     }
     let est = estimator_allocations(S);
     let mut lines = vec![format!(

@@ -26,7 +26,9 @@ fn spec_file(name: &str) -> PathBuf {
 fn the_spec_files_are_the_presets_estimator_specs() {
     for name in ["linear", "occlusion"] {
         let file = estpipe_spec::file::load(&spec_file(&format!("{name}.toml"))).unwrap();
-        let preset = channel_sim::scenario::preset(name).unwrap().estimator_spec();
+        let preset = channel_sim::scenario::preset(name)
+            .unwrap()
+            .estimator_spec();
         assert_eq!(*file, *preset, "{name}");
         assert_eq!(file.fingerprint(), preset.fingerprint(), "{name}");
         assert_eq!(file.stream_header(), preset.stream_header(), "{name}");
@@ -75,7 +77,11 @@ fn run(dir: &Path, tag: &str, config: &[&str]) -> (PathBuf, PathBuf, serde_json:
     let mut publ = start_channel_sim(dir, &p, "linear", STEPS, 0);
     assert!(publ.wait(60).success(), "publisher: {}", publ.err());
     let status = runner.wait(60);
-    assert!(status.success(), "runner {tag}: {status:?} {}", runner.err());
+    assert!(
+        status.success(),
+        "runner {tag}: {status:?} {}",
+        runner.err()
+    );
     (est, slots, common::report(&json))
 }
 
@@ -97,7 +103,10 @@ fn a_hand_written_spec_gives_the_scenario_runs_estimates_bit_for_bit() {
     // Bit for bit: every estimate column (and the truth column the CSV carries alike).
     for (x, y) in ra.iter().zip(&rb) {
         for (u, v) in x.iter().zip(y) {
-            assert!(u.to_bits() == v.to_bits() || (u.is_nan() && v.is_nan()), "{x:?} vs {y:?}");
+            assert!(
+                u.to_bits() == v.to_bits() || (u.is_nan() && v.is_nan()),
+                "{x:?} vs {y:?}"
+            );
         }
     }
     assert_eq!(a["instants"], b["instants"]);
@@ -157,16 +166,28 @@ fn a_bad_spec_file_is_one_line_naming_the_field() {
     let bad = dir.join("bad.toml");
     let text = std::fs::read_to_string(spec_file("linear.toml"))
         .unwrap()
-        .replace("q = [[0.01, 0.0], [0.0, 0.04]]", "q = [[0.01, 0.0], [0.0, -0.04]]");
+        .replace(
+            "q = [[0.01, 0.0], [0.0, 0.04]]",
+            "q = [[0.01, 0.0], [0.0, -0.04]]",
+        );
     std::fs::write(&bad, text).unwrap();
     let mut r = Proc::start(
         &dir,
         "runner",
-        &["run", "--estimator-spec", bad.to_str().unwrap(), "--prefix", &prefix("spec-bad")],
+        &[
+            "run",
+            "--estimator-spec",
+            bad.to_str().unwrap(),
+            "--prefix",
+            &prefix("spec-bad"),
+        ],
     );
     let status = r.wait(30);
     assert_eq!(status.code(), Some(2), "{}", r.err());
     let err = r.err();
-    let line = err.lines().find(|l| l.contains("model.q")).unwrap_or_else(|| panic!("{err}"));
+    let line = err
+        .lines()
+        .find(|l| l.contains("model.q"))
+        .unwrap_or_else(|| panic!("{err}"));
     assert!(line.contains("bad.toml"), "{line}");
 }

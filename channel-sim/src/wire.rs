@@ -1,5 +1,6 @@
 //! The simulator's side of the wire contract (`estpipe_wire`, `docs/wire.md`): an
-//! [`Observation`] as a [`Slot`] and back, and the [`StreamHeader`] a scenario's stream
+//! [`Observation`](estpipe_wire::Observation) as a [`Slot`](estpipe_wire::Slot) and back
+//! (re-exported from the contract), and the [`StreamHeader`] a scenario's stream
 //! announces. The payloads, services and QoS themselves live in `estpipe-wire`, which a
 //! foreign client depends on without this crate.
 

@@ -18,7 +18,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define ESTPIPE_WIRE_VERSION 3u
+#define ESTPIPE_WIRE_VERSION 4u
 
 #define ESTPIPE_MAX_NX 8
 #define ESTPIPE_MAX_NY 4

@@ -56,6 +56,11 @@ impl Source {
             Some(path) => {
                 let spec = estpipe_spec::file::load(path)
                     .map_err(|e| crate::limits::BadInput(e.to_string()))?;
+                // Parameters accepted against their paper's own conditions (λχ ≤ 1 by the
+                // explicit opt-in), as `eval` says them for a scenario.
+                for w in spec.warnings() {
+                    estpipe_process::errln!("ipc-runner: warning: {}: {w}", path.display());
+                }
                 Ok(Self::of_spec(spec))
             }
             None => {

@@ -15,9 +15,13 @@ pub struct StreamHeaderArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Estimator spec TOML file (as `run --estimator-spec`): the header a publisher of that
+    /// model announces, so that a runner configured by the same file accepts it.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["config", "scenario"])]
+    pub estimator_spec: Option<PathBuf>,
 }
 
-/// `{"wire_version":2,"scenario":"linear","nodes":1,"nx":2,"ny":[1],"model":"0x…"}`: the
+/// `{"wire_version":4,"scenario":"linear","nodes":1,"nx":2,"ny":[1],"model":"0x…"}`: the
 /// model as a hex string, since a 64-bit integer does not survive every JSON parser.
 pub fn to_json(h: &StreamHeader) -> serde_json::Value {
     serde_json::json!({
@@ -30,14 +34,20 @@ pub fn to_json(h: &StreamHeader) -> serde_json::Value {
     })
 }
 
-/// Prints the header of `--scenario`/`--config`. The line is the command's whole product,
+/// Prints the header of `--scenario`/`--config` (or `--estimator-spec`). The line is the command's whole product,
 /// so a stdout that cannot take it (a full disk, a closed pipe) fails the command (exit 1)
 /// instead of leaving an empty `header.json` behind a success.
 pub fn main(args: &StreamHeaderArgs) -> Result<i32> {
     use anyhow::Context as _;
     use std::io::Write as _;
-    let scenario = channel_sim::scenario::resolve(&args.scenario, args.config.as_deref())?;
-    let line = to_json(&channel_sim::wire::stream_header(&*scenario));
+    let source = crate::source::Source::resolve(
+        &args.scenario,
+        args.config.as_deref(),
+        args.estimator_spec.as_deref(),
+        0,
+        0,
+    )?;
+    let line = to_json(&source.spec.stream_header());
     let mut out = std::io::stdout().lock();
     writeln!(out, "{line}")
         .and_then(|()| out.flush())

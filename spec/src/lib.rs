@@ -16,7 +16,7 @@
 //! | [`linear`] | the linear-Gaussian model, its effective covariances formed once |
 //! | [`control`] | a known control input `B_u u_k` and its schedule |
 //! | [`channel`] | what the estimators know of the channel |
-//! | [`file`] | the TOML form, every field validated and named in errors |
+//! | [`file`](mod@file) | the TOML form, every field validated and named in errors |
 //! | [`overflow`] | refusing finite numbers whose moments overflow |
 //! | [`fingerprint`] | the stream's model fingerprint |
 //! | [`validate`], [`error`] | the checks and the one error type |

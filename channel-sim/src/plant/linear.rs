@@ -197,12 +197,12 @@ mod tests {
 
     fn plant() -> LinearPlant {
         LinearPlant::new(
-            dmatrix![0.9, 0.2; -0.1, 0.8].into(),
-            dmatrix![1.0; 0.5].into(),
+            dmatrix![0.9, 0.2; -0.1, 0.8],
+            dmatrix![1.0; 0.5],
             dmatrix![0.3],
             vec![LinearSensor {
-                c: dmatrix![1.0, -1.0].into(),
-                d: dmatrix![1.0].into(),
+                c: dmatrix![1.0, -1.0],
+                d: dmatrix![1.0],
                 r: dmatrix![0.5],
             }],
         )
@@ -246,20 +246,15 @@ mod tests {
 
     #[test]
     fn validation_names_fields() {
-        let bad_q = LinearPlant::new(
-            dmatrix![1.0].into(),
-            dmatrix![1.0].into(),
-            dmatrix![-1.0],
-            vec![],
-        );
+        let bad_q = LinearPlant::new(dmatrix![1.0], dmatrix![1.0], dmatrix![-1.0], vec![]);
         assert!(bad_q.unwrap_err().to_string().contains("model.q"));
         let bad_c = LinearPlant::new(
-            dmatrix![1.0].into(),
-            dmatrix![1.0].into(),
+            dmatrix![1.0],
+            dmatrix![1.0],
             dmatrix![1.0],
             vec![LinearSensor {
-                c: dmatrix![1.0, 2.0].into(),
-                d: dmatrix![1.0].into(),
+                c: dmatrix![1.0, 2.0],
+                d: dmatrix![1.0],
                 r: dmatrix![1.0],
             }],
         );

@@ -14,7 +14,7 @@
 //! eq. (5) uses `y₀` for `x̂₁`; docs/design.md, "Seed 003"): [`PlantRun::initial_measurement`]
 //! draws `w₀`, writes `y₀ = C₀ x₀ + D₀ w₀` and keeps `w₀` for `x₁`. The draws come in the
 //! order `w₀, w₁, …` either way, so `x_k` and `y_k` for k ≥ 1 are the same numbers whether or
-//! not `y₀` is read. The plant offers no linear model ([`Plant::linear`](super::Plant::linear)): it is
+//! not `y₀` is read. The plant offers no linear model ([`Plant::linear`]): it is
 //! neither linear nor has independent process and measurement noise.
 
 use std::any::Any;

@@ -10,7 +10,7 @@ import time
 
 import iceoryx2 as iox2
 
-WIRE_VERSION = 3
+WIRE_VERSION = 4
 
 MAX_NX = 8
 MAX_NY = 4

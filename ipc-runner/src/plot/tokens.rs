@@ -50,7 +50,7 @@ pub fn trace(
         return Ok(None);
     };
     let mut censor = composed.stage::<TobitCensoring>().cloned();
-    let mut stage = channel_sim::channel::event_trigger::build_stage(&spec);
+    let mut stage = channel_sim::channel::event_trigger::build_stage(spec);
     let l = spec.nodes();
     let (xi0, _, capacity) = spec.bucket();
     let mut out = TokenTrace {

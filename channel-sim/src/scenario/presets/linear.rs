@@ -24,12 +24,12 @@ pub const P_LOSS: f64 = 0.2;
 /// The `linear` preset.
 pub fn preset() -> Result<Box<dyn Scenario>, ScenarioError> {
     let plant = LinearPlant::new(
-        dmatrix![0.95, 0.10; -0.10, 0.95].into(),
-        DMatrix::identity(2, 2).into(),
+        dmatrix![0.95, 0.10; -0.10, 0.95],
+        DMatrix::identity(2, 2),
         dmatrix![0.01, 0.0; 0.0, 0.04],
         vec![LinearSensor {
-            c: dmatrix![1.0, 0.0].into(),
-            d: dmatrix![1.0].into(),
+            c: dmatrix![1.0, 0.0],
+            d: dmatrix![1.0],
             r: dmatrix![0.25],
         }],
     )?;

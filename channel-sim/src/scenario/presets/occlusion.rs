@@ -37,12 +37,12 @@ pub fn stage() -> Result<OcclusionSpec<REGIONS>, ScenarioError> {
 /// The `occlusion` preset.
 pub fn preset() -> Result<Box<dyn Scenario>, ScenarioError> {
     let plant = LinearPlant::new(
-        dmatrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02].into(),
-        DMatrix::identity(3, 3).into(),
+        dmatrix![1.01, 0.1, 0.0; 0.0, 1.01, 0.1; 0.0, 0.0, -1.02],
+        DMatrix::identity(3, 3),
         DMatrix::identity(3, 3) * 0.3,
         vec![LinearSensor {
-            c: dmatrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98].into(),
-            d: DMatrix::identity(2, 2).into(),
+            c: dmatrix![2.0, 3.0, 1.0; 1.0, 0.0, 0.98],
+            d: DMatrix::identity(2, 2),
             r: DMatrix::identity(2, 2) * 0.2,
         }],
     )?;

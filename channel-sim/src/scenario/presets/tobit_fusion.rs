@@ -60,13 +60,13 @@ pub fn stages() -> Result<(TobitCensoring, TriggeredTokenBucket), ScenarioError>
 pub fn preset() -> Result<Box<dyn Scenario>, ScenarioError> {
     let (s, c) = (OMEGA.sin(), OMEGA.cos());
     let sensor = LinearSensor {
-        c: DMatrix::identity(2, 2).into(),
-        d: DMatrix::identity(2, 2).into(),
+        c: DMatrix::identity(2, 2),
+        d: DMatrix::identity(2, 2),
         r: DMatrix::identity(2, 2) * 0.5,
     };
     let plant = LinearPlant::new(
-        dmatrix![c, s; -s, c].into(),
-        dmatrix![0.16; 0.18].into(),
+        dmatrix![c, s; -s, c],
+        dmatrix![0.16; 0.18],
         dmatrix![0.05],
         vec![sensor.clone(), sensor.clone(), sensor],
     )?;
