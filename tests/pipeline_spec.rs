@@ -70,7 +70,6 @@ fn run(dir: &Path, tag: &str, config: &[&str]) -> (PathBuf, PathBuf, serde_json:
         slots.to_str().unwrap(),
         "--json",
         json.to_str().unwrap(),
-        "--quiet",
     ]);
     let mut runner = Proc::start(dir, &format!("runner-{tag}"), &args);
     runner.wait_for_stderr("waiting for channel-sim", 30);
@@ -146,7 +145,6 @@ fn a_spec_of_another_model_is_refused() {
             &p,
             "--steps",
             "20",
-            "--quiet",
         ],
     );
     runner.wait_for_stderr("waiting for channel-sim", 30);
