@@ -7,7 +7,7 @@
  * user header and the type names ESTPIPE_TYPE_NAME_* (iceoryx2 compares name, size and
  * alignment), with the QoS of docs/wire.md ("Services and QoS").
  *
- * Wire version 3: every sensor node is its own stream (docs/wire.md, "Stream rules"): its
+ * Since wire version 3, every sensor node is its own stream (docs/wire.md, "Stream rules"): its
  * own stream_id, seq = k - 1 (estpipe_seq_of), one END/ABORT marker per node with node set
  * and seq = k = the node's last instant sent; up to ESTPIPE_SLOTS_MAX_PUBLISHERS publishers
  * (one per node) on <prefix>/slots.

@@ -103,39 +103,52 @@ fn the_kalman_filter_with_the_input_tracks_and_without_it_does_not() {
     );
 }
 
+/// Every estimator of `options` stepped once with `obs` from the same prior, on the model
+/// of `file` with its constant input and without it: `(name, x̂)` of each, both ways.
+#[allow(clippy::type_complexity)]
+fn one_step(
+    file: &str,
+    options: &EvalOptions,
+    obs: &[Observation],
+) -> (Vec<(&'static str, [f64; 2])>, Vec<(&'static str, [f64; 2])>) {
+    let (with, without) = with_and_without(file);
+    let step = |s: &ComposedScenario| {
+        let mut ests = build_for_scenario(FACTORIES, s, options, 1, 0).unwrap();
+        ests.iter_mut()
+            .map(|e| {
+                e.step(1, obs).unwrap();
+                let mut x = [0.0; 2];
+                e.estimate(&mut x);
+                (e.name(), x)
+            })
+            .collect::<Vec<_>>()
+    };
+    (step(&with), step(&without))
+}
+
+/// B_u u_0 of occlusion-user-controlled.toml: control.b = [[0.0], [0.1]], u = 2.
+const BU: [f64; 2] = [0.0, 0.2];
+
 /// Every family's time update adds B_u u_k: after one prediction-only instant (a slot lost
 /// in transport) from the same prior, each estimator's x̂ on the model with a constant input
 /// exceeds its x̂ on the model without it by exactly B_u u_0 (the linear filters, to rounding;
 /// `pf`, whose particles carry the same draws, to 1e-9 too).
 #[test]
 fn every_prediction_adds_the_input() {
-    let (with, without) = with_and_without("occlusion-user-controlled.toml");
     let names = ["kf", "ikf", "cce", "kf-io", "adf", "pf"];
-    let bu = [0.0, 0.2]; // control.b = [[0.0], [0.1]], u = 2
     for (flags, what) in [(FLAG_IPC_LOST, "lost"), (FLAG_OCCLUDED, "dropped")] {
         let obs = [Observation::dropped(1, 0, 1, flags)];
-        let step = |s: &ComposedScenario| {
-            let mut ests = build_for_scenario(FACTORIES, s, &options(&names), 1, 0).unwrap();
-            ests.iter_mut()
-                .map(|e| {
-                    e.step(1, &obs).unwrap();
-                    let mut x = [0.0; 2];
-                    e.estimate(&mut x);
-                    (e.name(), x)
-                })
-                .collect::<Vec<_>>()
-        };
-        let (a, b) = (step(&with), step(&without));
+        let (a, b) = one_step("occlusion-user-controlled.toml", &options(&names), &obs);
         assert_eq!(a.iter().map(|(n, _)| *n).collect::<Vec<_>>(), names);
         for ((name, xa), (_, xb)) in a.iter().zip(&b) {
             for j in 0..2 {
                 if what == "lost" || *name == "kf" || *name == "ikf" {
                     assert!(
-                        (xa[j] - xb[j] - bu[j]).abs() < 1e-9,
+                        (xa[j] - xb[j] - BU[j]).abs() < 1e-9,
                         "{name} ({what}) x[{j}]: {} − {} ≠ {}",
                         xa[j],
                         xb[j],
-                        bu[j]
+                        BU[j]
                     );
                 }
             }
@@ -150,25 +163,12 @@ fn every_prediction_adds_the_input() {
 /// filter: `kf+gate` on `controlled.toml` had 200× the MSE of `kf`.)
 #[test]
 fn every_gated_prediction_adds_the_input() {
-    let (with, without) = with_and_without("occlusion-user-controlled.toml");
-    let bu = [0.0, 0.2];
     let gated = EvalOptions {
         gate: Some(0.999),
         ..options(&["kf", "ikf", "cce", "kf-io", "adf"])
     };
     let obs = [Observation::dropped(1, 0, 1, FLAG_IPC_LOST)];
-    let step = |s: &ComposedScenario| {
-        let mut ests = build_for_scenario(FACTORIES, s, &gated, 1, 0).unwrap();
-        ests.iter_mut()
-            .map(|e| {
-                e.step(1, &obs).unwrap();
-                let mut x = [0.0; 2];
-                e.estimate(&mut x);
-                (e.name(), x)
-            })
-            .collect::<Vec<_>>()
-    };
-    let (a, b) = (step(&with), step(&without));
+    let (a, b) = one_step("occlusion-user-controlled.toml", &gated, &obs);
     assert_eq!(
         a.iter().map(|(n, _)| *n).collect::<Vec<_>>(),
         ["kf+gate", "ikf+gate", "cce+gate", "kf-io+gate", "adf+gate"]
@@ -176,11 +176,11 @@ fn every_gated_prediction_adds_the_input() {
     for ((name, xa), (_, xb)) in a.iter().zip(&b) {
         for j in 0..2 {
             assert!(
-                (xa[j] - xb[j] - bu[j]).abs() < 1e-9,
+                (xa[j] - xb[j] - BU[j]).abs() < 1e-9,
                 "{name} x[{j}]: {} − {} ≠ {}",
                 xa[j],
                 xb[j],
-                bu[j]
+                BU[j]
             );
         }
     }

@@ -30,7 +30,8 @@ pub struct OcclusionSpec<const S: usize> {
 }
 
 impl<const S: usize> OcclusionSpec<S> {
-    /// Validates `E` (finite, length `nx`) and `Ψ > 0`; regions are validated when built.
+    /// Validates `E` (finite, length `nx`), `Ψ` and the regions as the estimators' spec does
+    /// ([`estpipe_spec::channel::Occlusion::new`]: the same fields named in errors).
     pub fn new(
         e: Vec<f64>,
         psi: f64,
@@ -38,25 +39,15 @@ impl<const S: usize> OcclusionSpec<S> {
         radii: [f64; S],
         nx: usize,
     ) -> Result<Self, ScenarioError> {
-        if e.len() != nx || e.iter().any(|v| !v.is_finite()) {
-            return Err(ScenarioError::invalid(
-                "occlusion.e",
-                format!("must be {nx} finite entries"),
-            ));
-        }
-        // The estimators' own test of Ψ too (a Cholesky factor): a variance this rejects
-        // (1e308: its factor overflows) must be refused here, naming the field, and not
-        // later by every estimator as "does not match the plant".
-        if !psi.is_finite()
-            || psi <= 0.0
-            || estimator_core::linalg::check_spd(&SMatrix::<f64, 1, 1>::new(psi), "Psi").is_err()
-        {
-            return Err(ScenarioError::invalid(
-                "occlusion.psi",
-                format!("must be a positive variance the estimators can factor, got {psi:e}"),
-            ));
-        }
-        let regions = OcclusionRegions::new(centres.map(|c| SVector::from([c])), radii)
+        let known = estpipe_spec::channel::Occlusion::new(
+            e.clone(),
+            psi,
+            centres.to_vec(),
+            radii.to_vec(),
+            nx,
+        )?;
+        let regions = known
+            .regions::<S>()
             .map_err(|e| ScenarioError::invalid("occlusion.regions", e.to_string()))?;
         Ok(Self { e, psi, regions })
     }

@@ -167,7 +167,7 @@ def packed_index(nx: int, i: int, j: int) -> int:
 
 def seq_of(k: int) -> int:
     """A node's sequence number of its slot of instant k: k - 1 (every node is its own
-    stream, wire version 3)."""
+    stream, since wire version 3)."""
     return max(k - 1, 0)
 
 

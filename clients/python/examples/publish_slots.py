@@ -69,7 +69,7 @@ def main() -> int:
     stream_id = (os.getpid() << 32) ^ estpipe.monotonic_ns()
     period_ns = round(1e9 / args.rate) if args.rate > 0 else 0
     t0 = estpipe.monotonic_ns()
-    # Per node, the last instant sent: its END/ABORT marker's k and seq (wire version 3).
+    # Per node, the last instant sent: its END/ABORT marker's k and seq (since wire version 3).
     last_sent = [0] * nodes
     sent = 0
     try:
