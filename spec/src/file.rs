@@ -161,7 +161,8 @@ pub struct EventTriggerToml {
     pub rate: u32,
     /// Bucket capacity.
     pub capacity: u32,
-    /// Accept λχ ≤ 1 (the seed 004 example does); every eval then prints a warning.
+    /// Accept λχ ≤ 1 (the seed 004 example does); `eval`, and `run`/`replay` of a spec file,
+    /// then print a warning.
     #[serde(default)]
     pub allow_paper_violation: bool,
     /// One table per node.
