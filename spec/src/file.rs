@@ -436,6 +436,17 @@ pub fn read_bounded(path: &Path, what: &str) -> Result<(String, String), SpecErr
         path: shown.clone(),
         reason,
     };
+    // Opening a FIFO waits for a writer that may never come: refused before the open, as a
+    // socket is (a device such as /dev/zero is read within the bound below).
+    if let Ok(m) = std::fs::metadata(path) {
+        use std::os::unix::fs::FileTypeExt as _;
+        let t = m.file_type();
+        if t.is_fifo() || t.is_socket() {
+            return Err(fail(format!(
+                "a FIFO or socket, not a {what} file (give the file itself)"
+            )));
+        }
+    }
     let mut bytes = Vec::new();
     std::fs::File::open(path)
         .and_then(|f| f.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes))

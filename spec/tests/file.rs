@@ -426,6 +426,37 @@ fn an_endless_file_is_refused_quickly() {
     );
 }
 
+/// A FIFO given as a spec file (`--estimator-spec /tmp/fifo`) is refused at once, naming the
+/// file: opening one would wait for a writer that never comes.
+#[test]
+#[cfg(unix)]
+fn a_fifo_is_refused_without_waiting_for_a_writer() {
+    let dir = std::env::temp_dir().join(format!("estpipe-spec-fifo-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let fifo = dir.join("spec.toml");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if !made.is_ok_and(|s| s.success()) {
+        eprintln!("skipped: no mkfifo to make a FIFO with");
+        return;
+    }
+    // On a thread, so that a regression hangs the thread, not the test.
+    let (tx, rx) = std::sync::mpsc::channel();
+    let path = fifo.clone();
+    std::thread::spawn(move || {
+        let _ = tx.send(load(&path).map(|_| ()).map_err(|e| e.to_string()));
+    });
+    let got = rx
+        .recv_timeout(Duration::from_secs(5))
+        .expect("load of a FIFO still waiting after 5 s");
+    let e = got.unwrap_err();
+    assert!(
+        e.starts_with(&fifo.display().to_string()) && e.contains("FIFO") && !e.contains('\n'),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn deeply_nested_or_huge_text_does_not_crash() {
     // Within the size bound, text a parser could recurse on or loop over.
