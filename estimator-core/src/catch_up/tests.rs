@@ -2,7 +2,7 @@
 //! runner's gate over its catch-up (ipc-runner's `adapter.rs` and `fed.rs`, transcribed)
 //! against [`Gated`] over [`CatchUp`].
 
-use std::vec::Vec;
+use heapless::Vec;
 
 use nalgebra::{matrix, vector, SMatrix, SVector};
 
@@ -24,7 +24,8 @@ struct Counting {
     model: usize,
     fail_at: Option<usize>,
     est: Estimate<f64, 1>,
-    seen: Vec<Seen>,
+    /// Every step so far (the tests take at most a few dozen).
+    seen: Vec<Seen, 64>,
 }
 
 impl Counting {
@@ -49,7 +50,10 @@ impl Counting {
             return Err(Error::Numerical { what: "test" });
         }
         self.seen
-            .push((k, y.delivered().is_some(), self.model, gated));
+            .push((k, y.delivered().is_some(), self.model, gated))
+            .map_err(|_| Error::Numerical {
+                what: "more steps than the test records",
+            })?;
         self.next = k + 1;
         Ok(())
     }
@@ -91,7 +95,7 @@ fn lost_measurements_are_all_lost() {
 
 #[test]
 fn the_gap_is_stepped_as_lost_each_instant_on_its_own_model() {
-    let mut calls = Vec::new();
+    let mut calls: Vec<usize, 8> = Vec::new();
     let mut e = CatchUp::new(Counting::new()).with_remodel(|e: &mut Counting, k: usize| {
         e.model = k;
         Ok(())
@@ -111,7 +115,7 @@ fn the_gap_is_stepped_as_lost_each_instant_on_its_own_model() {
     // The hook: at k on the estimator, then every gap instant and k on the copy.
     let mut est = Counting::new();
     let mut hook = |e: &mut Counting, k: usize| {
-        calls.push(k);
+        calls.push(k).expect("a few calls");
         e.model = k;
         Ok(())
     };
