@@ -539,6 +539,28 @@ fn another_user_gets_one_line_and_runs_with_its_own_iceoryx2_root() {
     assert!(err.contains("docs/security.md"), "{err}");
     assert!(!err.contains("InternalError"), "{err}");
     no_panic(&denied);
+    // The bridge's sides set up their node through the same code (estpipe-process): the same
+    // one line, exit 2 (it was an internal error, exit 1), before any zenoh session opens.
+    let mut bridge = as_nobody(
+        &dir,
+        "denied-bridge",
+        &[
+            "bridge",
+            "--side",
+            "sensor",
+            "--prefix",
+            &p,
+            "--key",
+            "estpipe-t/otheruser",
+        ],
+    )
+    .unwrap();
+    let st = bridge.wait(30);
+    let err = bridge.err();
+    assert_eq!(st.code(), Some(2), "{st}\n{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one line:\n{err}");
+    assert!(err.contains("belongs to uid 0"), "{err}");
+    no_panic(&bridge);
 
     // The remedy the line names: an iceoryx2 root and prefix of this user's own.
     let cfg = dir.join("config");
