@@ -153,18 +153,14 @@ pub fn build_all(
     options: &EvalOptions,
     start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let mut merged;
-    let mut options = options;
-    if (options.loss_rate == 0.0 && spec.loss_rate.is_some())
-        || (options.gate.is_none() && spec.gate.is_some())
-    {
-        merged = options.clone();
-        if merged.loss_rate == 0.0 {
-            merged.loss_rate = spec.loss_rate.unwrap_or(0.0);
-        }
-        merged.gate = merged.gate.or(spec.gate);
-        options = &merged;
-    }
+    let options = &EvalOptions {
+        loss_rate: match options.loss_rate {
+            0.0 => spec.loss_rate.unwrap_or(0.0),
+            p => p,
+        },
+        gate: options.gate.or(spec.gate),
+        ..options.clone()
+    };
     let mut all = Vec::new();
     for f in factories {
         all.extend(f(spec, options, start)?);
@@ -174,4 +170,68 @@ pub fn build_all(
         all.retain(|e| options.estimators.iter().any(|n| names_match(e.name(), n)));
     }
     Ok(all)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A spec's own `gate` and `loss_rate` build the gated and `-mix` estimators as the flags
+    /// do; a flag given on the command line wins over the file's value.
+    #[test]
+    fn the_specs_gate_and_loss_rate_apply_unless_a_flag_is_given() {
+        let names = |spec: &EstimatorSpec, options: &EvalOptions| -> Vec<&'static str> {
+            let spec = Arc::new(spec.clone());
+            build_all(FACTORIES, &spec, options, &RunStart::default())
+                .unwrap()
+                .iter()
+                .map(|e| e.name())
+                .collect()
+        };
+        let plain = EvalOptions {
+            particles: 0,
+            ..EvalOptions::default()
+        };
+        let spec = (*crate::source::preset_spec("occlusion")).clone();
+        let with = spec
+            .clone()
+            .with_gate(Some(0.99))
+            .unwrap()
+            .with_loss_rate(Some(0.2))
+            .unwrap();
+        assert_eq!(names(&spec, &plain), ["kf", "ikf", "cce", "kf-io", "adf"]);
+        let from_file = names(&with, &plain);
+        assert_eq!(
+            from_file,
+            [
+                "kf+gate",
+                "ikf+gate",
+                "cce+gate",
+                "kf-io+gate",
+                "adf+gate",
+                "cce-mix+gate",
+                "kf-io-mix+gate",
+                "adf-mix+gate"
+            ]
+        );
+        // The flags' values: the same names, and the estimates of the flags' gate (a 0.5 gate
+        // rejects far more than the file's 0.99 on the same instants).
+        let flags = EvalOptions {
+            gate: Some(0.5),
+            loss_rate: 0.2,
+            ..plain.clone()
+        };
+        assert_eq!(names(&spec, &flags), from_file);
+        let rejected = |spec: &EstimatorSpec, options: &EvalOptions| -> u64 {
+            let spec = Arc::new(spec.clone());
+            let mut ests = build_all(FACTORIES, &spec, options, &RunStart::default()).unwrap();
+            let (_, mut sim) = crate::source::preset_run("occlusion", 1, 0);
+            for _ in 0..200 {
+                let i = sim.next_instant();
+                let _ = ests[1].step(i.k, &i.obs);
+            }
+            gate_counts(&*ests[1]).unwrap().1
+        };
+        assert!(rejected(&with, &flags) > rejected(&with, &plain));
+    }
 }
