@@ -80,6 +80,19 @@ impl<const L: usize> SharedTokenBucket<L> {
         self.capacity
     }
 
+    /// The same bucket at level `level` (≤ capacity): what a receiver that learns the level
+    /// from a packet ([`crate::protocol::bucket_mirror`]) resynchronises to. Unchanged on error.
+    pub fn set_level(&mut self, level: u32) -> Result<()> {
+        if level > self.capacity {
+            return Err(Error::InvalidConfig {
+                field: "token level",
+                reason: "exceeds the bucket capacity",
+            });
+        }
+        self.level = level;
+        Ok(())
+    }
+
     /// Per-node allocation ξ_t / L (eq. 16).
     #[inline]
     pub fn allocation<T: Real>(&self) -> T {
