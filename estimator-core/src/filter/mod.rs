@@ -13,6 +13,8 @@
 //!   correlated-noise predictor), [`independent_kf`] the textbook KF/EKF that treat its two
 //!   noise terms as independent.
 //! * [`tobit`] (seed 004): local Tobit filters of censored measurements and their fusion.
+//! * [`silence`]: what an event trigger's silence says (the product's, beside seed 004): the
+//!   silence set's updates, the Kalman filter that reads them.
 
 pub mod coupled_kf;
 pub mod gate;
@@ -22,6 +24,7 @@ pub mod kalman;
 pub mod nn;
 pub mod occlusion;
 pub mod sequential_kf;
+pub mod silence;
 pub mod time_update;
 pub mod tobit;
 
@@ -34,4 +37,5 @@ pub use kalman::KalmanFilter;
 pub use nn::NnTbcpEstimator;
 pub use occlusion::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
 pub use sequential_kf::SequentialKf;
-pub use tobit::{TobitFilter, TobitFusion};
+pub use silence::kalman::SilenceKf;
+pub use tobit::{MirroredFusion, TobitFilter, TobitFusion};

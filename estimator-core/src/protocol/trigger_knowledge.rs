@@ -138,7 +138,10 @@ mod tests {
             let mut held = 0;
             for t in 0..3000 {
                 let s = t as f64;
-                let y = vector![(0.07 * s).sin() * 2.0, (0.05 * s).cos() + 0.3 * (0.9 * s).sin()];
+                let y = vector![
+                    (0.07 * s).sin() * 2.0,
+                    (0.05 * s).cos() + 0.3 * (0.9 * s).sin()
+                ];
                 assert!(know.eta_max() >= node.eta() - 1e-12, "t = {t}");
                 let set = know.silence_set();
                 let o = node.step(&y, t % 2 == 0).unwrap();

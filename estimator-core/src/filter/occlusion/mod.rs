@@ -16,7 +16,7 @@ pub mod adf;
 pub mod cce;
 pub mod kf_io;
 pub mod skeleton;
-mod truncnorm;
+pub(crate) mod truncnorm;
 
 pub use adf::{AdfConfig, AdfState, AssumedDensityFilter};
 pub use cce::{CceConfig, CceState, CrossCoupledEstimator};

@@ -97,6 +97,30 @@ pub enum Silence {
     /// prediction error, which (29) already bounds, so Theorem 1's bound still holds; Ḡ
     /// still advances by Ξ, the held ȳ stays.
     Predict,
+    /// The product's option (docs/tobit-fusion.md, "Silence that speaks"): a silence the
+    /// bucket mirror calls held is the Sijs–Lazar pseudo-measurement — the set's centre
+    /// with `M + Σ_set` in (37), (22), (30) at θ = 0 — on the silence ball intersected with
+    /// the censoring region ([`crate::filter::silence::set::uniform_moments`]); any other
+    /// silence predicts only, as [`Silence::Predict`].
+    PseudoMeasurement,
+    /// The product's option: a held silence is the moment-matched truncated Gaussian of the
+    /// uncensored measurement on the set's box, open below where the censoring reaches
+    /// ([`crate::filter::silence::truncated::truncate_box`] with the prediction bound
+    /// P̄_{t|t−1} as the prior covariance); any other silence predicts only.
+    TruncatedGaussian,
+}
+
+impl Silence {
+    /// Whether the filter reads the trigger's silence set (and so keeps the trigger
+    /// knowledge).
+    #[inline]
+    #[must_use]
+    pub fn reads_set(self) -> bool {
+        matches!(
+            self,
+            Silence::PseudoMeasurement | Silence::TruncatedGaussian
+        )
+    }
 }
 
 /// Configuration of one node's local Tobit filter.

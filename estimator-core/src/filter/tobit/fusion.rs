@@ -24,6 +24,7 @@ use super::local::TobitFilter;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
+use crate::filter::silence::Arrival;
 use crate::linalg::{check_finite, inverse_spd, solve_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
@@ -165,12 +166,31 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         r: &[SVector<T, NY>; L],
         received: [Option<&SVector<T, NY>>; L],
     ) -> Result<()> {
+        let arrivals = received.map(|y| match y {
+            Some(y) => Arrival::Received(y),
+            None => Arrival::Held,
+        });
+        self.step_arrivals(a, bqb, gu, c, r, &arrivals)
+    }
+
+    /// [`TobitFusion::step_with_input`] on what every node's packet was ([`Arrival`]: the
+    /// silence-reading local filters tell a held trigger from a silence without a token or a
+    /// lost packet; the paper's and [`super::Silence::Predict`] do not). All-or-nothing.
+    pub fn step_arrivals(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &[SMatrix<T, NY, NX>; L],
+        r: &[SVector<T, NY>; L],
+        arrivals: &[Arrival<'_, T, NY>; L],
+    ) -> Result<()> {
         let mut locals = self.locals;
         let mut xs = [SVector::<T, NX>::zeros(); L];
         let mut ps = [SMatrix::<T, NX, NX>::zeros(); L];
         for m in 0..L {
             let q_m = bqb / self.alpha[m];
-            locals[m].step_with_input(a, &q_m, gu, &c[m], &r[m], received[m])?;
+            locals[m].step_arrival(a, &q_m, gu, &c[m], &r[m], arrivals[m])?;
             (xs[m], ps[m]) = locals[m].estimate().into_parts();
         }
         let (xg, pg) = federated_fuse(&xs, &ps)?;
@@ -191,6 +211,20 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         k: usize,
         received: [Option<&SVector<T, NY>>; L],
     ) -> Result<()> {
+        let arrivals = received.map(|y| match y {
+            Some(y) => Arrival::Received(y),
+            None => Arrival::Held,
+        });
+        self.step_arrivals_models(models, k, &arrivals)
+    }
+
+    /// [`TobitFusion::step_models`] on every node's [`Arrival`].
+    pub fn step_arrivals_models<M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        models: &[M; L],
+        k: usize,
+        arrivals: &[Arrival<'_, T, NY>; L],
+    ) -> Result<()> {
         let prev = k.saturating_sub(1);
         let mut c = [SMatrix::<T, NY, NX>::zeros(); L];
         let mut r = [SVector::<T, NY>::zeros(); L];
@@ -198,13 +232,13 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
             c[m] = models[m].c(k);
             r[m] = diagonal_variances(&models[m].measurement_cov(k))?;
         }
-        self.step_with_input(
+        self.step_arrivals(
             &models[0].a(prev),
             &models[0].process_cov(prev),
             models[0].input(prev).as_ref(),
             &c,
             &r,
-            received,
+            arrivals,
         )
     }
 }

@@ -31,7 +31,11 @@
 //! (eqs. 5-7 are per component), so a model's measurement covariance must be diagonal.
 //!
 //! With [`Silence::Predict`] (the product's option, not the paper's) an instant without a
-//! measurement is the prediction (21), (29) alone: no gain, no (22), no (30).
+//! measurement is the prediction (21), (29) alone: no gain, no (22), no (30). With
+//! [`Silence::PseudoMeasurement`] or [`Silence::TruncatedGaussian`] (the product's options,
+//! docs/tobit-fusion.md "Silence that speaks") an instant whose trigger held is the silence
+//! update on the node's silence set ([`crate::filter::silence`]), and one without a token or
+//! lost is the prediction; these filters keep the receiver's [`TriggerKnowledge`] of the node.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -40,10 +44,14 @@ use super::gain::GainProblem;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
+use crate::filter::silence::set::{uniform_moments, SilenceBox};
+use crate::filter::silence::truncated::truncate_box;
+use crate::filter::silence::Arrival;
 use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
 use crate::protocol::tobit::TobitStats;
+use crate::protocol::trigger_knowledge::TriggerKnowledge;
 use crate::{Error, Real, Result};
 
 /// Everything one local step computes before the gain: the quantities of (23), (29), (30).
@@ -77,6 +85,8 @@ pub struct TobitFilter<T: Real, const NX: usize, const NY: usize> {
     y_held: SVector<T, NY>,
     g: T,
     last_theta: T,
+    /// The receiver's knowledge of the node's trigger (kept only when the silence is read).
+    knowledge: TriggerKnowledge<T, NY>,
 }
 
 impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
@@ -100,6 +110,7 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             y_held: cfg.tau,
             g: eta0 * eta0,
             last_theta: T::one(),
+            knowledge: TriggerKnowledge::new(cfg.trigger, cfg.tau)?,
         })
     }
 
@@ -127,6 +138,12 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
     #[inline]
     pub fn config(&self) -> &TobitFilterConfig<T, NY> {
         &self.cfg
+    }
+    /// The receiver's knowledge of the node's trigger (advanced only when the configured
+    /// [`Silence`] reads the set).
+    #[inline]
+    pub fn trigger_knowledge(&self) -> &TriggerKnowledge<T, NY> {
+        &self.knowledge
     }
 
     /// Overwrites x̂ and P̄ (the fusion reset (51)); validated, unchanged on error.
@@ -268,16 +285,86 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         r: &SVector<T, NY>,
         received: Option<&SVector<T, NY>>,
     ) -> Result<()> {
-        let plan = self.plan_with_input(a, bqb, gu, c, r, received)?;
-        let (x, p) = if received.is_none() && self.cfg.silence == Silence::Predict {
-            // Silence::Predict: the prediction (21), (29) is the estimate and its bound.
-            (plan.x_prior, plan.problem.p_prior)
+        let arrival = match received {
+            Some(y) => Arrival::Received(y),
+            None => Arrival::Held,
+        };
+        self.step_arrival(a, bqb, gu, c, r, arrival)
+    }
+
+    /// One instant on what the node's packet was ([`Arrival`]). The paper's filter and
+    /// [`Silence::Predict`] read every arrival but `Received` as "nothing arrived" (θ = 1),
+    /// as [`TobitFilter::step_with_input`] does; the silence-reading options update a `Held`
+    /// silence with the set and predict on `Blocked` and `Lost`. Nothing changes on error.
+    pub fn step_arrival(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        arrival: Arrival<'_, T, NY>,
+    ) -> Result<()> {
+        let received = match arrival {
+            Arrival::Received(y) => Some(y),
+            _ => None,
+        };
+        let silence = self.cfg.silence;
+        let mut knowledge = self.knowledge;
+        let set = if silence.reads_set() {
+            let ball = match arrival {
+                Arrival::Held => knowledge.silence_set(),
+                _ => None,
+            };
+            match arrival {
+                Arrival::Received(y) => knowledge.delivered(y)?,
+                Arrival::Held | Arrival::Blocked => knowledge.silent(),
+                Arrival::Lost => knowledge.lost(),
+            }
+            ball
         } else {
-            let k = plan.problem.gain()?;
-            (
-                plan.x_prior + k * (plan.y_bar - plan.stats.mean),
-                plan.problem.bound(&k),
-            )
+            None
+        };
+        let mut plan = match (set, silence) {
+            (Some(ball), Silence::PseudoMeasurement) => {
+                // (S3), (S7): the set's centre as a measurement at θ = 0, its covariance
+                // added to M; the held ȳ stays (it is the trigger's reference).
+                let (mean, var) = uniform_moments(&ball, Some(&self.cfg.tau));
+                let mut plan = self.plan_with_input(a, bqb, gu, c, r, Some(&mean))?;
+                for j in 0..NY {
+                    plan.problem.m[(j, j)] += var[j];
+                }
+                plan.y_bar = self.y_held;
+                plan
+            }
+            _ => self.plan_with_input(a, bqb, gu, c, r, received)?,
+        };
+        let (x, p) = match (received, set, silence) {
+            (None, Some(ball), Silence::PseudoMeasurement) => {
+                let (mean, _) = uniform_moments(&ball, Some(&self.cfg.tau));
+                let k = plan.problem.gain()?;
+                (
+                    plan.x_prior + k * (mean - plan.stats.mean),
+                    plan.problem.bound(&k),
+                )
+            }
+            (None, Some(ball), Silence::TruncatedGaussian) => truncate_box(
+                &plan.x_prior,
+                &plan.problem.p_prior,
+                c,
+                &SMatrix::from_diagonal(r),
+                &SilenceBox::of_ball(&ball, Some(&self.cfg.tau)),
+            )?,
+            // Silence::Predict, and a silence-reading filter without a usable set: the
+            // prediction (21), (29) is the estimate and its bound.
+            (None, _, s) if s != Silence::HeldMeasurement => (plan.x_prior, plan.problem.p_prior),
+            _ => {
+                let k = plan.problem.gain()?;
+                (
+                    plan.x_prior + k * (plan.y_bar - plan.stats.mean),
+                    plan.problem.bound(&k),
+                )
+            }
         };
         check_finite(&x, "local estimate")?;
         check_spd(&p, "local bound")?;
@@ -285,10 +372,14 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         if !g.finite() {
             return Err(Error::NonFinite { what: "G bar" });
         }
+        if received.is_none() {
+            plan.theta = T::one();
+        }
         self.est = Estimate::trusted(x, p);
         self.y_held = plan.y_bar;
         self.g = g;
         self.last_theta = plan.theta;
+        self.knowledge = knowledge;
         Ok(())
     }
 

@@ -5,7 +5,9 @@
 //!   and the measurement covariances it accepts;
 //! * [`gain`]: the bound (30) as a quadratic in the gain and its minimiser (37);
 //! * [`local`]: the local filter (21)-(23), (29)-(30) of one node;
-//! * [`fusion`]: the federated fusion (50)-(51) of `L` local filters.
+//! * [`fusion`]: the federated fusion (50)-(51) of `L` local filters;
+//! * [`mirrored`]: the fusion behind the receiver's bucket mirror, for the silence-reading
+//!   local filters (the product's, docs/tobit-fusion.md "Silence that speaks").
 //!
 //! The section 4 example's scalars are [`BoundScalars::paper_example`], defined with the other
 //! papers' examples in [`crate::papers`].
@@ -14,6 +16,7 @@ pub mod config;
 pub mod fusion;
 pub mod gain;
 pub mod local;
+pub mod mirrored;
 
 pub use config::{
     diagonal_variances, BoundScalars, Kappas, Silence, TobitFilterConfig, UpsilonPlacement,
@@ -21,3 +24,4 @@ pub use config::{
 pub use fusion::{federated_fuse, TobitFusion};
 pub use gain::GainProblem;
 pub use local::{LocalStepPlan, TobitFilter};
+pub use mirrored::MirroredFusion;

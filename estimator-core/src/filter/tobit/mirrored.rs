@@ -1,0 +1,95 @@
+//! The fusion filter with silence-reading local filters and the receiver's bucket mirror
+//! (docs/tobit-fusion.md, "Silence that speaks"): Algorithm 1's estimator side, where an
+//! instant's silences are first classified by the mirror of the shared bucket
+//! ([`crate::protocol::bucket_mirror`]) — held trigger, or no token / unknown — and then every
+//! local filter steps on its node's [`Arrival`](crate::filter::silence::Arrival).
+
+use super::fusion::TobitFusion;
+use crate::estimate::Estimate;
+use crate::estimator::{Estimator, OnModel};
+use crate::filter::silence::{Arrival, SilenceCounts, TriggeredPackets};
+use crate::model::LinearSystem;
+use crate::protocol::bucket_mirror::BucketMirror;
+use crate::protocol::shared_token_bucket::SharedTokenBucket;
+use crate::{Real, Result};
+
+/// [`TobitFusion`] behind the bucket mirror.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MirroredFusion<T: Real, const NX: usize, const NY: usize, const L: usize> {
+    fusion: TobitFusion<T, NX, NY, L>,
+    mirror: BucketMirror<L>,
+    counts: SilenceCounts,
+}
+
+impl<T: Real, const NX: usize, const NY: usize, const L: usize> MirroredFusion<T, NX, NY, L> {
+    /// `fusion` (its local filters configured with a silence-reading
+    /// [`super::Silence`], or any other) and the shared bucket at ξ₀.
+    pub fn new(fusion: TobitFusion<T, NX, NY, L>, bucket: SharedTokenBucket<L>) -> Self {
+        Self {
+            fusion,
+            mirror: BucketMirror::new(bucket),
+            counts: SilenceCounts::default(),
+        }
+    }
+
+    /// The fusion filter.
+    #[inline]
+    pub fn fusion(&self) -> &TobitFusion<T, NX, NY, L> {
+        &self.fusion
+    }
+
+    /// The bucket mirror.
+    #[inline]
+    pub fn mirror(&self) -> &BucketMirror<L> {
+        &self.mirror
+    }
+
+    /// Silences held / without a token so far, over all nodes.
+    #[inline]
+    pub fn counts(&self) -> SilenceCounts {
+        self.counts
+    }
+
+    /// One instant `k ≥ 1`: the mirror, then [`TobitFusion::step_arrivals_models`].
+    /// All-or-nothing (the mirror included).
+    pub fn step<M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        models: &[M; L],
+        k: usize,
+        y: &TriggeredPackets<T, NY, L>,
+    ) -> Result<()> {
+        let mut mirror = self.mirror;
+        let held = mirror.step(&y.sent(), y.level);
+        let arrivals = y.arrivals(&held);
+        let mut fusion = self.fusion;
+        fusion.step_arrivals_models(models, k, &arrivals)?;
+        let mut counts = self.counts;
+        for a in &arrivals {
+            match a {
+                Arrival::Held => counts.held += 1,
+                Arrival::Blocked => counts.blocked += 1,
+                _ => {}
+            }
+        }
+        self.fusion = fusion;
+        self.mirror = mirror;
+        self.counts = counts;
+        Ok(())
+    }
+}
+
+impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<T, NX, NY>>
+    Estimator<T, NX> for OnModel<[M; L], MirroredFusion<T, NX, NY, L>, NY>
+{
+    type Measurement = TriggeredPackets<T, NY, L>;
+
+    #[inline]
+    fn step(&mut self, k: usize, y: &TriggeredPackets<T, NY, L>) -> Result<()> {
+        self.filter.step(&self.model, k, y)
+    }
+
+    #[inline]
+    fn estimate(&self) -> &Estimate<T, NX> {
+        self.filter.fusion.estimate()
+    }
+}
