@@ -368,6 +368,7 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
                 ny: 2,
                 y: [f64::from(slot.y[0]), f64::from(slot.y[1]), 0.0, 0.0],
                 flags: slot.flags,
+                tokens: None,
             })
             .collect();
         for v in views.iter_mut() {

@@ -35,6 +35,7 @@ mod tests {
             ny: 2,
             y,
             flags: if delivered { 0 } else { FLAG_OCCLUDED },
+            tokens: None,
         }
     }
 

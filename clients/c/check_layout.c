@@ -34,7 +34,7 @@ static const struct expected layout[] = {
     FIELD(Slot, ny, 30, 1),
     FIELD(Slot, delivered, 31, 1),
     FIELD(Slot, flags, 32, 4),
-    FIELD(Slot, reserved, 36, 4),
+    FIELD(Slot, tokens, 36, 4),
     FIELD(Slot, send_ns, 40, 8),
     FIELD(Slot, period_ns, 48, 8),
     FIELD(Slot, stream_start_ns, 56, 8),

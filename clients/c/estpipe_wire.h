@@ -18,7 +18,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define ESTPIPE_WIRE_VERSION 4u
+#define ESTPIPE_WIRE_VERSION 5u
 
 #define ESTPIPE_MAX_NX 8
 #define ESTPIPE_MAX_NY 4
@@ -34,6 +34,7 @@
 #define ESTPIPE_FLAG_CENSORED (1u << 2)
 #define ESTPIPE_FLAG_RANDOM_LOSS (1u << 3)
 #define ESTPIPE_FLAG_OCCLUDED (1u << 4)
+#define ESTPIPE_FLAG_TOKENS (1u << 5)
 #define ESTPIPE_FLAG_IPC_LOST (1u << 31)
 
 #define ESTPIPE_STATUS_OK 0u
@@ -66,7 +67,7 @@ typedef struct estpipe_Slot {
     uint8_t ny;
     uint8_t delivered;
     uint32_t flags;
-    uint32_t reserved;
+    uint32_t tokens;
     uint64_t send_ns;
     uint64_t period_ns;
     uint64_t stream_start_ns;
@@ -123,7 +124,7 @@ _Static_assert(offsetof(estpipe_Slot, nodes) == 29, "estpipe_Slot.nodes offset")
 _Static_assert(offsetof(estpipe_Slot, ny) == 30, "estpipe_Slot.ny offset");
 _Static_assert(offsetof(estpipe_Slot, delivered) == 31, "estpipe_Slot.delivered offset");
 _Static_assert(offsetof(estpipe_Slot, flags) == 32, "estpipe_Slot.flags offset");
-_Static_assert(offsetof(estpipe_Slot, reserved) == 36, "estpipe_Slot.reserved offset");
+_Static_assert(offsetof(estpipe_Slot, tokens) == 36, "estpipe_Slot.tokens offset");
 _Static_assert(offsetof(estpipe_Slot, send_ns) == 40, "estpipe_Slot.send_ns offset");
 _Static_assert(offsetof(estpipe_Slot, period_ns) == 48, "estpipe_Slot.period_ns offset");
 _Static_assert(offsetof(estpipe_Slot, stream_start_ns) == 56, "estpipe_Slot.stream_start_ns offset");

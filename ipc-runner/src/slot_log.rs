@@ -12,6 +12,7 @@
 //! | `delivered`   | 0 / 1   | 1 if a measurement reached the estimator, 0 if the packet was dropped |
 //! | `flags`       | integer | channel-side flags (`channel_sim::sim::FLAG_*`; 0 if unknown); bit 31 (`FLAG_IPC_LOST`, 2147483648) marks a slot that never reached the receiver |
 //! | `y_0` … `y_{ny−1}` | float | the measurement; ignored (may be empty) when `delivered = 0` |
+//! | `tokens`      | integer, optional | the bucket level a delivered packet reported (wire version 5's `tokens`); empty when none |
 //!
 //! A row with `delivered = 0` is a packet the channel dropped (a dropout, which may carry
 //! information: occlusion, event trigger), unless its flags have `FLAG_IPC_LOST`: then the
@@ -39,7 +40,7 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
     for j in 0..ny {
         write!(w, ",y_{j}")?;
     }
-    writeln!(w)?;
+    writeln!(w, ",tokens")?;
     for o in slots {
         write!(
             w,
@@ -56,7 +57,10 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
                 write!(w, ",")?;
             }
         }
-        writeln!(w)?;
+        match o.tokens {
+            Some(t) => writeln!(w, ",{t}")?,
+            None => writeln!(w, ",")?,
+        }
     }
     // Dropping a BufWriter loses its last error: a full disk must fail the write.
     w.flush()
@@ -129,6 +133,7 @@ pub fn read_slots_within(
         })
     };
     let (ck, cn, cd, cf) = (idx("k")?, idx("node")?, idx("delivered")?, find("flags")?);
+    let ct = find("tokens")?;
     let cy: Vec<usize> = (0..ny)
         .map(|j| idx(&format!("y_{j}")))
         .collect::<Result<_>>()?;
@@ -165,6 +170,14 @@ pub fn read_slots_within(
                 .parse()
                 .map_err(|e| at("flags", format!("{:?} ({e})", get(c))))?,
             _ => 0,
+        };
+        let tokens: Option<u32> = match ct {
+            Some(c) if delivered && !get(c).is_empty() => Some(
+                get(c)
+                    .parse()
+                    .map_err(|e| at("tokens", format!("{:?} ({e})", get(c))))?,
+            ),
+            _ => None,
         };
         if k == 0 {
             return Err(at("k", "k must be ≥ 1 (k = 0 is the prior)".into()));
@@ -227,6 +240,7 @@ pub fn read_slots_within(
             ny: ny as u8,
             y,
             flags,
+            tokens,
         };
     }
     Ok(out)
@@ -252,6 +266,7 @@ mod tests {
                 ny: 2,
                 y,
                 flags: 4,
+                tokens: None,
             },
             Observation::dropped(3, 0, 2, 16),
         ];

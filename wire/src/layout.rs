@@ -70,7 +70,7 @@ pub fn layouts() -> Vec<TypeLayout> {
             fields!(Slot:
                 version: "u32", kind: "u32", stream_id: "u64", seq: "u64", k: "u32",
                 node: "u8", nodes: "u8", ny: "u8", delivered: "u8", flags: "u32",
-                reserved: "u32", send_ns: "u64", period_ns: "u64", stream_start_ns: "u64",
+                tokens: "u32", send_ns: "u64", period_ns: "u64", stream_start_ns: "u64",
                 y: "[f64; 4]",
             ),
         ),

@@ -56,7 +56,7 @@ pub use services::{
 };
 pub use slot::{
     Slot, SlotFault, FLAGS_LOST, FLAG_CENSORED, FLAG_IPC_LOST, FLAG_NET_LOST, FLAG_OCCLUDED,
-    FLAG_RANDOM_LOSS, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, SLOT_ABORT, SLOT_DATA, SLOT_END,
+    FLAG_RANDOM_LOSS, FLAG_TOKENS, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED, SLOT_ABORT, SLOT_DATA, SLOT_END,
 };
 pub use truth::Truth;
 
@@ -68,7 +68,7 @@ pub use truth::Truth;
 /// non-overflowing (back-pressure). Version 3 made every sensor node its own stream (its own
 /// stream id, `seq = k − 1`, its own END/ABORT marker) and lets the slot service admit one
 /// publisher per node ([`MAX_NODES`]).
-pub const WIRE_VERSION: u32 = 4;
+pub const WIRE_VERSION: u32 = 5;
 
 /// Largest state dimension (fixed so payloads are fixed-size).
 pub const MAX_NX: usize = 8;

@@ -220,7 +220,7 @@ fn put_slot(w: &mut Writer<'_>, s: &Slot) {
     w.u8(s.ny);
     w.u8(s.delivered);
     w.u32(s.flags);
-    w.u32(s.reserved);
+    w.u32(s.tokens);
     w.u64(s.send_ns);
     w.u64(s.period_ns);
     w.u64(s.stream_start_ns);
@@ -239,7 +239,7 @@ fn get_slot(r: &mut Reader<'_>) -> Slot {
         ny: r.u8(),
         delivered: r.u8(),
         flags: r.u32(),
-        reserved: r.u32(),
+        tokens: r.u32(),
         send_ns: r.u64(),
         period_ns: r.u64(),
         stream_start_ns: r.u64(),

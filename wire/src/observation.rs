@@ -24,6 +24,10 @@ pub struct Observation {
     pub y: [f64; MAX_NY],
     /// Channel-side flags of this instant, see the `FLAG_*` constants.
     pub flags: u32,
+    /// The shared token bucket's level ξ_{t−1} this node's grant used, when the packet
+    /// reports it (a delivered packet behind seed 004's shared bucket; the slot's `tokens`
+    /// with [`FLAG_TOKENS`](crate::FLAG_TOKENS)).
+    pub tokens: Option<u32>,
 }
 
 impl Observation {
@@ -36,6 +40,7 @@ impl Observation {
             ny,
             y: [0.0; MAX_NY],
             flags,
+            tokens: None,
         }
     }
 
@@ -57,7 +62,11 @@ pub fn slot_of(
     Slot {
         ny: obs.ny,
         delivered: u8::from(obs.delivered),
-        flags: obs.flags,
+        flags: match obs.tokens {
+            Some(_) if obs.delivered => obs.flags | crate::FLAG_TOKENS,
+            _ => obs.flags & !crate::FLAG_TOKENS,
+        },
+        tokens: obs.tokens.filter(|_| obs.delivered).unwrap_or(0),
         send_ns,
         period_ns,
         stream_start_ns,
@@ -85,5 +94,7 @@ pub fn observation_of(slot: &Slot) -> Result<Observation, WireError> {
         ny: slot.ny,
         y,
         flags: slot.flags,
+        // The level a delivered packet reports; a dropped one has no grant to report.
+        tokens: (slot.flags & crate::FLAG_TOKENS != 0 && slot.delivered == 1).then_some(slot.tokens),
     })
 }

@@ -25,6 +25,11 @@ pub const FLAG_RANDOM_LOSS: u32 = 1 << 3;
 /// [`Slot::flags`]: the packet was dropped because the state was inside an occlusion region
 /// (seed 001).
 pub const FLAG_OCCLUDED: u32 = 1 << 4;
+/// [`Slot::flags`]: [`Slot::tokens`] holds the shared token bucket's level ξ_{t−1} that this
+/// node's grant used (seed 004, eq. 18): a delivered packet tells the receiver the bucket's
+/// level, so the receiver's mirror of the bucket can resynchronise after a lost packet
+/// (docs/tobit-fusion.md, "Silence that speaks"). Since wire version 5.
+pub const FLAG_TOKENS: u32 = 1 << 5;
 /// Added by the runner, never written on the wire: the node's slot of this instant never
 /// reached the estimators — lost inside the IPC (a gap in the node's sequence numbers),
 /// skipped as malformed, or not there when the instant was handed on (its deadline, or the
@@ -72,8 +77,9 @@ pub struct Slot {
     pub delivered: u8,
     /// Channel-side flags (`FLAG_*`).
     pub flags: u32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// With [`FLAG_TOKENS`]: the shared bucket's level ξ_{t−1} the node's grant used (a
+    /// delivered packet of a node behind seed 004's shared bucket); 0 otherwise.
+    pub tokens: u32,
     /// `CLOCK_MONOTONIC` time (ns) at which the slot was written, just before `send()`.
     pub send_ns: u64,
     /// The publisher's sampling period in ns (0 = as fast as possible).
@@ -101,7 +107,7 @@ impl Slot {
             ny: 0,
             delivered: 0,
             flags: 0,
-            reserved: 0,
+            tokens: 0,
             send_ns: 0,
             period_ns: 0,
             stream_start_ns: 0,

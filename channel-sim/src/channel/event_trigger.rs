@@ -134,6 +134,9 @@ impl Stage for TriggeredTokenBucketStage {
                 slot.as_mut_slice()[o.ny as usize..].fill(0.0);
             }
         }
+        // ξ_{t−1}, what every grant of this instant uses: a sent packet reports it (docs/wire.md,
+        // "The bucket level on a delivered packet").
+        let level = self.sched.level();
         match self.sched.step(&ys) {
             Ok(decisions) => {
                 self.last = decisions;
@@ -149,7 +152,9 @@ impl Stage for TriggeredTokenBucketStage {
                         flags |= FLAG_TOKEN_BLOCKED;
                     }
                     o.flags |= flags;
-                    if !d.sent {
+                    if d.sent {
+                        o.tokens = Some(level);
+                    } else {
                         drop_packet(o, 0);
                     }
                 }

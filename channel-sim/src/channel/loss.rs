@@ -170,6 +170,7 @@ mod tests {
                 ny: 1,
                 y: [1.0, 0.0, 0.0, 0.0],
                 flags: 0,
+                tokens: None,
             })
             .collect()
     }

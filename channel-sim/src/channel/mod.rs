@@ -61,4 +61,5 @@ pub fn drop_packet(obs: &mut Observation, flag: u32) {
     obs.delivered = false;
     obs.y = [0.0; MAX_NY];
     obs.flags |= flag;
+    obs.tokens = None;
 }

@@ -130,6 +130,7 @@ mod tests {
                 ny: 1,
                 y: [1.0, 0.0, 0.0, 0.0],
                 flags: 0,
+                tokens: None,
             }];
             stage.apply(1, &[x1, 0.0], &mut obs, &mut rng);
             assert_eq!(!obs[0].delivered, dropped, "x1 = {x1}");

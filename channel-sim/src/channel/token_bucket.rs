@@ -83,6 +83,7 @@ mod tests {
                 ny: 2,
                 y: [1.0, 2.0, 0.0, 0.0],
                 flags: 0,
+                tokens: None,
             }];
             stage.apply(k, &[0.0; 3], &mut obs, &mut rng);
             assert_eq!(obs[0].flags & FLAG_TOKEN_BLOCKED != 0, !obs[0].delivered);

@@ -223,6 +223,7 @@ impl ComposedSimulation {
                 ny,
                 y,
                 flags: 0,
+                tokens: None,
             });
         }
         // The channel, stage by stage.

@@ -10,7 +10,7 @@ import time
 
 import iceoryx2 as iox2
 
-WIRE_VERSION = 4
+WIRE_VERSION = 5
 
 MAX_NX = 8
 MAX_NY = 4
@@ -26,6 +26,7 @@ FLAG_TOKEN_BLOCKED = 1 << 1
 FLAG_CENSORED = 1 << 2
 FLAG_RANDOM_LOSS = 1 << 3
 FLAG_OCCLUDED = 1 << 4
+FLAG_TOKENS = 1 << 5
 FLAG_IPC_LOST = 1 << 31
 
 STATUS_OK = 0
@@ -56,7 +57,7 @@ class Slot(ctypes.Structure):
         ("ny", ctypes.c_uint8),
         ("delivered", ctypes.c_uint8),
         ("flags", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
+        ("tokens", ctypes.c_uint32),
         ("send_ns", ctypes.c_uint64),
         ("period_ns", ctypes.c_uint64),
         ("stream_start_ns", ctypes.c_uint64),

@@ -406,6 +406,11 @@ impl Assembler {
                     ny: self.ny[m],
                     y,
                     flags: slot.flags & !FLAG_IPC_LOST,
+                    // The bucket level a delivered packet reports (docs/wire.md, since 5).
+                    tokens: (slot.flags & estpipe_wire::FLAG_TOKENS != 0
+                        && slot.delivered == 1
+                        && !net_lost)
+                        .then_some(slot.tokens),
                 };
                 (o, Pushed::Data)
             }

@@ -15,6 +15,7 @@ fn slot(k: u32, node: u8, nodes: u8, sid: u64) -> Slot {
         ny: 1,
         y: if node != 1 { y } else { [0.0; MAX_NY] },
         flags: 0,
+        tokens: None,
     };
     estpipe_wire::observation::slot_of(&o, nodes, sid, 10, 0, 100)
 }
