@@ -15,6 +15,7 @@
 //!   or instant the runner has no observation of at all:
 //!   [`Packet::Lost`], which carries none.
 
+use estimator_core::filter::silence::TriggeredPackets;
 use estimator_core::Packet;
 use estpipe_wire::Observation;
 use estpipe_wire::FLAGS_LOST;
@@ -63,6 +64,21 @@ impl<const NY: usize, const L: usize> FromSlots for [Packet<f64, NY>; L] {
             }
         }
         y
+    }
+}
+
+/// Every node's packet and the bucket level the instant's first delivered packet reported
+/// (docs/wire.md, "The bucket level on a delivered packet").
+impl<const NY: usize, const L: usize> FromSlots for TriggeredPackets<f64, NY, L> {
+    fn from_slots(obs: &[Observation]) -> Self {
+        let level = obs
+            .iter()
+            .filter(|o| usize::from(o.node) < L && o.measurement().is_some())
+            .find_map(|o| o.tokens);
+        Self {
+            packets: FromSlots::from_slots(obs),
+            level,
+        }
     }
 }
 

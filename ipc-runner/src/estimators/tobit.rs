@@ -12,6 +12,18 @@
 //! measurement ([`Silence::Predict`], the product's option; docs/tobit-fusion.md, "Predict
 //! on silence"), where the paper updates with the held measurement.
 //!
+//! Beside those, two fusion filters read the trigger's silence (docs/tobit-fusion.md,
+//! "Silence that speaks"): their local filters update a silence that the receiver's mirror of
+//! the shared bucket calls held (the node had a token, so its trigger did not fire) with the
+//! silence set intersected with the censoring region, and predict on any other silence —
+//! `tobit-1-silence` … `tobit-l-silence`, `fused-silence` with the moment-matched truncated
+//! Gaussian ([`Silence::TruncatedGaussian`]), `tobit-1-sl` … `tobit-l-sl`, `fused-sl` with the
+//! Sijs–Lazar pseudo-measurement ([`Silence::PseudoMeasurement`]). Their diagnostics add the
+//! cumulative counts `silence_held`, `silence_blocked` (over all nodes) and the mirror's
+//! `mirror_unknown`, `mirror_mismatches`, `mirror_resyncs`, `mirror_refused`. They are not
+//! built when the spec declares a loss rate: a channel that may lose a transmission after
+//! the trigger makes a silence ambiguous in a way the mirror cannot see.
+//!
 //! Applies to a spec with a linear model, Tobit censoring thresholds τ_m
 //! ([`TobitCensoring`]) and event triggers sharing a token bucket ([`TriggeredTokenBucket`]:
 //! σ_m, χ_m, λ_m, η_{m,0} enter Ξ). A node whose packet was not
@@ -27,9 +39,11 @@
 
 use std::sync::{Arc, Mutex};
 
+use estimator_core::catch_up::LostMeasurement;
 use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
-use estimator_core::filter::{Gated, InnovationGate, TobitFusion};
-use estimator_core::{Error, Estimator as _, OnModel};
+use estimator_core::filter::{Gated, GatedStep, InnovationGate, MirroredFusion, TobitFusion};
+use estimator_core::protocol::shared_token_bucket::SharedTokenBucket;
+use estimator_core::{Error, Estimator as CoreEstimator, OnModel};
 use estpipe_spec::channel::{TobitCensoring, TriggeredTokenBucket};
 use estpipe_spec::{EstimatorSpec, LinearModel};
 use estpipe_wire::Observation;
@@ -61,6 +75,32 @@ pub const LOCAL_PREDICT_NAMES: [&str; 8] = [
 ];
 /// The fused view of the filter with [`Silence::Predict`].
 pub const FUSED_PREDICT_NAME: &str = "fused-predict";
+/// The local views of the filter with [`Silence::TruncatedGaussian`], node 1 first.
+pub const LOCAL_SILENCE_NAMES: [&str; 8] = [
+    "tobit-1-silence",
+    "tobit-2-silence",
+    "tobit-3-silence",
+    "tobit-4-silence",
+    "tobit-5-silence",
+    "tobit-6-silence",
+    "tobit-7-silence",
+    "tobit-8-silence",
+];
+/// The fused view of the filter with [`Silence::TruncatedGaussian`].
+pub const FUSED_SILENCE_NAME: &str = "fused-silence";
+/// The local views of the filter with [`Silence::PseudoMeasurement`], node 1 first.
+pub const LOCAL_SL_NAMES: [&str; 8] = [
+    "tobit-1-sl",
+    "tobit-2-sl",
+    "tobit-3-sl",
+    "tobit-4-sl",
+    "tobit-5-sl",
+    "tobit-6-sl",
+    "tobit-7-sl",
+    "tobit-8-sl",
+];
+/// The fused view of the filter with [`Silence::PseudoMeasurement`].
+pub const FUSED_SL_NAME: &str = "fused-sl";
 /// The views' names with their gated names, in the order of the name constants above.
 const LOCAL: [Name; 8] = [
     name!("tobit-1"),
@@ -84,6 +124,28 @@ const LOCAL_PREDICT: [Name; 8] = [
     name!("tobit-8-predict"),
 ];
 const FUSED_PREDICT: Name = name!("fused-predict");
+const LOCAL_SILENCE: [Name; 8] = [
+    name!("tobit-1-silence"),
+    name!("tobit-2-silence"),
+    name!("tobit-3-silence"),
+    name!("tobit-4-silence"),
+    name!("tobit-5-silence"),
+    name!("tobit-6-silence"),
+    name!("tobit-7-silence"),
+    name!("tobit-8-silence"),
+];
+const FUSED_SILENCE: Name = name!("fused-silence");
+const LOCAL_SL: [Name; 8] = [
+    name!("tobit-1-sl"),
+    name!("tobit-2-sl"),
+    name!("tobit-3-sl"),
+    name!("tobit-4-sl"),
+    name!("tobit-5-sl"),
+    name!("tobit-6-sl"),
+    name!("tobit-7-sl"),
+    name!("tobit-8-sl"),
+];
+const FUSED_SL: Name = name!("fused-sl");
 /// χ²_n(0.95) for n = 1, 2, 3 degrees of freedom.
 pub const CHI2_95: [f64; 3] = [
     3.841_458_820_694_124,
@@ -115,10 +177,10 @@ pub fn build(
     macro_rules! by_l {
         ($n:literal) => {
             match l {
-                1 => views::<$n, $n, 1>(&parts, options.gate),
-                2 => views::<$n, $n, 2>(&parts, options.gate),
-                3 => views::<$n, $n, 3>(&parts, options.gate),
-                4 => views::<$n, $n, 4>(&parts, options.gate),
+                1 => views::<$n, $n, 1>(&parts, options),
+                2 => views::<$n, $n, 2>(&parts, options),
+                3 => views::<$n, $n, 3>(&parts, options),
+                4 => views::<$n, $n, 4>(&parts, options),
                 _ => anyhow::bail!("tobit: {l} nodes not supported (1..=4 are compiled in)"),
             }
         };
@@ -200,6 +262,55 @@ pub fn fusion_for<const NX: usize, const NY: usize, const L: usize>(
 /// The fusion filter on every node's model.
 type OnNodes<const NX: usize, const NY: usize, const L: usize> =
     OnModel<[Snapshot<NX, NY>; L], TobitFusion<f64, NX, NY, L>, NY>;
+/// The fusion filter behind the bucket mirror on every node's model.
+type OnMirrored<const NX: usize, const NY: usize, const L: usize> =
+    OnModel<[Snapshot<NX, NY>; L], MirroredFusion<f64, NX, NY, L>, NY>;
+
+/// What the views read of a fusion filter, with or without the mirror.
+trait FusionFilter<const NX: usize, const NY: usize, const L: usize>:
+    GatedStep<f64, NX> + Clone + Send + 'static
+where
+    Self::Measurement: FromSlots + LostMeasurement,
+{
+    /// The fusion filter.
+    fn fusion(&self) -> &TobitFusion<f64, NX, NY, L>;
+    /// The node models, to bring a controlled model's input term to an instant.
+    fn models_mut(&mut self) -> &mut [Snapshot<NX, NY>; L];
+    /// The silence-reading filter's counts (none for the others).
+    fn silence(&self, _sink: &mut dyn FnMut(&'static str, f64)) {}
+}
+
+impl<const NX: usize, const NY: usize, const L: usize> FusionFilter<NX, NY, L>
+    for OnNodes<NX, NY, L>
+{
+    fn fusion(&self) -> &TobitFusion<f64, NX, NY, L> {
+        &self.filter
+    }
+    fn models_mut(&mut self) -> &mut [Snapshot<NX, NY>; L] {
+        &mut self.model
+    }
+}
+
+impl<const NX: usize, const NY: usize, const L: usize> FusionFilter<NX, NY, L>
+    for OnMirrored<NX, NY, L>
+{
+    fn fusion(&self) -> &TobitFusion<f64, NX, NY, L> {
+        self.filter.fusion()
+    }
+    fn models_mut(&mut self) -> &mut [Snapshot<NX, NY>; L] {
+        &mut self.model
+    }
+    fn silence(&self, sink: &mut dyn FnMut(&'static str, f64)) {
+        let c = self.filter.counts();
+        sink("silence_held", f64::from(c.held));
+        sink("silence_blocked", f64::from(c.blocked));
+        let m = self.filter.mirror().counts();
+        sink("mirror_unknown", f64::from(m.unknown));
+        sink("mirror_mismatches", f64::from(m.mismatches));
+        sink("mirror_resyncs", f64::from(m.resyncs));
+        sink("mirror_refused", f64::from(m.refused));
+    }
+}
 
 /// A fresh fusion filter on the spec's model, converted for instant 1 (its input term brought
 /// to every instant by [`Fed`] when the model has one).
@@ -212,85 +323,130 @@ fn fed_fusion<const NX: usize, const NY: usize, const L: usize>(
     Ok(on_model(on, &parts.spec, set_inputs))
 }
 
+/// A fresh silence-reading fusion filter behind the mirror of the spec's bucket.
+fn fed_mirrored<const NX: usize, const NY: usize, const L: usize>(
+    parts: &Parts,
+    silence: Silence,
+) -> anyhow::Result<Fed<OnMirrored<NX, NY, L>>> {
+    let model = Snapshot::nodes(linear(&parts.spec)?, L, 1);
+    let (initial, rate, capacity) = parts.trigger.bucket();
+    let costs: [u32; L] = core::array::from_fn(|m| parts.trigger.costs()[m]);
+    let bucket = SharedTokenBucket::<L>::new(initial, rate, capacity, costs)
+        .map_err(|e| anyhow::anyhow!("tobit: bucket: {e}"))?;
+    let filter = MirroredFusion::new(fusion_for::<NX, NY, L>(parts, silence)?, bucket);
+    Ok(on_model(OnModel::new(model, filter), &parts.spec, set_inputs))
+}
+
 /// The input term of instant `k` in every node's model.
-fn set_inputs<const NX: usize, const NY: usize, const L: usize>(
-    on: &mut OnNodes<NX, NY, L>,
+fn set_inputs<const NX: usize, const NY: usize, const L: usize, E: FusionFilter<NX, NY, L>>(
+    on: &mut E,
     model: &LinearModel,
     k: usize,
-) {
-    for m in &mut on.model {
+) where
+    E::Measurement: FromSlots + LostMeasurement,
+{
+    for m in on.models_mut() {
         m.set_input(model, k);
     }
 }
 
 /// The views' one filter: stepped by whichever view asks first at an instant, its result
 /// kept for the others.
-struct Shared<const NX: usize, const NY: usize, const L: usize> {
+struct Shared<E> {
     /// The filter, behind the core's gate with `--gate` (its counts are all nodes').
-    fed: Gated<f64, Fed<OnNodes<NX, NY, L>>>,
+    fed: Gated<f64, Fed<E>>,
     gated: bool,
     done_k: u32,
     last: Result<(), Error>,
 }
 
-impl<const NX: usize, const NY: usize, const L: usize> Shared<NX, NY, L> {
-    /// The fusion filter.
-    fn fusion(&self) -> &TobitFusion<f64, NX, NY, L> {
-        &self.fed.estimator.estimator.filter
-    }
-}
-
-struct View<const NX: usize, const NY: usize, const L: usize> {
+struct View<E, const NX: usize, const NY: usize, const L: usize> {
     name: &'static str,
     node: Option<usize>,
-    shared: Arc<Mutex<Shared<NX, NY, L>>>,
+    shared: Arc<Mutex<Shared<E>>>,
 }
 
-/// Two fusion filters, the paper's and the one with [`Silence::Predict`], each with its
-/// local views and its fused view: `tobit-1` … `tobit-l`, `fused`, then `tobit-1-predict` …
-/// `tobit-l-predict`, `fused-predict`.
+/// The views of one fusion filter: `locals[0..L]`, then `fused`.
+fn push_views<const NX: usize, const NY: usize, const L: usize, E>(
+    out: &mut Vec<Box<dyn Estimator>>,
+    fed: Fed<E>,
+    gate: InnovationGate<f64>,
+    gated: bool,
+    locals: &[Name; 8],
+    fused: Name,
+) where
+    E: FusionFilter<NX, NY, L>,
+    E::Measurement: FromSlots + LostMeasurement,
+{
+    // Gated views are named `<name>+gate` (docs/gate.md).
+    let named = |n: Name| if gated { n.gated } else { n.plain };
+    let shared = Arc::new(Mutex::new(Shared {
+        fed: Gated::new(fed, gate),
+        gated,
+        done_k: 0,
+        last: Ok(()),
+    }));
+    for m in 0..L {
+        out.push(Box::new(View::<E, NX, NY, L> {
+            name: named(locals[m]),
+            node: Some(m),
+            shared: Arc::clone(&shared),
+        }));
+    }
+    out.push(Box::new(View::<E, NX, NY, L> {
+        name: named(fused),
+        node: None,
+        shared,
+    }));
+}
+
+/// The fusion filters, each with its local views and its fused view: the paper's
+/// (`tobit-1` … `tobit-l`, `fused`), [`Silence::Predict`] (`…-predict`), and — unless the spec
+/// declares a loss rate — the two silence-reading ones (`…-silence`, `…-sl`).
 fn views<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
-    gate: Option<f64>,
+    options: &EvalOptions,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     // Without `--gate` the views take the plain step (the gate held is never asked).
-    let (gate, gated) = match gate {
+    let (gate, gated) = match options.gate {
         Some(p) => (
             InnovationGate::chi2(p).map_err(|e| anyhow::anyhow!("tobit: {e}"))?,
             true,
         ),
         None => (InnovationGate::off(), false),
     };
-    // Gated views are named `<name>+gate` (docs/gate.md).
-    let named = |n: Name| if gated { n.gated } else { n.plain };
-    let mut out: Vec<Box<dyn Estimator>> = Vec::with_capacity(2 * (L + 1));
+    let mut out: Vec<Box<dyn Estimator>> = Vec::with_capacity(4 * (L + 1));
     for (silence, locals, fused) in [
         (Silence::HeldMeasurement, &LOCAL, FUSED),
         (Silence::Predict, &LOCAL_PREDICT, FUSED_PREDICT),
     ] {
-        let shared = Arc::new(Mutex::new(Shared {
-            fed: Gated::new(fed_fusion::<NX, NY, L>(parts, silence)?, gate),
-            gated,
-            done_k: 0,
-            last: Ok(()),
-        }));
-        for m in 0..L {
-            out.push(Box::new(View {
-                name: named(locals[m]),
-                node: Some(m),
-                shared: Arc::clone(&shared),
-            }));
+        let fed = fed_fusion::<NX, NY, L>(parts, silence)?;
+        push_views::<NX, NY, L, _>(&mut out, fed, gate, gated, locals, fused);
+    }
+    if options.loss_rate == 0.0 {
+        for (silence, locals, fused) in [
+            (Silence::TruncatedGaussian, &LOCAL_SILENCE, FUSED_SILENCE),
+            (Silence::PseudoMeasurement, &LOCAL_SL, FUSED_SL),
+        ] {
+            let fed = fed_mirrored::<NX, NY, L>(parts, silence)?;
+            push_views::<NX, NY, L, _>(&mut out, fed, gate, gated, locals, fused);
         }
-        out.push(Box::new(View {
-            name: named(fused),
-            node: None,
-            shared,
-        }));
     }
     Ok(out)
 }
 
-impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY, L> {
+impl<E> Shared<E> {
+    /// The core estimator.
+    fn filter(&self) -> &E {
+        &self.fed.estimator.estimator
+    }
+}
+
+impl<const NX: usize, const NY: usize, const L: usize, E> Estimator for View<E, NX, NY, L>
+where
+    E: FusionFilter<NX, NY, L>,
+    E::Measurement: FromSlots + LostMeasurement,
+{
     fn name(&self) -> &'static str {
         self.name
     }
@@ -300,9 +456,9 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         if s.done_k != k {
             let y = FromSlots::from_slots(obs);
             s.last = if s.gated {
-                s.fed.step(k as usize, &y)
+                CoreEstimator::step(&mut s.fed, k as usize, &y)
             } else {
-                s.fed.estimator.step(k as usize, &y)
+                CoreEstimator::step(&mut s.fed.estimator, k as usize, &y)
             };
             s.done_k = k;
         }
@@ -312,8 +468,8 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn estimate(&self, out: &mut [f64]) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let x = match self.node {
-            Some(m) => s.fusion().local_estimate(m).map(|e| *e.state()),
-            None => Some(*s.fed.estimate().state()),
+            Some(m) => s.filter().fusion().local_estimate(m).map(|e| *e.state()),
+            None => Some(*CoreEstimator::estimate(s.filter()).state()),
         };
         match x {
             Some(x) => out[..NX].copy_from_slice(x.as_slice()),
@@ -325,8 +481,8 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn covariance(&self, out: &mut [f64]) -> CovarianceKind {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let p = match self.node {
-            Some(m) => s.fusion().local_estimate(m).map(|e| *e.covariance()),
-            None => Some(*s.fed.estimate().covariance()),
+            Some(m) => s.filter().fusion().local_estimate(m).map(|e| *e.covariance()),
+            None => Some(*CoreEstimator::estimate(s.filter()).covariance()),
         };
         match p {
             Some(p) => {
@@ -343,11 +499,11 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
     fn diagnostics_vs_truth(&self, truth: &[f64], sink: &mut dyn FnMut(&'static str, f64)) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let (x, p) = match self.node {
-            Some(m) => match s.fusion().local_estimate(m) {
+            Some(m) => match s.filter().fusion().local_estimate(m) {
                 Some(e) => e.into_parts(),
                 None => return,
             },
-            None => s.fed.estimate().into_parts(),
+            None => CoreEstimator::estimate(s.filter()).into_parts(),
         };
         let e = SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
         if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "bound") {
@@ -368,12 +524,12 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         }
         match self.node {
             Some(m) => {
-                if let Some(p) = s.fusion().local_estimate(m).map(|e| e.covariance()) {
+                if let Some(p) = s.filter().fusion().local_estimate(m).map(|e| e.covariance()) {
                     sink("trace_p", p.trace());
                 }
             }
             None => {
-                let p = s.fed.estimate().covariance();
+                let p = CoreEstimator::estimate(s.filter()).covariance();
                 sink("trace_p", p.trace());
                 if NX == 2 {
                     sink("p11", p[(0, 0)]);
@@ -382,6 +538,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
                 }
             }
         }
+        s.filter().silence(sink);
     }
 }
 

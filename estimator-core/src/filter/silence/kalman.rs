@@ -15,6 +15,7 @@ use super::truncated::truncate_box;
 use super::{Arrival, SilenceCounts, SilenceForm, TriggeredPackets};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::kalman::KalmanFilter;
 use crate::model::LinearSystem;
 use crate::protocol::bucket_mirror::BucketMirror;
@@ -97,14 +98,39 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> SilenceKf<T, NX,
         k: usize,
         arrivals: &[Arrival<'_, T, NY>; L],
     ) -> Result<()> {
+        self.step_arrivals_gated(models, k, arrivals, &InnovationGate::off())
+            .map(|_| ())
+    }
+
+    /// [`SilenceKf::step_arrivals`] behind an innovation gate (docs/gate.md): a delivered
+    /// measurement the gate rejects is no information and its node's reference unknown (the
+    /// node did send it), as a lost packet. Returns what the gate tested and rejected.
+    pub fn step_arrivals_gated<M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        models: &[M; L],
+        k: usize,
+        arrivals: &[Arrival<'_, T, NY>; L],
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
         let mut next = *self;
+        let mut counts = GateCounts::NONE;
         next.kf.predict(&models[0], k.saturating_sub(1))?;
         for m in 0..L {
             let node = &mut next.nodes[m];
             match arrivals[m] {
                 Arrival::Received(y) => {
-                    next.kf.update(&models[m], k, y)?;
-                    node.delivered(y)?;
+                    let (c, r) = (models[m].c(k), models[m].measurement_cov(k));
+                    let used = next.kf.update_gated_with(&c, &r, y, gate)?;
+                    if gate.is_off() {
+                        node.delivered(y)?;
+                    } else {
+                        counts.add(GateCounts::one(used));
+                        if used {
+                            node.delivered(y)?;
+                        } else {
+                            node.lost();
+                        }
+                    }
                 }
                 Arrival::Held => {
                     match node.silence_set() {
@@ -125,7 +151,7 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> SilenceKf<T, NX,
             }
         }
         *self = next;
-        Ok(())
+        Ok(counts)
     }
 
     /// One instant: the mirror classifies the silences, then [`SilenceKf::step_arrivals`].
@@ -141,6 +167,25 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> SilenceKf<T, NX,
         next.step_arrivals(models, k, &y.arrivals(&held))?;
         *self = next;
         Ok(())
+    }
+}
+
+/// Behind a gate: the mirror sees every delivered packet (a rejected one was still a send);
+/// the filter reads a rejected one as lost.
+impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<[M; L], SilenceKf<T, NX, NY, L>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &TriggeredPackets<T, NY, L>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let mut next = self.filter;
+        let held = next.mirror.step(&y.sent(), y.level);
+        let counts = next.step_arrivals_gated(&self.model, k, &y.arrivals(&held), gate)?;
+        self.filter = next;
+        Ok(counts)
     }
 }
 

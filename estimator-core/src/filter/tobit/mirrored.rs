@@ -4,9 +4,11 @@
 //! ([`crate::protocol::bucket_mirror`]) — held trigger, or no token / unknown — and then every
 //! local filter steps on its node's [`Arrival`](crate::filter::silence::Arrival).
 
+use super::config::diagonal_variances;
 use super::fusion::TobitFusion;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
+use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::silence::{Arrival, SilenceCounts, TriggeredPackets};
 use crate::model::LinearSystem;
 use crate::protocol::bucket_mirror::BucketMirror;
@@ -58,9 +60,27 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> MirroredFusion<T
         k: usize,
         y: &TriggeredPackets<T, NY, L>,
     ) -> Result<()> {
+        self.step_admitted(models, k, y, &[true; L])
+    }
+
+    /// [`MirroredFusion::step`] where node m's delivered packet is used only if
+    /// `admitted[m]` (the gate's verdict): a rejected one still counts as a send for the
+    /// mirror, and its local filter reads it as lost (no information, reference unknown).
+    pub fn step_admitted<M: LinearSystem<T, NX, NY>>(
+        &mut self,
+        models: &[M; L],
+        k: usize,
+        y: &TriggeredPackets<T, NY, L>,
+        admitted: &[bool; L],
+    ) -> Result<()> {
         let mut mirror = self.mirror;
         let held = mirror.step(&y.sent(), y.level);
-        let arrivals = y.arrivals(&held);
+        let mut arrivals = y.arrivals(&held);
+        for m in 0..L {
+            if !admitted[m] && matches!(arrivals[m], Arrival::Received(_)) {
+                arrivals[m] = Arrival::Lost;
+            }
+        }
         let mut fusion = self.fusion;
         fusion.step_arrivals_models(models, k, &arrivals)?;
         let mut counts = self.counts;
@@ -75,6 +95,35 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> MirroredFusion<T
         self.mirror = mirror;
         self.counts = counts;
         Ok(())
+    }
+}
+
+/// Behind a gate: each delivered measurement is tested by its local filter
+/// ([`super::TobitFilter::admits`]); see [`MirroredFusion::step_admitted`].
+impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<T, NX, NY>>
+    GatedStep<T, NX> for OnModel<[M; L], MirroredFusion<T, NX, NY, L>, NY>
+{
+    fn step_gated(
+        &mut self,
+        k: usize,
+        y: &TriggeredPackets<T, NY, L>,
+        gate: &InnovationGate<T>,
+    ) -> Result<GateCounts> {
+        let (models, prev) = (&self.model, k.saturating_sub(1));
+        let (a, bqb) = (models[0].a(prev), models[0].process_cov(prev));
+        let mut counts = GateCounts::NONE;
+        let mut admitted = [true; L];
+        for m in 0..L {
+            if let (Some(z), Some(local)) = (y.packets[m].delivered(), self.filter.fusion.local(m)) {
+                let r = diagonal_variances(&models[m].measurement_cov(k))?;
+                let q_m = bqb / self.filter.fusion.weights()[m];
+                let used = local.admits(&a, &q_m, &models[m].c(k), &r, z, gate)?;
+                counts.add(GateCounts::one(used));
+                admitted[m] = used;
+            }
+        }
+        self.filter.step_admitted(models, k, y, &admitted)?;
+        Ok(counts)
     }
 }
 
