@@ -42,16 +42,9 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
 fn paper_example_what_holds() {
     let runs = runs();
     let scenario = preset("tobit-fusion").unwrap();
-    #[allow(clippy::needless_update)] // estimator families add fields
-    let options = EvalOptions {
-        runs,
-        horizon: T,
-        seed: SEED,
-        ..EvalOptions::default()
-    };
     let factories: &[ipc_runner::estimators::Factory] = &[tobit::build];
     // The paper's views, then the same with `Silence::Predict` (the order `tobit::build` has;
-    // `run_one` checks it).
+    // `run_one` checks it). The silence-reading views are tests/tobit_silence.rs'.
     let (l, p) = (&tobit::LOCAL_NAMES, &tobit::LOCAL_PREDICT_NAMES);
     let names = [
         l[0],
@@ -63,6 +56,13 @@ fn paper_example_what_holds() {
         p[2],
         tobit::FUSED_PREDICT_NAME,
     ];
+    let options = EvalOptions {
+        runs,
+        horizon: T,
+        seed: SEED,
+        estimators: names.iter().map(|n| n.to_string()).collect(),
+        ..EvalOptions::default()
+    };
     let t = T as usize;
     let mut run_avg = vec![Vec::new(); 8];
     let mut nees = vec![Vec::new(); t + 1];
