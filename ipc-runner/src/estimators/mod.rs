@@ -22,6 +22,7 @@ pub mod nn;
 pub mod occlusion;
 mod particles_rng;
 pub mod pf;
+pub mod silence_kf;
 mod slots;
 mod snapshot;
 pub mod tobit;
@@ -142,6 +143,7 @@ pub const FACTORIES: &[Factory] = &[
     pf::build,
     nn::build,
     tobit::build,
+    silence_kf::build,
 ];
 
 /// All estimators that apply to `spec`, from `factories` in order; only those named in

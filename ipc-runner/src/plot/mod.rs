@@ -9,6 +9,7 @@
 
 pub mod bound;
 pub mod latency;
+pub mod rate;
 pub mod tokens;
 pub mod trace;
 
