@@ -103,6 +103,12 @@ const BINS: &[(&str, HostRun, usize, usize)] = &[
         8 * 1024,
     ),
     (
+        "tobit-silence",
+        || run::run_tobit_silence(&tobit_stream(), usize::MAX),
+        56 * 1024,
+        8 * 1024,
+    ),
+    (
         "kf3x2",
         || peers::run_kf3x2(&stream(), usize::MAX),
         32 * 1024,

@@ -4,6 +4,8 @@
 //! ([`crate::protocol::bucket_mirror`]) — held trigger, or no token / unknown — and then every
 //! local filter steps on its node's [`Arrival`](crate::filter::silence::Arrival).
 
+use nalgebra::{SMatrix, SVector};
+
 use super::config::diagonal_variances;
 use super::fusion::TobitFusion;
 use crate::estimate::Estimate;
@@ -63,6 +65,28 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> MirroredFusion<T
         self.step_admitted(models, k, y, &[true; L])
     }
 
+    /// [`MirroredFusion::step`] with explicit matrices (as [`TobitFusion::step`] takes them:
+    /// `a` = A, `bqb` = B Q Bᵀ, per node `C_m` and the variances `r_m`), for a caller that
+    /// stores a time-invariant model once (the firmware). All-or-nothing.
+    pub fn step_matrices(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        c: &[SMatrix<T, NY, NX>; L],
+        r: &[SVector<T, NY>; L],
+        y: &TriggeredPackets<T, NY, L>,
+    ) -> Result<()> {
+        let mut mirror = self.mirror;
+        let held = mirror.step(&y.sent(), y.level);
+        let arrivals = y.arrivals(&held);
+        let mut fusion = self.fusion;
+        fusion.step_arrivals(a, bqb, None, c, r, &arrivals)?;
+        self.counts = tally(self.counts, &arrivals);
+        self.fusion = fusion;
+        self.mirror = mirror;
+        Ok(())
+    }
+
     /// [`MirroredFusion::step`] where node m's delivered packet is used only if
     /// `admitted[m]` (the gate's verdict): a rejected one still counts as a send for the
     /// mirror, and its local filter reads it as lost (no information, reference unknown).
@@ -83,19 +107,26 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> MirroredFusion<T
         }
         let mut fusion = self.fusion;
         fusion.step_arrivals_models(models, k, &arrivals)?;
-        let mut counts = self.counts;
-        for a in &arrivals {
-            match a {
-                Arrival::Held => counts.held += 1,
-                Arrival::Blocked => counts.blocked += 1,
-                _ => {}
-            }
-        }
+        self.counts = tally(self.counts, &arrivals);
         self.fusion = fusion;
         self.mirror = mirror;
-        self.counts = counts;
         Ok(())
     }
+}
+
+/// `counts` plus the instant's held and blocked silences.
+fn tally<T: Real, const NY: usize>(
+    mut counts: SilenceCounts,
+    arrivals: &[Arrival<'_, T, NY>],
+) -> SilenceCounts {
+    for a in arrivals {
+        match a {
+            Arrival::Held => counts.held += 1,
+            Arrival::Blocked => counts.blocked += 1,
+            _ => {}
+        }
+    }
+    counts
 }
 
 /// Behind a gate: each delivered measurement is tested by its local filter

@@ -6,7 +6,9 @@
 mod nn;
 mod occlusion;
 mod tobit;
+mod tobit_silence;
 
 pub use nn::{run_nn, Nn};
 pub use occlusion::{run_adf, run_cce, run_ikf, run_kf, run_kf_io, Adf, Cce, Ikf, Kf, KfIo};
 pub use tobit::{run_tobit, Fusion, Tobit};
+pub use tobit_silence::{paper_bucket, run_tobit_silence, TobitSilence};
