@@ -5,7 +5,9 @@
 
 use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation};
 use estimator_core::filter::nn::{GainSolver, NnBoundConfig};
-use estimator_core::filter::tobit::{BoundScalars, TobitFilterConfig};
+use estimator_core::filter::silence::TriggeredPackets;
+use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
+use estimator_core::filter::MirroredFusion;
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, TobitFusion};
 use estimator_core::gsum::GaussSum;
 use estimator_core::papers::Seed001Example;
@@ -198,6 +200,66 @@ pub fn tobit_kernel<T: Real>(tag: &str) -> (String, StepFn) {
     )
 }
 
+/// The product's silence update beside the paper's step (docs/tobit-fusion.md, "Silence that
+/// speaks"): the same fusion step from the same state as [`tobit_kernel`], with the bucket
+/// mirror and truncated-Gaussian (`tg`) or Sijs–Lazar (`sl`) local filters; node 2 silent with
+/// a token (its trigger held), so its local filter takes the silence update.
+pub fn tobit_silence_kernel<T: Real>(form: Silence, tag: &str) -> (String, StepFn) {
+    let w = 0.052 * core::f64::consts::PI;
+    let a = matrix![w.cos(), w.sin(); -w.sin(), w.cos()];
+    let b = vector![0.16, 0.18];
+    let bqb = b * b.transpose() * 0.05;
+    let cm = [SMatrix::<f64, 2, 2>::identity(); 3];
+    let r = [vector![0.5, 0.5]; 3];
+    let tau = vector![0.0, 0.0];
+    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)].map(|(s, l)| {
+        EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5).expect("valid")
+    });
+    let cfgs = trig.map(|t| {
+        TobitFilterConfig::new(tau, BoundScalars::paper_example(), t, 1.5, 2.0)
+            .expect("valid")
+            .with_silence(form)
+            .cast::<T>()
+            .expect("valid")
+    });
+    let fusion =
+        TobitFusion::<T, 2, 2, 3>::new(cfgs, vector![T::lit(5.0), T::zero()], SMatrix::identity())
+            .expect("valid");
+    let bucket = SharedTokenBucket::<3>::new(10, 5, 30, [3, 3, 3]).expect("valid");
+    let filter = MirroredFusion::new(fusion, bucket);
+    let (a, bqb) = (a.map(T::lit), bqb.map(T::lit));
+    let cm = cm.map(|m| m.map(T::lit));
+    let r = r.map(|v| v.map(T::lit));
+    let y = [vector![4.8, 0.2], vector![5.1, 0.0], vector![4.9, 0.3]].map(|v| v.map(T::lit));
+    let packets = TriggeredPackets {
+        packets: [
+            Packet::Delivered(y[0]),
+            Packet::Dropped,
+            Packet::Delivered(y[2]),
+        ],
+        level: None,
+    };
+    let name = match form {
+        Silence::PseudoMeasurement => "sl",
+        _ => "tg",
+    };
+    (
+        format!("tobit_silence_step/{name}_l3_2x2_{tag}"),
+        Box::new(move || {
+            let mut f = black_box(filter);
+            f.step_matrices(
+                black_box(&a),
+                black_box(&bqb),
+                black_box(&cm),
+                black_box(&r),
+                black_box(&packets),
+            )?;
+            black_box(f);
+            Ok(())
+        }),
+    )
+}
+
 /// Seed 004's sensor side for one instant: three event triggers sharing one token bucket,
 /// from a fixed state.
 pub fn tobit_protocol_kernel<T: Real>(tag: &str) -> (String, StepFn) {
@@ -236,5 +298,9 @@ pub fn all_kernels() -> Vec<(String, StepFn)> {
     k.push(tobit_kernel::<f32>("f32"));
     k.push(tobit_protocol_kernel::<f64>("f64"));
     k.push(tobit_protocol_kernel::<f32>("f32"));
+    for form in [Silence::TruncatedGaussian, Silence::PseudoMeasurement] {
+        k.push(tobit_silence_kernel::<f64>(form, "f64"));
+        k.push(tobit_silence_kernel::<f32>(form, "f32"));
+    }
     k
 }

@@ -36,7 +36,10 @@ fn main() -> anyhow::Result<()> {
         .map_or_else(|| PathBuf::from("docs/silence-rate.png"), PathBuf::from);
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let base = std::fs::read_to_string(root.join("channel-sim/scenarios/linear-triggered.toml"))?;
-    anyhow::ensure!(base.contains("sigma = 0.5\n"), "the shipped file's sigma moved");
+    anyhow::ensure!(
+        base.contains("sigma = 0.5\n"),
+        "the shipped file's sigma moved"
+    );
     let dir = std::env::temp_dir().join(format!("silence-rate-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let names = ["kf", "ikf", "kf-silence", "kf-sl"];
@@ -47,7 +50,10 @@ fn main() -> anyhow::Result<()> {
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
     for sigma in SIGMAS {
         let file = dir.join(format!("sigma-{sigma}.toml"));
-        std::fs::write(&file, base.replace("sigma = 0.5\n", &format!("sigma = {sigma}\n")))?;
+        std::fs::write(
+            &file,
+            base.replace("sigma = 0.5\n", &format!("sigma = {sigma}\n")),
+        )?;
         let scenario = resolve("", Some(&file))?;
         let options = EvalOptions {
             runs,

@@ -105,9 +105,10 @@ fn evaluate(scenario: &dyn Scenario, runs: u64, transport_loss: f64) -> Views {
     for run in 0..runs {
         let out = run_one(scenario, &options, &[tobit::build], run, &names).unwrap();
         for (j, e) in out.estimators.iter().enumerate() {
-            let sq = e.sq_err.as_ref().unwrap_or_else(|| {
-                panic!("{} diverged in run {run}: {:?}", names[j], e.error)
-            });
+            let sq = e
+                .sq_err
+                .as_ref()
+                .unwrap_or_else(|| panic!("{} diverged in run {run}: {:?}", names[j], e.error));
             run_avg[j].push(sq[2..].iter().sum::<f64>() / f64::from(T));
             let diag = |d: &str| &e.diagnostics.iter().find(|(n, _)| *n == d).unwrap().1;
             for k in 1..=T as usize {
@@ -199,7 +200,12 @@ fn the_mirror_resynchronises_after_transport_losses() {
         assert_eq!(v.diag(view, "mirror_refused"), 0.0, "{view}");
     }
     for view in 8..16 {
-        assert!(v.inside[view] >= 0.95, "{}: {}", v.names[view], v.inside[view]);
+        assert!(
+            v.inside[view] >= 0.95,
+            "{}: {}",
+            v.names[view],
+            v.inside[view]
+        );
     }
 }
 
@@ -243,7 +249,10 @@ fn the_mirror_tells_a_held_trigger_from_a_blocked_send() {
             assert_eq!(mirror.counts().unknown, 0);
             assert_eq!(mirror.counts().mismatches, 0);
         }
-        assert!(held > 100 && blocked > 100, "held {held}, blocked {blocked}");
+        assert!(
+            held > 100 && blocked > 100,
+            "held {held}, blocked {blocked}"
+        );
     }
 }
 
@@ -252,7 +261,9 @@ fn a_starved_bucket_fools_the_naive_reading_but_not_the_mirror() {
     let runs = runs().min(300);
     let scenario = starved();
     let v = evaluate(&*scenario, runs, 0.0);
-    v.print(&format!("tobit-fusion-starved, {runs} runs, T = {T}, seed {SEED}"));
+    v.print(&format!(
+        "tobit-fusion-starved, {runs} runs, T = {T}, seed {SEED}"
+    ));
     // The naive reading, written here: every silence a held trigger (no mirror).
     let spec = scenario.estimator_spec();
     let parts = tobit::Parts::of(&spec).unwrap();
@@ -260,7 +271,10 @@ fn a_starved_bucket_fools_the_naive_reading_but_not_the_mirror() {
     // The example's matrices (C = I, R = 0.5 I for every node; A and B Q Bᵀ from the spec).
     let a = SMatrix::<f64, 2, 2>::from_column_slice(model.a().as_slice());
     let bqb = SMatrix::<f64, 2, 2>::from_column_slice(model.process_cov().as_slice());
-    assert_eq!(model.c(0).as_slice(), SMatrix::<f64, 2, 2>::identity().as_slice());
+    assert_eq!(
+        model.c(0).as_slice(),
+        SMatrix::<f64, 2, 2>::identity().as_slice()
+    );
     let (mut blocked, mut triggered) = (0u64, 0u64);
     for form in [Silence::TruncatedGaussian, Silence::PseudoMeasurement] {
         let (mut nees, mut inside, mut run_avg) = (0.0, 0.0, Vec::new());
@@ -309,8 +323,16 @@ fn a_starved_bucket_fools_the_naive_reading_but_not_the_mirror() {
             v.nees[aware],
             100.0 * v.inside[aware]
         );
-        assert!(v.inside[aware] >= 0.95, "{}: {}", v.names[aware], v.inside[aware]);
-        assert!(inside / samples < v.inside[aware] - 0.05, "naive {form:?} is not worse");
+        assert!(
+            v.inside[aware] >= 0.95,
+            "{}: {}",
+            v.names[aware],
+            v.inside[aware]
+        );
+        assert!(
+            inside / samples < v.inside[aware] - 0.05,
+            "naive {form:?} is not worse"
+        );
         assert!(d - 3.0 * s > 0.0, "naive {form:?} − aware = {d} ± {s}");
     }
     let share = blocked as f64 / triggered as f64;

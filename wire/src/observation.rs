@@ -95,6 +95,7 @@ pub fn observation_of(slot: &Slot) -> Result<Observation, WireError> {
         y,
         flags: slot.flags,
         // The level a delivered packet reports; a dropped one has no grant to report.
-        tokens: (slot.flags & crate::FLAG_TOKENS != 0 && slot.delivered == 1).then_some(slot.tokens),
+        tokens: (slot.flags & crate::FLAG_TOKENS != 0 && slot.delivered == 1)
+            .then_some(slot.tokens),
     })
 }

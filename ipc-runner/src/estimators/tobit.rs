@@ -334,7 +334,11 @@ fn fed_mirrored<const NX: usize, const NY: usize, const L: usize>(
     let bucket = SharedTokenBucket::<L>::new(initial, rate, capacity, costs)
         .map_err(|e| anyhow::anyhow!("tobit: bucket: {e}"))?;
     let filter = MirroredFusion::new(fusion_for::<NX, NY, L>(parts, silence)?, bucket);
-    Ok(on_model(OnModel::new(model, filter), &parts.spec, set_inputs))
+    Ok(on_model(
+        OnModel::new(model, filter),
+        &parts.spec,
+        set_inputs,
+    ))
 }
 
 /// The input term of instant `k` in every node's model.
@@ -481,7 +485,11 @@ where
     fn covariance(&self, out: &mut [f64]) -> CovarianceKind {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let p = match self.node {
-            Some(m) => s.filter().fusion().local_estimate(m).map(|e| *e.covariance()),
+            Some(m) => s
+                .filter()
+                .fusion()
+                .local_estimate(m)
+                .map(|e| *e.covariance()),
             None => Some(*CoreEstimator::estimate(s.filter()).covariance()),
         };
         match p {
@@ -524,7 +532,12 @@ where
         }
         match self.node {
             Some(m) => {
-                if let Some(p) = s.filter().fusion().local_estimate(m).map(|e| e.covariance()) {
+                if let Some(p) = s
+                    .filter()
+                    .fusion()
+                    .local_estimate(m)
+                    .map(|e| e.covariance())
+                {
                     sink("trace_p", p.trace());
                 }
             }

@@ -38,8 +38,8 @@ mod vectors;
 pub use digest::{fnv1a64, Fnv1a64};
 pub use drive::{drive, Digested, FromNodes, Instant};
 pub use drivers::{
-    paper_bucket, run_adf, run_cce, run_ikf, run_kf, run_kf_io, run_nn, run_tobit, run_tobit_silence,
-    Adf, Cce, Fusion, Ikf, Kf, KfIo, Nn, Tobit, TobitSilence,
+    paper_bucket, run_adf, run_cce, run_ikf, run_kf, run_kf_io, run_nn, run_tobit,
+    run_tobit_silence, Adf, Cce, Fusion, Ikf, Kf, KfIo, Nn, Tobit, TobitSilence,
 };
 pub use models::{
     model, occlusion, prior, Model, TobitModel, TOBIT_CHI, TOBIT_ETA0, TOBIT_LAMBDA, TOBIT_SIGMA,

@@ -145,7 +145,8 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize, M: LinearSystem<
         let mut counts = GateCounts::NONE;
         let mut admitted = [true; L];
         for m in 0..L {
-            if let (Some(z), Some(local)) = (y.packets[m].delivered(), self.filter.fusion.local(m)) {
+            if let (Some(z), Some(local)) = (y.packets[m].delivered(), self.filter.fusion.local(m))
+            {
                 let r = diagonal_variances(&models[m].measurement_cov(k))?;
                 let q_m = bqb / self.filter.fusion.weights()[m];
                 let used = local.admits(&a, &q_m, &models[m].c(k), &r, z, gate)?;

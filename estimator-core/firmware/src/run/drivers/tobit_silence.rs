@@ -35,9 +35,8 @@ pub struct TobitSilence {
 impl TobitSilence {
     /// The example's fusion filter with [`Silence::TruncatedGaussian`] local filters.
     pub fn paper_example() -> Result<Self, Error> {
-        let cfgs = [0, 1, 2].map(|m| {
-            Tobit::node_config(m).map(|c| c.with_silence(Silence::TruncatedGaussian))
-        });
+        let cfgs = [0, 1, 2]
+            .map(|m| Tobit::node_config(m).map(|c| c.with_silence(Silence::TruncatedGaussian)));
         let [a, b, c] = cfgs;
         let fusion = Fusion::new([a?, b?, c?], Vector2::new(5.0, 0.0), Matrix2::identity())?;
         Ok(Self {
