@@ -175,8 +175,8 @@ fn run_and_collect(
 fn expected_kind(name: &str) -> ipc_runner::CovarianceKind {
     use ipc_runner::CovarianceKind::*;
     match name {
-        "nn" | "fused" | "fused-predict" => Bound,
-        n if n.starts_with("tobit-") => Bound,
+        "nn" | "fused" => Bound,
+        n if n.starts_with("tobit-") || n.starts_with("fused-") => Bound,
         _ => Estimate,
     }
 }

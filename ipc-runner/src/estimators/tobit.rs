@@ -574,9 +574,23 @@ mod tests {
                 "tobit-1-predict",
                 "tobit-2-predict",
                 "tobit-3-predict",
-                "fused-predict"
+                "fused-predict",
+                "tobit-1-silence",
+                "tobit-2-silence",
+                "tobit-3-silence",
+                "fused-silence",
+                "tobit-1-sl",
+                "tobit-2-sl",
+                "tobit-3-sl",
+                "fused-sl"
             ]
         );
+        // A declared loss rate makes a silence ambiguous: no silence-reading views.
+        let lossy = EvalOptions {
+            loss_rate: 0.1,
+            ..EvalOptions::default()
+        };
+        assert_eq!(build(&s, &lossy, &RunStart::default()).unwrap().len(), 8);
         let lin = crate::source::preset_spec("linear");
         assert!(build(&lin, &EvalOptions::default(), &RunStart::default())
             .unwrap()
