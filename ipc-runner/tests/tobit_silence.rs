@@ -347,8 +347,8 @@ fn the_linear_silence_kf_beats_the_intermittent_kf() {
     // −10.5 % at 2000 runs, about 45 s.e.), and their covariance consistent in trace: the
     // average MSE within [0.5, 1] × the average tr P (+ 3 s.e.; a consistent filter's MSE is
     // tr P, an overconfident one's above it).
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel-sim/scenarios/linear-triggered.toml");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../channel-sim/scenarios/linear-triggered.toml");
     let scenario = resolve("", Some(&path)).unwrap();
     let names = ["ikf", "kf-silence", "kf-sl"];
     let options = EvalOptions {
@@ -368,11 +368,20 @@ fn the_linear_silence_kf_beats_the_intermittent_kf() {
         for (j, e) in out.estimators.iter().enumerate() {
             let sq = e.sq_err.as_ref().unwrap();
             avg[j].push(sq[2..].iter().sum::<f64>() / f64::from(T));
-            let t = &e.diagnostics.iter().find(|(d, _)| *d == "trace_p").unwrap().1;
+            let t = &e
+                .diagnostics
+                .iter()
+                .find(|(d, _)| *d == "trace_p")
+                .unwrap()
+                .1;
             tr[j] += t[1..].iter().sum::<f64>() / f64::from(T) / 300.0;
             if j > 0 {
                 let held = e.diagnostics.iter().find(|(d, _)| *d == "silence_held");
-                assert!(held.is_some_and(|(_, v)| v[T as usize] > 0.0), "{}", names[j]);
+                assert!(
+                    held.is_some_and(|(_, v)| v[T as usize] > 0.0),
+                    "{}",
+                    names[j]
+                );
             }
         }
     }
@@ -381,7 +390,17 @@ fn the_linear_silence_kf_beats_the_intermittent_kf() {
         println!("{} − ikf = {d:+.4} ± {s:.4}", names[j]);
         assert!(d + 3.0 * s < 0.0, "{} − ikf = {d} ± {s}", names[j]);
         let (m, se) = mean_se(&avg[j]);
-        assert!(m < tr[j] + 3.0 * se, "{}: MSE {m} against tr P {}", names[j], tr[j]);
-        assert!(m > 0.5 * tr[j], "{}: MSE {m} far below tr P {}", names[j], tr[j]);
+        assert!(
+            m < tr[j] + 3.0 * se,
+            "{}: MSE {m} against tr P {}",
+            names[j],
+            tr[j]
+        );
+        assert!(
+            m > 0.5 * tr[j],
+            "{}: MSE {m} far below tr P {}",
+            names[j],
+            tr[j]
+        );
     }
 }

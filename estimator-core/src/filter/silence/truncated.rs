@@ -43,7 +43,7 @@ pub fn truncate_box<T: Real, const NX: usize, const NY: usize>(
     let mut s = symmetrize(&(c * p * c.transpose() + r));
     for j in 0..NY {
         let sjj = s[(j, j)];
-        if !(sjj > T::zero()) {
+        if !sjj.finite() || sjj <= T::zero() {
             return Err(Error::NotPositiveDefinite {
                 what: "silence innovation covariance",
             });
