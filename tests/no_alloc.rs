@@ -42,6 +42,7 @@ fn estimator_steps_do_not_allocate() {
     occlusion_section();
     nn_tbcp_section();
     tobit_fusion_section();
+    silence_section();
 }
 
 /// Seed 001 (issue 4): CCE, ADF and KF-IO steps on the paper's example, arrivals, dropouts
@@ -201,4 +202,126 @@ fn tobit_fusion_section() {
     });
     assert!(ok);
     assert_eq!(n, 0, "{n} heap allocations in 10 000 Tobit fusion steps");
+}
+
+/// The silence-reading estimators (docs/tobit-fusion.md, "Silence that speaks"): the bucket
+/// mirror with both silence forms in the Tobit fusion, and the silence Kalman filter, over
+/// 10 000 instants of the example's protocol each, error paths included.
+fn silence_section() {
+    use estimator_core::filter::silence::kalman::SilenceKf;
+    use estimator_core::filter::silence::{SilenceForm, TriggeredPackets};
+    use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
+    use estimator_core::filter::{MirroredFusion, TobitFusion};
+    use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
+    use estimator_core::protocol::shared_token_bucket::{
+        SharedTokenBucket, TriggeredBucketScheduler,
+    };
+    use estimator_core::protocol::trigger_knowledge::TriggerKnowledge;
+    use estimator_core::Packet;
+
+    let w = 0.052 * core::f64::consts::PI;
+    let a = matrix![w.cos(), w.sin(); -w.sin(), w.cos()];
+    let b = vector![0.16, 0.18];
+    let bqb = b * b.transpose() * 0.05;
+    let c = [SMatrix::<f64, 2, 2>::identity(); 3];
+    let r = [vector![0.5, 0.5]; 3];
+    let tau = vector![0.0, 0.0];
+    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)]
+        .map(|(s, l)| EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5).unwrap());
+    let bucket = SharedTokenBucket::<3>::new(10, 5, 30, [3, 3, 3]).unwrap();
+    let fusion = |form: Silence| {
+        let cfgs = trig.map(|t| {
+            TobitFilterConfig::new(tau, BoundScalars::paper_example(), t, 1.5, 2.0)
+                .unwrap()
+                .with_silence(form)
+        });
+        let f =
+            TobitFusion::<f64, 2, 2, 3>::new(cfgs, vector![5.0, 0.0], SMatrix::identity()).unwrap();
+        MirroredFusion::new(f, bucket)
+    };
+    let mut tg = fusion(Silence::TruncatedGaussian);
+    let mut sl = fusion(Silence::PseudoMeasurement);
+    let model = LinearModel::<f64, 2, 1, 1, 1>::new(
+        matrix![1.0, 0.1; 0.0, 1.0],
+        matrix![0.005; 0.1],
+        matrix![1.0, 0.0],
+        matrix![1.0],
+        matrix![1.0],
+        matrix![0.01],
+    )
+    .unwrap();
+    let lin_cfg = EventTriggerConfig::new(0.3, 5.0, 0.5, 0.0).unwrap();
+    let lin_bucket = SharedTokenBucket::<1>::new(3, 1, 6, [3]).unwrap();
+    let mut kf = SilenceKf::new(
+        KalmanFilter::new(vector![0.0, 1.0], SMatrix::identity()).unwrap(),
+        [TriggerKnowledge::new(lin_cfg, vector![0.0]).unwrap()],
+        lin_bucket,
+        SilenceForm::TruncatedGaussian,
+    );
+    let nodes = trig.map(|t| EventTrigger::new(t, tau).unwrap());
+    let mut sched = TriggeredBucketScheduler::new(nodes, bucket);
+    let mut lin_node = TriggeredBucketScheduler::new(
+        [EventTrigger::new(lin_cfg, vector![0.0]).unwrap()],
+        lin_bucket,
+    );
+    let (n, ok) = ALLOC.count(|| {
+        let mut ok = true;
+        let mut x = vector![5.0, 0.0];
+        for k in 1..=10_000usize {
+            x = a * x;
+            let s = k as f64;
+            let ys = [0.3, 0.7, 1.1].map(|p| {
+                vector![
+                    (x[0] + (p * s).sin() * 0.3).max(0.0),
+                    (x[1] + (p * s).cos() * 0.3).max(0.0)
+                ]
+            });
+            let level = sched.bucket().level();
+            let d = match sched.step(&ys) {
+                Ok(d) => d,
+                Err(_) => return false,
+            };
+            let packets = TriggeredPackets {
+                packets: [0, 1, 2].map(|m| {
+                    if d[m].sent {
+                        Packet::Delivered(ys[m])
+                    } else if k % 97 == 0 {
+                        Packet::Lost
+                    } else {
+                        Packet::Dropped
+                    }
+                }),
+                level: d.iter().any(|d| d.sent).then_some(level),
+            };
+            for f in [&mut tg, &mut sl] {
+                ok &= f.step_matrices(&a, &bqb, &c, &r, &packets).is_ok();
+                let bad = TriggeredPackets {
+                    packets: [
+                        Packet::Delivered(vector![f64::NAN, 0.0]),
+                        Packet::Dropped,
+                        Packet::Lost,
+                    ],
+                    level: Some(31),
+                };
+                ok &= f.step_matrices(&a, &bqb, &c, &r, &bad).is_err();
+            }
+            let y = vector![(0.05 * s).sin() * 3.0];
+            let dl = match lin_node.step(&[y]) {
+                Ok(d) => d[0],
+                Err(_) => return false,
+            };
+            let p = TriggeredPackets {
+                packets: [if dl.sent {
+                    Packet::Delivered(y)
+                } else {
+                    Packet::Dropped
+                }],
+                level: None,
+            };
+            ok &= kf.step(&[model], k, &p).is_ok();
+        }
+        ok && tg.counts().held > 0 && kf.counts().held > 0
+    });
+    assert!(ok);
+    assert_eq!(n, 0, "{n} heap allocations in 10 000 silence-reading steps");
 }

@@ -2,7 +2,7 @@
 //! (docs/tobit-fusion.md, "Silence that speaks"): Algorithm 1's estimator side, where an
 //! instant's silences are first classified by the mirror of the shared bucket
 //! ([`crate::protocol::bucket_mirror`]) — held trigger, or no token / unknown — and then every
-//! local filter steps on its node's [`Arrival`](crate::filter::silence::Arrival).
+//! local filter steps on its node's [`Arrival`].
 
 use nalgebra::{SMatrix, SVector};
 
