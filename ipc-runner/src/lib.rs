@@ -3,7 +3,7 @@
 
 pub mod estimator;
 
-pub use estimator::{CovarianceKind, Estimator};
+pub use estimator::{CovarianceKind, Estimator, LateFold};
 pub mod bridge;
 pub mod cli;
 pub mod demo;

@@ -50,16 +50,23 @@ pub struct ReplayArgs {
     pub max_memory: u64,
 }
 
-/// Steps `estimators` over `instants`; returns per-instant estimates (`nx` per estimator)
-/// and the rejected counts.
+/// Steps `estimators` over `instants`, and folds in each slot of `late` after the instant it
+/// came after (what `run --lag` did live; an estimator without the lag leaves it lost);
+/// returns per-instant estimates (`nx` per estimator, as published at each instant: before
+/// the slots that came after it) and the rejected counts.
 pub fn run_estimators(
     estimators: &mut [Box<dyn Estimator>],
     instants: &[LoggedInstant],
+    late: &[(u32, Observation)],
     nx: usize,
 ) -> (Vec<f64>, Vec<u64>) {
     let mut out = Vec::with_capacity(instants.len() * nx * estimators.len());
     let mut rejected = vec![0; estimators.len()];
     let mut x = [0.0; MAX_NX];
+    // By the instant each came after (stable: the log's order within one instant).
+    let mut by_arrival: Vec<&(u32, Observation)> = late.iter().collect();
+    by_arrival.sort_by_key(|(after, _)| *after);
+    let mut next = by_arrival.into_iter().peekable();
     for (k, obs) in instants {
         for (e, est) in estimators.iter_mut().enumerate() {
             if est.step(*k, obs).is_err() {
@@ -67,6 +74,18 @@ pub fn run_estimators(
             }
             est.estimate(&mut x[..nx]);
             out.extend_from_slice(&x[..nx]);
+        }
+        // The live run folded each late slot in when it came, after the instant `after`.
+        while let Some((_, o)) = next.next_if(|(after, _)| *after <= *k) {
+            let mut all: heapless::Vec<Observation, { estpipe_wire::MAX_NODES }> =
+                heapless::Vec::new();
+            for n in 0..obs.len() {
+                let lost = Observation::dropped(o.k, n as u8, o.ny, FLAG_IPC_LOST);
+                let _ = all.push(if n == usize::from(o.node) { *o } else { lost });
+            }
+            for est in estimators.iter_mut() {
+                est.fold_late(o.k, &all);
+            }
         }
     }
     (out, rejected)
@@ -119,10 +138,11 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         pf.saturating_add(per_instant),
     )?;
     let max_instants = budget.bytes.saturating_sub(pf) / per_instant;
-    let instants = read_slots_within(&args.input, nodes, ny, max_instants)?;
+    let log = read_slots_within(&args.input, nodes, ny, max_instants)?;
+    let instants = &log.instants;
     let make = factory(u32::try_from(instants.len()).unwrap_or(u32::MAX))?;
     let mut estimators = make()?;
-    let (est, rejected) = run_estimators(&mut estimators, &instants, nx);
+    let (est, rejected) = run_estimators(&mut estimators, instants, &log.late, nx);
     let count = |f: &dyn Fn(&Observation) -> bool| -> usize {
         instants
             .iter()

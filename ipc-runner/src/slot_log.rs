@@ -12,6 +12,7 @@
 //! | `delivered`   | 0 / 1   | 1 if a measurement reached the estimator, 0 if the packet was dropped |
 //! | `flags`       | integer | channel-side flags (`channel_sim::sim::FLAG_*`; 0 if unknown); bit 31 (`FLAG_IPC_LOST`, 2147483648) marks a slot that never reached the receiver |
 //! | `y_0` … `y_{ny−1}` | float | the measurement; ignored (may be empty) when `delivered = 0` |
+//! | `late_after`  | integer, optional | a slot that arrived late: the newest instant handed on when it came (0 or absent: on time) |
 //!
 //! A row with `delivered = 0` is a packet the channel dropped (a dropout, which may carry
 //! information: occlusion, event trigger), unless its flags have `FLAG_IPC_LOST`: then the
@@ -30,8 +31,15 @@ use estpipe_wire::FLAG_IPC_LOST;
 use std::io::Write;
 use std::path::Path;
 
-/// Writes observations as a slot log.
-pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> {
+/// Writes observations as a slot log. `late_after` lists the slots (by index in `slots`)
+/// that arrived late and the newest instant handed on when they came: with any, the log has
+/// a `late_after` column and its rows are ordered by k (a late slot among its instant's).
+pub fn write_slots(
+    path: &Path,
+    slots: &[Observation],
+    ny: usize,
+    late_after: &[(usize, u32)],
+) -> Result<()> {
     let mut w = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
     );
@@ -39,8 +47,27 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
     for j in 0..ny {
         write!(w, ",y_{j}")?;
     }
+    let mut after = vec![
+        0u32;
+        if late_after.is_empty() {
+            0
+        } else {
+            slots.len()
+        }
+    ];
+    for &(i, k) in late_after {
+        if let Some(a) = after.get_mut(i) {
+            *a = k;
+        }
+    }
+    let mut order: Vec<usize> = (0..slots.len()).collect();
+    if !after.is_empty() {
+        write!(w, ",late_after")?;
+        order.sort_by_key(|&i| slots[i].k);
+    }
     writeln!(w)?;
-    for o in slots {
+    for i in order {
+        let o = &slots[i];
         write!(
             w,
             "{},{},{},{}",
@@ -55,6 +82,9 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
             } else {
                 write!(w, ",")?;
             }
+        }
+        if let Some(a) = after.get(i) {
+            write!(w, ",{a}")?;
         }
         writeln!(w)?;
     }
@@ -71,10 +101,20 @@ pub type LoggedInstant = (u32, heapless::Vec<Observation, MAX_NODES>);
 pub const DEFAULT_MAX_INSTANTS: u64 =
     crate::limits::DEFAULT_MAX_MEMORY_MIB * (1 << 20) / size_of::<LoggedInstant>() as u64;
 
+/// A slot log as read: the instants, and the slots that arrived late.
+#[derive(Clone, Debug, Default)]
+pub struct SlotLog {
+    /// Every k from 1 to the last, all nodes present (a late slot is lost at its instant).
+    pub instants: Vec<LoggedInstant>,
+    /// The slots that arrived late (a `late_after` above 0): the newest instant handed on
+    /// when each came, and the slot; in file order.
+    pub late: Vec<(u32, Observation)>,
+}
+
 /// Reads a slot log; returns the instants (every k from 1 to the last, all nodes present),
 /// with at most [`DEFAULT_MAX_INSTANTS`] of them.
 pub fn read_slots(path: &Path, nodes: usize, ny: usize) -> Result<Vec<LoggedInstant>> {
-    read_slots_within(path, nodes, ny, DEFAULT_MAX_INSTANTS)
+    Ok(read_slots_within(path, nodes, ny, DEFAULT_MAX_INSTANTS)?.instants)
 }
 
 /// [`read_slots`] with a bound on the k span: a row whose k exceeds `max_instants` is refused
@@ -87,7 +127,7 @@ pub fn read_slots_within(
     nodes: usize,
     ny: usize,
     max_instants: u64,
-) -> Result<Vec<LoggedInstant>> {
+) -> Result<SlotLog> {
     if ny > MAX_NY || nodes > MAX_NODES {
         bail!("scenario dimensions exceed the wire limits");
     }
@@ -129,6 +169,8 @@ pub fn read_slots_within(
         })
     };
     let (ck, cn, cd, cf) = (idx("k")?, idx("node")?, idx("delivered")?, find("flags")?);
+    let cl = find("late_after")?;
+    let mut late: Vec<(u32, Observation)> = Vec::new();
     let cy: Vec<usize> = (0..ny)
         .map(|j| idx(&format!("y_{j}")))
         .collect::<Result<_>>()?;
@@ -168,6 +210,18 @@ pub fn read_slots_within(
         };
         if k == 0 {
             return Err(at("k", "k must be ≥ 1 (k = 0 is the prior)".into()));
+        }
+        let late_after: u32 = match cl {
+            Some(c) if !get(c).is_empty() => get(c)
+                .parse()
+                .map_err(|e| at("late_after", format!("{:?} ({e})", get(c))))?,
+            _ => 0,
+        };
+        if late_after != 0 && late_after < k {
+            return Err(at(
+                "late_after",
+                format!("{late_after} is before the slot's own instant k = {k}"),
+            ));
         }
         if node >= nodes {
             return Err(at(
@@ -219,8 +273,7 @@ pub fn read_slots_within(
                     .map_err(|e| at(&format!("y_{j}"), format!("{:?} ({e})", get(c))))?;
             }
         }
-        let obs = &mut out.last_mut().expect("pushed above").1[node];
-        *obs = Observation {
+        let o = Observation {
             k,
             node: node as u8,
             delivered,
@@ -228,8 +281,18 @@ pub fn read_slots_within(
             y,
             flags,
         };
+        if late_after > 0 {
+            // Lost at its instant; held until the instant it came after (one per row, so
+            // bounded like the rows).
+            late.push((late_after, o));
+        } else {
+            out.last_mut().expect("pushed above").1[node] = o;
+        }
     }
-    Ok(out)
+    Ok(SlotLog {
+        instants: out,
+        late,
+    })
 }
 
 #[cfg(test)]
@@ -255,7 +318,7 @@ mod tests {
             },
             Observation::dropped(3, 0, 2, 16),
         ];
-        write_slots(&p, &slots, 2).unwrap();
+        write_slots(&p, &slots, 2, &[]).unwrap();
         let r = read_slots(&p, 2, 2).unwrap();
         assert_eq!(r.len(), 3);
         assert_eq!(r[0].1[1], slots[0]);
@@ -293,7 +356,7 @@ mod tests {
         );
         // The same node at the next k is no duplicate.
         std::fs::write(&p, "k,node,delivered,y_0\n1,0,1,0.5\n2,0,1,0.25\n").unwrap();
-        assert_eq!(read_slots_within(&p, 2, 1, 10).unwrap().len(), 2);
+        assert_eq!(read_slots_within(&p, 2, 1, 10).unwrap().instants.len(), 2);
         let e = refuse("k,node,delivered,y_0\n1,0,1,0.5\n11,0,0,\n", 10);
         assert!(
             e.contains("line 3: k: k = 11 means replaying 11 instants")

@@ -10,7 +10,7 @@ import time
 
 import iceoryx2 as iox2
 
-WIRE_VERSION = 4
+WIRE_VERSION = 5
 
 MAX_NX = 8
 MAX_NY = 4
@@ -120,6 +120,8 @@ class Estimate(ctypes.Structure):
         ("slot_send_ns", ctypes.c_uint64),
         ("receive_ns", ctypes.c_uint64),
         ("step_done_ns", ctypes.c_uint64),
+        ("late_folded", ctypes.c_uint32),
+        ("revised_from", ctypes.c_uint32),
     ]
 
     @staticmethod

@@ -29,18 +29,19 @@ use std::sync::{Arc, Mutex};
 
 use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
 use estimator_core::filter::{Gated, InnovationGate, TobitFusion};
-use estimator_core::{Error, Estimator as _, OnModel};
+use estimator_core::{Error, Estimator as _, OnModel, Packet};
 use estpipe_spec::channel::{TobitCensoring, TriggeredTokenBucket};
 use estpipe_spec::{EstimatorSpec, LinearModel};
-use estpipe_wire::Observation;
+use estpipe_wire::{Observation, MAX_NODES};
 use nalgebra::SVector;
 
 use super::adapter::{name, write_row_major, Name};
 use super::fed::{linear, on_model, Fed};
+use super::lagged::Lagged;
 use super::slots::FromSlots;
 use super::snapshot::{fixed, Snapshot};
 use super::{EvalOptions, RunStart};
-use crate::{CovarianceKind, Estimator};
+use crate::{CovarianceKind, Estimator, LateFold};
 
 /// The names of the local views, node 1 first.
 pub const LOCAL_NAMES: [&str; 8] = [
@@ -226,17 +227,25 @@ fn set_inputs<const NX: usize, const NY: usize, const L: usize>(
 /// The views' one filter: stepped by whichever view asks first at an instant, its result
 /// kept for the others.
 struct Shared<const NX: usize, const NY: usize, const L: usize> {
-    /// The filter, behind the core's gate with `--gate` (its counts are all nodes').
-    fed: Gated<f64, Fed<OnNodes<NX, NY, L>>>,
+    /// The filter, behind the core's gate with `--gate` (its counts are all nodes'), with the
+    /// history of `--lag`.
+    fed: Lagged<Gated<f64, Fed<OnNodes<NX, NY, L>>>, [Packet<f64, NY>; L]>,
     gated: bool,
     done_k: u32,
     last: Result<(), Error>,
+    /// The last late fold: its instant, its observations and what it did (every view asks).
+    folded: Option<(u32, [Observation; MAX_NODES], LateFold)>,
 }
 
 impl<const NX: usize, const NY: usize, const L: usize> Shared<NX, NY, L> {
     /// The fusion filter.
     fn fusion(&self) -> &TobitFusion<f64, NX, NY, L> {
-        &self.fed.estimator.estimator.filter
+        &self.gated().estimator.estimator.filter
+    }
+
+    /// The filter behind its gate.
+    fn gated(&self) -> &Gated<f64, Fed<OnNodes<NX, NY, L>>> {
+        self.fed.inner()
     }
 }
 
@@ -269,10 +278,11 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
         (Silence::Predict, &LOCAL_PREDICT, FUSED_PREDICT),
     ] {
         let shared = Arc::new(Mutex::new(Shared {
-            fed: Gated::new(fed_fusion::<NX, NY, L>(parts, silence)?, gate),
+            fed: Lagged::Off(Gated::new(fed_fusion::<NX, NY, L>(parts, silence)?, gate)),
             gated,
             done_k: 0,
             last: Ok(()),
+            folded: None,
         }));
         for m in 0..L {
             out.push(Box::new(View {
@@ -299,21 +309,46 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         if s.done_k != k {
             let y = FromSlots::from_slots(obs);
-            s.last = if s.gated {
-                s.fed.step(k as usize, &y)
-            } else {
-                s.fed.estimator.step(k as usize, &y)
+            let gated = s.gated;
+            s.last = match &mut s.fed {
+                // Without `--gate` and `--lag`, the plain step (the gate held is never asked);
+                // with a lag, the off gate's step, which admits without computing anything.
+                Lagged::Off(g) if !gated => g.estimator.step(k as usize, &y),
+                fed => fed.step(k as usize, &y),
             };
             s.done_k = k;
         }
         s.last
     }
 
+    fn set_lag(&mut self, lag: u32) -> bool {
+        let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        // Every view asks; the history is set once, before the first step.
+        if matches!(s.fed, Lagged::Off(_)) && s.done_k == 0 {
+            s.fed.set_lag(lag);
+        }
+        lag > 0
+    }
+
+    fn fold_late(&mut self, k: u32, obs: &[Observation]) -> LateFold {
+        let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((fk, fobs, done)) = &s.folded {
+            if *fk == k && fobs.get(..obs.len()) == Some(obs) {
+                return *done;
+            }
+        }
+        let done = s.fed.fold(k as usize, &FromSlots::from_slots(obs));
+        let mut all = [Observation::dropped(0, 0, 0, 0); MAX_NODES];
+        all[..obs.len().min(MAX_NODES)].copy_from_slice(&obs[..obs.len().min(MAX_NODES)]);
+        s.folded = Some((k, all, done));
+        done
+    }
+
     fn estimate(&self, out: &mut [f64]) {
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let x = match self.node {
             Some(m) => s.fusion().local_estimate(m).map(|e| *e.state()),
-            None => Some(*s.fed.estimate().state()),
+            None => Some(*s.gated().estimate().state()),
         };
         match x {
             Some(x) => out[..NX].copy_from_slice(x.as_slice()),
@@ -326,7 +361,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         let p = match self.node {
             Some(m) => s.fusion().local_estimate(m).map(|e| *e.covariance()),
-            None => Some(*s.fed.estimate().covariance()),
+            None => Some(*s.gated().estimate().covariance()),
         };
         match p {
             Some(p) => {
@@ -347,7 +382,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
                 Some(e) => e.into_parts(),
                 None => return,
             },
-            None => s.fed.estimate().into_parts(),
+            None => s.gated().estimate().into_parts(),
         };
         let e = SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
         if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "bound") {
@@ -361,7 +396,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         // The views share one filter: every view reports its counts over all nodes.
         if s.gated {
-            let g = s.fed.state();
+            let g = s.gated().state();
             sink("gate_tested", f64::from(g.counts.tested));
             sink("gate_rejected", f64::from(g.counts.rejected));
             sink("gate_forced", f64::from(g.forced));
@@ -373,7 +408,7 @@ impl<const NX: usize, const NY: usize, const L: usize> Estimator for View<NX, NY
                 }
             }
             None => {
-                let p = s.fed.estimate().covariance();
+                let p = s.gated().estimate().covariance();
                 sink("trace_p", p.trace());
                 if NX == 2 {
                     sink("p11", p[(0, 0)]);

@@ -67,6 +67,9 @@ pub struct Limits {
     /// nodes' slots (0: for ever). Blocking mode (`period_ns = 0`) never loses a slot by a
     /// deadline.
     pub instant_deadline_ns: u64,
+    /// `--lag`: a slot at most this many instants late (its instant and those after it handed
+    /// on) is handed on by itself ([`Pushed::Late`]) instead of skipped as late.
+    pub lag: u32,
 }
 
 impl Default for Limits {
@@ -74,6 +77,7 @@ impl Default for Limits {
         Self {
             max_gap: DEFAULT_MAX_GAP,
             instant_deadline_ns: (DEFAULT_INSTANT_DEADLINE_MS * 1e6) as u64,
+            lag: 0,
         }
     }
 }
@@ -91,6 +95,9 @@ pub enum Pushed {
     NewStream,
     /// A node's END/ABORT; other nodes' streams go on.
     Marker,
+    /// A data slot of an instant already handed on, at most [`Limits::lag`] instants late:
+    /// [`Assembler::take_late`] gives it, for the estimators' fixed-lag history.
+    Late,
     /// The last node's END marker: every stream is complete, every instant handed on.
     End,
     /// The last node's marker, and some node's was an ABORT (its publisher stopped early).
@@ -149,6 +156,8 @@ pub struct Assembler {
     /// Bit m: node m's stream goes on from another publisher (a relay that restarted), so
     /// the slots missing before its next one were lost while nothing forwarded them.
     relay_gap: u16,
+    /// The slot of the last [`Pushed::Late`].
+    late: Option<Observation>,
     /// Running counts (over all sessions).
     pub counts: Counts,
 }
@@ -197,6 +206,7 @@ impl Assembler {
             node: [NodeStream::default(); MAX_NODES],
             first_seen: None,
             relay_gap: 0,
+            late: None,
             counts: Counts::default(),
         };
         a.reset();
@@ -352,8 +362,25 @@ impl Assembler {
         }
         if k < self.base {
             // Its instant was handed on without it (deadline or overrun); what lies between
-            // was given up with it.
+            // was given up with it. Within the lag it is still information (its lateness:
+            // the instants handed on from its own to the newest).
             self.node[m].next_k = k + 1;
+            let lateness = self.base - k;
+            if lateness <= u64::from(self.limits.lag)
+                && fault.is_none()
+                && slot.flags & FLAG_NET_LOST == 0
+            {
+                self.counts.late_folded += 1;
+                self.late = Some(Observation {
+                    k: slot.k,
+                    node: slot.node,
+                    delivered: slot.delivered == 1,
+                    ny: self.ny[m],
+                    y: self.measurement(slot),
+                    flags: slot.flags & !FLAG_IPC_LOST,
+                });
+                return Pushed::Late;
+            }
             return self.skip(Reason::Late);
         }
         // From what is still pending: a node that fell behind (its slots given up) may come
@@ -381,11 +408,12 @@ impl Assembler {
                 (o, Pushed::Refused(f))
             }
             None => {
-                let mut y = [0.0; MAX_NY];
                 let net_lost = slot.flags & FLAG_NET_LOST != 0;
-                if let Some(v) = slot.measurement().filter(|_| !net_lost) {
-                    y[..v.len()].copy_from_slice(v);
-                }
+                let y = if net_lost {
+                    [0.0; MAX_NY]
+                } else {
+                    self.measurement(slot)
+                };
                 if net_lost {
                     // A bridge's stand-in for a slot the network lost (docs/bridge.md). Its
                     // count says lost, so it is handed on as lost: a foreign publisher that
@@ -415,6 +443,28 @@ impl Assembler {
         self.advance(emit);
         self.expire(recv_ns, emit);
         pushed
+    }
+
+    /// The slot's measurement, zero-padded (zero when it has none).
+    fn measurement(&self, slot: &Slot) -> [f64; MAX_NY] {
+        let mut y = [0.0; MAX_NY];
+        if let Some(v) = slot.measurement() {
+            y[..v.len()].copy_from_slice(v);
+        }
+        y
+    }
+
+    /// The slot of the last [`Pushed::Late`], as its instant's observations: every other node
+    /// lost (`FLAG_IPC_LOST`), what the estimators' `fold_late` takes. `None` after the first
+    /// call.
+    pub fn take_late(&mut self, out: &mut [Observation; MAX_NODES]) -> Option<(u32, usize)> {
+        let o = self.late.take()?;
+        let nodes = usize::from(self.nodes);
+        for (n, d) in out.iter_mut().enumerate().take(nodes) {
+            *d = Observation::dropped(o.k, n as u8, self.ny[n], FLAG_IPC_LOST);
+        }
+        out[usize::from(o.node)] = o;
+        Some((o.k, nodes))
     }
 
     /// The first slot of a session: whether this runner saw the stream start, and where the

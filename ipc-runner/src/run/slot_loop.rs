@@ -87,6 +87,7 @@ pub fn run_loop(
     let limits = Limits {
         max_gap: args.max_gap,
         instant_deadline_ns: (args.instant_deadline_ms * 1e6) as u64,
+        lag: args.estimator.lag,
     };
     let mut asm = Assembler::new(&expected, limits);
     asm.set_subscribed_ns(t.subscribed_ns);
@@ -308,6 +309,12 @@ impl Loop<'_> {
             }
             if let Some(r) = self.asm.take_first_seen() {
                 self.warn(r, slot);
+            }
+            if pushed == Pushed::Late {
+                let mut obs = [Observation::dropped(0, 0, 0, 0); MAX_NODES];
+                if let Some((k, nodes)) = self.asm.take_late(&mut obs) {
+                    self.runner.on_late(k, &obs[..nodes]);
+                }
             }
             if pushed == Pushed::Data {
                 // A period beyond the bound is not used for the data deadline.

@@ -19,6 +19,9 @@ pub struct Trajectories {
     pub timing: Vec<[u64; 3]>,
     /// Received slots (for `replay`), if requested.
     pub slots: Vec<Observation>,
+    /// The slots of `slots` (by index) that arrived late and were folded in (`--lag`), with
+    /// the newest instant handed on when each came.
+    pub late_after: Vec<(usize, u32)>,
     /// State dimension.
     pub nx: usize,
     /// Estimator names.
@@ -41,6 +44,7 @@ impl Trajectories {
             estimates: Vec::with_capacity(instants * nx * names.len()),
             timing: Vec::with_capacity(instants),
             slots: Vec::with_capacity(slots * nodes),
+            late_after: Vec::new(),
             nx,
             names,
         }
@@ -132,6 +136,6 @@ impl Trajectories {
 
     /// Writes the received slots as a slot log ([`crate::slot_log`], what `replay` reads).
     pub fn write_slots_csv(&self, path: &std::path::Path, ny: usize) -> Result<()> {
-        crate::slot_log::write_slots(path, &self.slots, ny)
+        crate::slot_log::write_slots(path, &self.slots, ny, &self.late_after)
     }
 }
