@@ -163,17 +163,34 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         args.input,
         instants.len() * nodes - delivered - ipc_lost - net_lost
     );
+    if !log.late.is_empty() {
+        estpipe_process::outln!(
+            "{} slot(s) arrived late: {}",
+            log.late.len(),
+            if args.estimator.lag > 0 {
+                format!(
+                    "folded in where at most --lag {} instants late, lost otherwise",
+                    args.estimator.lag
+                )
+            } else {
+                "lost (no --lag)".to_string()
+            }
+        );
+    }
     let ne = estimators.len();
     for (e, est_e) in estimators.iter().enumerate() {
-        let last = est
-            .len()
-            .checked_sub(nx * ne)
-            .map(|i| &est[i + e * nx..i + (e + 1) * nx]);
+        // After the last instant and every late slot folded in after it.
+        let mut last = [0.0; MAX_NX];
+        est_e.estimate(&mut last[..nx]);
         estpipe_process::outln!(
             "{:<12} rejected {:>5}   final estimate {:?}",
             est_e.name(),
             rejected[e],
-            last.unwrap_or(&[])
+            if instants.is_empty() {
+                &[][..]
+            } else {
+                &last[..nx]
+            }
         );
         if let Some((tested, rejected)) = crate::estimators::gate_counts(&**est_e) {
             estpipe_process::outln!(
