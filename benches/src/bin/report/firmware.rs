@@ -65,6 +65,10 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         sizes: read("sizes.csv")?,
     };
     render(md, &data)?;
+    // Late packets (issue #33): the fixed-lag binaries, if .ci/firmware counted them.
+    if let Ok(lag) = read("lag_counts.csv") {
+        crate::late::firmware(md, &lag, &data.sizes);
+    }
     // The part can be regenerated on its own (`--skip` the others): say of which commit.
     let commit = Command::new("git")
         .args(["rev-parse", "--short", "HEAD"])
@@ -89,13 +93,13 @@ struct Data {
 }
 
 /// A CSV file without quoting: the header and the rows by their first column.
-struct Csv {
-    header: Vec<String>,
-    rows: Vec<Vec<String>>,
+pub(crate) struct Csv {
+    pub(crate) header: Vec<String>,
+    pub(crate) rows: Vec<Vec<String>>,
 }
 
 impl Csv {
-    fn parse(text: &str) -> Self {
+    pub(crate) fn parse(text: &str) -> Self {
         let mut lines = text.lines().filter(|l| !l.is_empty());
         let split = |l: &str| l.split(',').map(str::to_string).collect::<Vec<_>>();
         Self {
@@ -114,7 +118,7 @@ impl Csv {
         row.get(c).map(String::as_str)
     }
 
-    fn num(&self, bin: &str, col: &str) -> Option<f64> {
+    pub(crate) fn num(&self, bin: &str, col: &str) -> Option<f64> {
         self.get(bin, col)?.parse().ok()
     }
 }
