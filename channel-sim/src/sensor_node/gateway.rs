@@ -231,13 +231,31 @@ impl NodeLoop {
         timeout: Duration,
         wanted: impl Fn(&FromNode) -> bool,
     ) -> Result<FromNode, String> {
+        self.tell(m, msg)?;
+        self.answer(m, msg, timeout, wanted)
+    }
+
+    /// Sends `msg` to node `m`.
+    fn tell(&mut self, m: usize, msg: &ToNode) -> Result<(), String> {
         let mut frame = [0u8; MAX_FRAME];
         let n = encode(msg, &mut frame).ok_or("a message longer than a frame")?;
+        self.links[m].send(&frame[..n])
+    }
+
+    /// Waits for node `m`'s answer to `msg` (already sent once) that `wanted` accepts, sending
+    /// `msg` again after a corrupt frame or a timeout, [`RETRIES`] times at most.
+    fn answer(
+        &mut self,
+        m: usize,
+        msg: &ToNode,
+        timeout: Duration,
+        wanted: impl Fn(&FromNode) -> bool,
+    ) -> Result<FromNode, String> {
         for attempt in 0..=RETRIES {
             if attempt > 0 {
                 self.report.resent += 1;
+                self.tell(m, msg)?;
             }
-            self.links[m].send(&frame[..n])?;
             let deadline = Clock::now() + timeout;
             loop {
                 match self.links[m].receive(deadline)? {
@@ -280,13 +298,19 @@ impl NodeLoop {
         let nodes = self.links.len();
         let mut sent = vec![false; nodes];
         let mut out = Vec::with_capacity(nodes);
-        for m in 0..nodes {
-            let sample = Sample {
+        let sample = |m: usize| {
+            ToNode::Sample(Sample {
                 k,
                 z: raw[m].y,
                 level,
-            };
-            let answer = self.ask(m, &ToNode::Sample(sample), self.timeout, |a| {
+            })
+        };
+        // Every node gets its sample before any answer is awaited: the nodes decide at once.
+        for m in 0..nodes {
+            self.tell(m, &sample(m))?;
+        }
+        for m in 0..nodes {
+            let answer = self.answer(m, &sample(m), self.timeout, |a| {
                 matches!(a, FromNode::Decision(d) if d.k == k)
                     || matches!(a, FromNode::Refused { k: rk, .. } if *rk == k)
             })?;
