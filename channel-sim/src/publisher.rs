@@ -462,6 +462,35 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         discarded: 0,
     };
 
+    // Sensor nodes are connected and configured before the wait for a subscriber, so that a
+    // node that is not there is said at once.
+    let mut source = if endpoints.is_empty() {
+        Source::Simulated(scenario.start(args.seed, args.run))
+    } else {
+        // connect-timeout 0 means "wait for ever" for the subscriber; for a node's line, a day.
+        let connect = Duration::from_secs_f64(if args.connect_timeout > 0.0 {
+            args.connect_timeout
+        } else {
+            86_400.0
+        });
+        say(&format!(
+            "{} sensor node(s) on {}",
+            endpoints.len(),
+            args.sensor_node.join(", ")
+        ));
+        Source::Nodes(Box::new(
+            NodeLoop::start(
+                &*scenario,
+                args.seed,
+                args.run,
+                &endpoints,
+                connect,
+                Duration::from_secs_f64(args.node_timeout),
+                &|| gate.stop_requested(),
+            )
+            .map_err(anyhow::Error::msg)?,
+        ))
+    };
     say(&format!(
         "scenario {} (seed {}, run {}), {steps} instants × {} at {} on prefix {:?}; \
          waiting for a subscriber",
@@ -497,32 +526,6 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
     }
 
-    let mut source = if endpoints.is_empty() {
-        Source::Simulated(scenario.start(args.seed, args.run))
-    } else {
-        // connect-timeout 0 means "wait for ever" for the subscriber; for a node's line, a day.
-        let connect = Duration::from_secs_f64(if args.connect_timeout > 0.0 {
-            args.connect_timeout
-        } else {
-            86_400.0
-        });
-        say(&format!(
-            "{} sensor node(s) on {}",
-            endpoints.len(),
-            args.sensor_node.join(", ")
-        ));
-        Source::Nodes(Box::new(
-            NodeLoop::start(
-                &*scenario,
-                args.seed,
-                args.run,
-                &endpoints,
-                connect,
-                Duration::from_secs_f64(args.node_timeout),
-            )
-            .map_err(anyhow::Error::msg)?,
-        ))
-    };
     let x0 = source.sim().initial_truth();
     send_truth(Truth::new(0, sid, nx, &x0))?;
 

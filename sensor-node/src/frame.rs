@@ -343,3 +343,61 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod sizes {
+    use super::*;
+
+    /// The lengths docs/sensor-node.md gives, delimiter included.
+    #[test]
+    fn frame_lengths_on_the_line() {
+        let mut buf = [0u8; MAX_FRAME];
+        let s = |k, level| {
+            ToNode::Sample(Sample {
+                k,
+                z: [1.5, -0.25, 0.0, 0.0],
+                level,
+            })
+        };
+        let len = |m: &dyn Fn(&mut [u8]) -> Option<usize>, b: &mut [u8]| m(b).unwrap();
+        let small = len(&|b| encode(&s(5, 0), b), &mut buf);
+        let large = len(&|b| encode(&s(2000, 30), b), &mut buf);
+        let d = |k, sent| {
+            FromNode::Decision(Decision {
+                k,
+                sent,
+                triggered: sent,
+                blocked: false,
+                censored: false,
+                y: if sent { [1.5, -0.25, 0.0, 0.0] } else { [0.0; 4] },
+            })
+        };
+        let dec = len(&|b| encode(&d(2000, true), b), &mut buf);
+        let config = len(
+            &|b| {
+                encode(
+                    &ToNode::Configure(NodeConfig {
+                        version: LINK_VERSION,
+                        node: 7,
+                        ny: 4,
+                        censor: Some([-f64::MAX; 4]),
+                        schedule: Schedule::EventTrigger {
+                            sigma: 0.3,
+                            chi: 5.0,
+                            lambda: 0.1,
+                            eta0: 1.5,
+                            allow_paper_violation: true,
+                            reference: [-f64::MAX; 4],
+                            cost: u32::MAX,
+                            nodes: 8,
+                        },
+                    }),
+                    b,
+                )
+            },
+            &mut buf,
+        );
+        assert_eq!((small, large, dec), (41, 42, 45));
+        assert!(config < MAX_FRAME, "{config}");
+    }
+}

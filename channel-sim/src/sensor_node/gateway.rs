@@ -133,7 +133,8 @@ impl NodeLoop {
     /// Connects to every node (`endpoints[m]` is node m's line, waiting up to `connect` for
     /// it), configures it from the scenario's channel stages, and starts run `(seed, run)`;
     /// a plant that measures at k = 0 (seed 003) has its instant 0 decided by the nodes
-    /// too (compared, not published: the stream starts at k = 1).
+    /// too (compared, not published: the stream starts at k = 1). `stop` cuts the wait for a
+    /// line short (the publisher's stop signal).
     pub fn start(
         scenario: &dyn Scenario,
         seed: u64,
@@ -141,6 +142,7 @@ impl NodeLoop {
         endpoints: &[Endpoint],
         connect: Duration,
         timeout: Duration,
+        stop: &dyn Fn() -> bool,
     ) -> Result<Self, String> {
         let cfg = loop_config(scenario)?;
         if endpoints.len() != cfg.nodes.len() {
@@ -159,7 +161,7 @@ impl NodeLoop {
         let give_up = Clock::now() + connect;
         let links = endpoints
             .iter()
-            .map(|e| Link::connect(e, give_up))
+            .map(|e| Link::connect(e, give_up, stop))
             .collect::<Result<Vec<_>, _>>()?;
         let mut lp = Self {
             sim,
@@ -433,5 +435,132 @@ impl Simulation for NodeLoop {
             Err(e) => self.failure = Some(e),
         }
         inst
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::preset;
+    use estpipe_sensor_node::{Deframer, Push, Reply, SensorNode};
+    use std::io::{Read, Write};
+    use std::os::unix::net::UnixListener;
+    use std::path::PathBuf;
+
+    /// A node of `estpipe_sensor_node`'s state machine on a thread, listening at `path` (as
+    /// QEMU does), whose decisions pass through `lie` before they are sent.
+    fn software_node(path: PathBuf, lie: fn(&mut Decision)) -> std::thread::JoinHandle<()> {
+        let _ = std::fs::remove_file(&path);
+        let listener = UnixListener::bind(&path).unwrap();
+        std::thread::spawn(move || {
+            let (mut s, _) = listener.accept().unwrap();
+            let mut node = SensorNode::new();
+            let mut deframer = Deframer::new();
+            let mut out = [0u8; MAX_FRAME];
+            let mut buf = [0u8; 256];
+            while let Ok(n) = s.read(&mut buf) {
+                if n == 0 {
+                    return;
+                }
+                for &b in &buf[..n] {
+                    let Push::Frame(f) = deframer.push(b) else {
+                        continue;
+                    };
+                    match node.handle(f, &mut out, |_| {}) {
+                        Reply::Nothing => {}
+                        Reply::Send(len) => {
+                            let mut a: FromNode = decode(&mut out[..len - 1]).unwrap();
+                            if let FromNode::Decision(d) = &mut a {
+                                lie(d);
+                            }
+                            let len = encode(&a, &mut out).unwrap();
+                            s.write_all(&out[..len]).unwrap();
+                        }
+                        Reply::Finish => {
+                            let len = node.finish(0, &mut out).unwrap();
+                            let _ = s.write_all(&out[..len]);
+                            return;
+                        }
+                    }
+                }
+            }
+        })
+    }
+
+    fn sock(name: &str, m: usize) -> PathBuf {
+        std::env::temp_dir().join(format!("cs-node-{}-{name}-{m}.sock", std::process::id()))
+    }
+
+    /// Runs `steps` instants of `scenario` (seed 11) with software nodes, node 0 lying.
+    fn run(name: &str, scenario: &str, steps: u32, lie: fn(&mut Decision)) -> (LoopReport, u64) {
+        let sc = preset(scenario).unwrap();
+        let n = sc.nodes();
+        let threads: Vec<_> = (0..n)
+            .map(|m| software_node(sock(name, m), if m == 0 { lie } else { |_| {} }))
+            .collect();
+        let endpoints: Vec<_> = (0..n).map(|m| Endpoint::Unix(sock(name, m))).collect();
+        let s = Duration::from_secs(5);
+        let mut lp = NodeLoop::start(&*sc, 11, 0, &endpoints, s, s, &|| false).unwrap();
+        let mut slots = 0;
+        for _ in 0..steps {
+            slots += lp.next_instant().obs.len() as u64;
+            assert!(lp.failure().is_none(), "{:?}", lp.failure());
+        }
+        lp.finish();
+        for t in threads {
+            t.join().unwrap();
+        }
+        for m in 0..n {
+            let _ = std::fs::remove_file(sock(name, m));
+        }
+        (lp.report().clone(), slots)
+    }
+
+    #[test]
+    fn software_nodes_decide_as_channel_sim() {
+        let (r, slots) = run("same", "tobit-fusion", 300, |_| {});
+        assert_eq!((r.compared, r.equal, r.refused, slots), (900, 900, 0, 900));
+        assert_eq!((r.corrupt, r.stale, r.timeouts, r.resent), (0, 0, 0, 0));
+        let sent: u32 = r.nodes.iter().map(|s| s.unwrap().sent).sum();
+        assert_eq!(u64::from(sent), r.sent);
+    }
+
+    #[test]
+    fn a_node_that_sends_without_its_share_is_refused_not_forwarded() {
+        // Node 0 claims to have sent whenever it was blocked: the gateway's eq. (18) check
+        // refuses exactly those; the bucket is updated without them, so every other decision
+        // is still channel-sim's.
+        let (r, slots) = run("lie", "tobit-fusion", 300, |d| {
+            if d.blocked {
+                d.sent = true;
+                d.blocked = false;
+                d.y = [1.0, 1.0, 0.0, 0.0];
+            }
+        });
+        let sc = preset("tobit-fusion").unwrap();
+        let mut sim = sc.start(11, 0);
+        let blocked = (0..300)
+            .filter(|_| sim.next_instant().obs[0].flags & FLAG_TOKEN_BLOCKED != 0)
+            .count() as u64;
+        assert!(blocked > 0);
+        assert_eq!(r.refused, blocked, "{r:?}");
+        assert_eq!((r.compared, r.equal), (900 - blocked, 900 - blocked));
+        assert_eq!(slots, 900 - blocked);
+    }
+
+    #[test]
+    fn the_wrong_number_of_lines_is_refused_before_connecting() {
+        let sc = preset("tobit-fusion").unwrap();
+        let e = NodeLoop::start(
+            &*sc,
+            0,
+            0,
+            &[Endpoint::Unix("/nonexistent".into())],
+            Duration::ZERO,
+            Duration::from_secs(1),
+            &|| false,
+        )
+        .unwrap_err();
+        assert!(e.contains("3 node(s), 1 --sensor-node line(s)"), "{e}");
     }
 }

@@ -110,8 +110,12 @@ impl std::fmt::Debug for Link {
 
 impl Link {
     /// Connects, trying again until `give_up` while nobody listens yet (QEMU creates its
-    /// socket a moment after it starts).
-    pub fn connect(endpoint: &Endpoint, give_up: Instant) -> Result<Self, String> {
+    /// socket a moment after it starts), unless `stop` says to give up first.
+    pub fn connect(
+        endpoint: &Endpoint,
+        give_up: Instant,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Self, String> {
         loop {
             let r = match endpoint {
                 Endpoint::Unix(p) => UnixStream::connect(p).map(Stream::Unix),
@@ -136,6 +140,9 @@ impl Link {
                         ErrorKind::NotFound | ErrorKind::ConnectionRefused
                     ) && Instant::now() < give_up =>
                 {
+                    if stop() {
+                        return Err(format!("{endpoint}: stopped while waiting for the node"));
+                    }
                     std::thread::sleep(Duration::from_millis(20));
                 }
                 Err(e) => return Err(format!("{endpoint}: cannot connect: {e}")),
