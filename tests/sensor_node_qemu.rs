@@ -154,7 +154,15 @@ fn runner(dir: &Path, name: &str, p: &str, scenario: &str, seed: u64, steps: u32
 }
 
 /// The publisher on `p`, with `lines` as its sensor nodes (none: the simulated channel).
-fn publisher(dir: &Path, name: &str, p: &str, scenario: &str, seed: u64, steps: u32, lines: &[String]) -> Proc {
+fn publisher(
+    dir: &Path,
+    name: &str,
+    p: &str,
+    scenario: &str,
+    seed: u64,
+    steps: u32,
+    lines: &[String],
+) -> Proc {
     let (seed, steps) = (seed.to_string(), steps.to_string());
     let mut args: Vec<&str> = vec![
         "channel-sim",
@@ -183,7 +191,11 @@ fn reference(dir: &Path, scenario: &str, seed: u64, steps: u32) -> String {
     let mut run = runner(dir, "ref", &p, scenario, seed, steps);
     let mut publ = publisher(dir, "ref-pub", &p, scenario, seed, steps, &[]);
     assert!(run.wait(120).success(), "reference runner: {}", run.err());
-    assert!(publ.wait(60).success(), "reference publisher: {}", publ.err());
+    assert!(
+        publ.wait(60).success(),
+        "reference publisher: {}",
+        publ.err()
+    );
     std::fs::read_to_string(dir.join("ref.csv")).unwrap()
 }
 
@@ -282,7 +294,11 @@ fn estimates(csv: &str) -> Vec<Vec<&str>> {
         .collect();
     std::iter::once(head.clone())
         .chain(lines.map(|l| l.split(',').collect()))
-        .map(|row: Vec<&str>| keep.iter().map(|&i| row.get(i).copied().unwrap_or("")).collect())
+        .map(|row: Vec<&str>| {
+            keep.iter()
+                .map(|&i| row.get(i).copied().unwrap_or(""))
+                .collect()
+        })
         .collect()
 }
 
@@ -330,7 +346,10 @@ fn seed004_three_nodes_decide_as_channel_sim_and_the_estimates_are_bit_identical
     let sent: u64 = c.nodes.iter().map(|n| n[3]).sum();
     // The shared bucket (ξ₀ = 10, g = 5, c = 3, L = 3) lets at most 5/3 nodes' worth of
     // packets through per instant on average, plus the initial level.
-    assert!(sent > 0 && sent <= (10 + 5 * u64::from(steps)) / 3, "{sent}");
+    assert!(
+        sent > 0 && sent <= (10 + 5 * u64::from(steps)) / 3,
+        "{sent}"
+    );
     for n in &c.nodes {
         assert_eq!((n[0], n[1], n[2], n[4]), (2002, 0, 2000, 0), "{n:?}");
     }

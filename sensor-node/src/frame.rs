@@ -332,15 +332,9 @@ mod tests {
         // A FromNode frame is not a ToNode message (variant 3 with a Stats body is no
         // ToNode), and trailing bytes after one message are refused.
         let n = encode(&FromNode::Stats(NodeStats::default()), &mut buf).unwrap();
-        assert_eq!(
-            decode::<ToNode>(&mut buf[..n - 1]),
-            Err(FrameError::Decode)
-        );
+        assert_eq!(decode::<ToNode>(&mut buf[..n - 1]), Err(FrameError::Decode));
         let n = encode(&(ToNode::Finish, 7u8), &mut buf).unwrap();
-        assert_eq!(
-            decode::<ToNode>(&mut buf[..n - 1]),
-            Err(FrameError::Decode)
-        );
+        assert_eq!(decode::<ToNode>(&mut buf[..n - 1]), Err(FrameError::Decode));
     }
 }
 
@@ -369,7 +363,11 @@ mod sizes {
                 triggered: sent,
                 blocked: false,
                 censored: false,
-                y: if sent { [1.5, -0.25, 0.0, 0.0] } else { [0.0; 4] },
+                y: if sent {
+                    [1.5, -0.25, 0.0, 0.0]
+                } else {
+                    [0.0; 4]
+                },
             })
         };
         let dec = len(&|b| encode(&d(2000, true), b), &mut buf);

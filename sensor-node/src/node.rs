@@ -21,8 +21,8 @@ use estimator_core::protocol::token_bucket::{TokenBucket, TokenBucketConfig};
 use nalgebra::SVector;
 
 use crate::frame::{
-    decode, encode, Decision, FromNode, NodeConfig, NodeStats, Refusal, Sample, Schedule,
-    ToNode, LINK_VERSION, MAX_NY,
+    decode, encode, Decision, FromNode, NodeConfig, NodeStats, Refusal, Sample, Schedule, ToNode,
+    LINK_VERSION, MAX_NY,
 };
 
 type Vector = SVector<f64, MAX_NY>;
@@ -342,7 +342,10 @@ mod tests {
             assert_eq!((d.k, d.sent, d.blocked), (k as u32, w, !w));
             assert_eq!(d.y[0], if w { k as f64 } else { 0.0 });
             // The same sample again: the same answer, the bucket not stepped.
-            assert_eq!(ask(&mut node, &sample(k as u32)), Some(FromNode::Decision(d)));
+            assert_eq!(
+                ask(&mut node, &sample(k as u32)),
+                Some(FromNode::Decision(d))
+            );
         }
         assert_eq!(
             ask(&mut node, &sample(12)),
@@ -373,7 +376,11 @@ mod tests {
         // The protocol did not move: k = 0 is still the first decision.
         assert!(matches!(
             ask(&mut node, &sample(0)),
-            Some(FromNode::Decision(Decision { k: 0, sent: true, .. }))
+            Some(FromNode::Decision(Decision {
+                k: 0,
+                sent: true,
+                ..
+            }))
         ));
     }
 
@@ -389,13 +396,7 @@ mod tests {
         let ToNode::Configure(good) = bucket_config() else {
             unreachable!()
         };
-        assert_eq!(
-            refused(NodeConfig {
-                version: 9,
-                ..good
-            }),
-            Refusal::Version
-        );
+        assert_eq!(refused(NodeConfig { version: 9, ..good }), Refusal::Version);
         assert_eq!(refused(NodeConfig { ny: 5, ..good }), Refusal::Config);
         assert_eq!(
             refused(NodeConfig {

@@ -195,6 +195,9 @@ mod tests {
         assert_eq!((sigma, cost), (0.3, 3));
         assert_eq!(c.nodes[1].censor.unwrap()[..2], [0.0, 0.0]);
         let e = loop_config(&*preset("occlusion").unwrap()).unwrap_err();
-        assert!(e.contains("stage occlusion does not run on a sensor node"), "{e}");
+        assert!(
+            e.contains("stage occlusion does not run on a sensor node"),
+            "{e}"
+        );
     }
 }

@@ -26,8 +26,8 @@ use super::config::{loop_config, Bucket};
 use super::link::{Endpoint, Link, Received};
 use crate::scenario::composed::ComposedSimulation;
 use crate::sim::{
-    Instant, Observation, Scenario, Simulation, FLAG_CENSORED, FLAG_TOKEN_BLOCKED,
-    FLAG_TRIGGERED, MAX_NX,
+    Instant, Observation, Scenario, Simulation, FLAG_CENSORED, FLAG_TOKEN_BLOCKED, FLAG_TRIGGERED,
+    MAX_NX,
 };
 
 /// Times a sample is sent again before the node is given up.
@@ -214,11 +214,9 @@ impl NodeLoop {
     /// Ends every node's run and collects its own figures (best effort, one timeout each).
     pub fn finish(&mut self) {
         for m in 0..self.links.len() {
-            if let Ok(FromNode::Stats(s)) =
-                self.ask(m, &ToNode::Finish, self.timeout, |a| {
-                    matches!(a, FromNode::Stats(_))
-                })
-            {
+            if let Ok(FromNode::Stats(s)) = self.ask(m, &ToNode::Finish, self.timeout, |a| {
+                matches!(a, FromNode::Stats(_))
+            }) {
                 self.report.nodes[m] = Some(s);
             }
         }
@@ -393,7 +391,10 @@ impl NodeLoop {
             r.k == obs.k
                 && r.delivered == obs.delivered
                 && r.flags == obs.flags
-                && r.y.iter().zip(&obs.y).all(|(a, b)| a.to_bits() == b.to_bits())
+                && r.y
+                    .iter()
+                    .zip(&obs.y)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
         });
         if same {
             self.report.equal += 1;

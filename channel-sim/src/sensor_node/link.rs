@@ -135,10 +135,8 @@ impl Link {
                     })
                 }
                 Err(e)
-                    if matches!(
-                        e.kind(),
-                        ErrorKind::NotFound | ErrorKind::ConnectionRefused
-                    ) && Instant::now() < give_up =>
+                    if matches!(e.kind(), ErrorKind::NotFound | ErrorKind::ConnectionRefused)
+                        && Instant::now() < give_up =>
                 {
                     if stop() {
                         return Err(format!("{endpoint}: stopped while waiting for the node"));
