@@ -22,6 +22,7 @@
 #[path = "pipeline_common.rs"]
 mod common;
 #[path = "firmware_qemu/qemu.rs"]
+#[allow(dead_code)] // run_qemu: the estimator binaries' runner, not used here
 mod qemu;
 
 use common::{prefix, scratch, Proc};
@@ -252,6 +253,9 @@ fn counts(stderr: &str) -> Counts {
     }
 }
 
+/// Puts a proxy in front of a node's socket (in the scenario's directory): the proxy's socket.
+type Proxy = dyn Fn(&Path, &Path) -> PathBuf;
+
 /// The scenario's loop with its nodes on QEMU (through `proxy` for node 0 when given):
 /// the gateway's counts and the estimates.
 fn node_loop(
@@ -261,7 +265,7 @@ fn node_loop(
     seed: u64,
     steps: u32,
     nodes: usize,
-    proxy: Option<&dyn Fn(&Path, &Path) -> PathBuf>,
+    proxy: Option<&Proxy>,
 ) -> (Counts, String) {
     let p = prefix("sn-loop");
     let mut run = runner(dir, "loop", &p, scenario, seed, steps);
