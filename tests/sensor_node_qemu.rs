@@ -498,3 +498,144 @@ fn demo_with_sensor_nodes_runs_the_whole_loop() {
     assert!(o.contains("fused"), "the usual summary: {o}");
     assert!(out.join("estimates.csv").is_file());
 }
+
+/// Exit code and stderr of `pipeline-node <args>` (bounded).
+fn refused(dir: &Path, name: &str, args: &[&str]) -> (Option<i32>, String) {
+    let mut p = Proc::start(dir, name, args);
+    let code = p.wait(60).code();
+    let err = p.err();
+    assert!(!err.contains("panicked"), "{name}: {err}");
+    (code, err)
+}
+
+#[test]
+fn bad_sensor_node_flags_get_one_line_without_qemu() {
+    let dir = scratch("snflags");
+    let p = prefix("snflags");
+    let base = [
+        "channel-sim",
+        "--quiet",
+        "--prefix",
+        &p,
+        "--connect-timeout",
+        "1",
+    ];
+    let cases: &[(&[&str], i32, &str)] = &[
+        (
+            &[
+                "--scenario",
+                "nn-token-bucket",
+                "--sensor-node",
+                "/dev/ttyUSB0",
+            ],
+            2,
+            "--sensor-node",
+        ),
+        (
+            &["--scenario", "nn-token-bucket", "--sensor-node", "unix:"],
+            2,
+            "--sensor-node",
+        ),
+        (
+            &["--scenario", "occlusion", "--sensor-node", "unix:/x"],
+            2,
+            "stage occlusion",
+        ),
+        (
+            &["--scenario", "tobit-fusion", "--sensor-node", "unix:/x"],
+            2,
+            "3 node(s), 1",
+        ),
+        (
+            &[
+                "--scenario",
+                "nn-token-bucket",
+                "--sensor-node",
+                "unix:/x",
+                "--node",
+                "0",
+            ],
+            2,
+            "--node",
+        ),
+        (
+            &[
+                "--scenario",
+                "nn-token-bucket",
+                "--sensor-node",
+                "unix:/x",
+                "--node-timeout",
+                "0",
+            ],
+            2,
+            "--node-timeout",
+        ),
+        (
+            &[
+                "--scenario",
+                "nn-token-bucket",
+                "--sensor-node",
+                "unix:/x",
+                "--node-timeout",
+                "nan",
+            ],
+            2,
+            "--node-timeout",
+        ),
+        (
+            &[
+                "--scenario",
+                "nn-token-bucket",
+                "--sensor-node",
+                "unix:/x",
+                "--node-timeout",
+                "inf",
+            ],
+            2,
+            "--node-timeout",
+        ),
+        // Nobody on the line: said after --connect-timeout, exit 1.
+        (
+            &[
+                "--scenario",
+                "nn-token-bucket",
+                "--sensor-node",
+                "unix:/nonexistent/n.sock",
+            ],
+            1,
+            "cannot connect",
+        ),
+    ];
+    for (i, (args, want, needle)) in cases.iter().enumerate() {
+        let all = [&base[..], args].concat();
+        let (code, err) = refused(&dir, &format!("case{i}"), &all);
+        assert_eq!(code, Some(*want), "{args:?}: {err}");
+        let lines: Vec<&str> = err.lines().collect();
+        assert_eq!(lines.len(), 1, "{args:?}: not one line: {err}");
+        assert!(
+            lines[0].contains(needle),
+            "{args:?}: {needle:?} missing: {err}"
+        );
+    }
+    let out = dir.join("out");
+    let (code, err) = refused(
+        &dir,
+        "demo",
+        &[
+            "demo",
+            "--scenario",
+            "nn-token-bucket",
+            "--sensor-node",
+            "qemu",
+            "--node-firmware",
+            "/nonexistent/sensor-node",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("--node-firmware") && err.lines().count() == 1,
+        "{err}"
+    );
+}

@@ -363,6 +363,15 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
         crate::sensor_node::config::loop_config(&*scenario)
             .map_err(|e| estpipe_process::flags::BadInput(format!("--sensor-node: {e}")))?;
+        if endpoints.len() != scenario.nodes() {
+            return Err(estpipe_process::flags::BadInput(format!(
+                "--sensor-node: scenario {} has {} node(s), {} --sensor-node line(s) given",
+                scenario.name(),
+                scenario.nodes(),
+                endpoints.len()
+            ))
+            .into());
+        }
     }
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let nodes = u8::try_from(scenario.nodes()).context("too many nodes")?;
