@@ -10,8 +10,8 @@
 //! - the runner's estimates are the channel-sim-fed run's, bit for bit (the CSV prints the
 //!   shortest text that reads back to the same `f64`);
 //! - corrupt, truncated, overlong and merged frames injected on the node's line are counted
-//!   and skipped by the gateway, the sample is sent again, and the run goes on to the same
-//!   estimates;
+//!   and skipped by the gateway, a corrupt sample by the node, the sample is sent again, and
+//!   the run goes on to the same estimates;
 //! - `ipc-runner demo --sensor-node qemu` runs the whole loop with one command.
 //!
 //! Needs qemu-system-arm and the thumbv7em-none-eabihf target: skipped with one line where
@@ -364,11 +364,58 @@ const FLIP: usize = 10;
 const TRUNCATE: usize = 20;
 const GARBAGE: usize = 30;
 const MERGE: usize = 40;
+/// The gateway's frame (counted the same way) that reaches the node with a bit flipped:
+/// well after the node-side injections and their retransmissions, so a fresh sample.
+const INPUT_FLIP: usize = 100;
 
-/// A proxy on node 0's line: the gateway's bytes pass unchanged; of the node's frames (counted
-/// from 1, empty ones not counted) number FLIP gets a bit flipped, TRUNCATE loses its second
-/// half, GARBAGE is preceded by 600 bytes without a delimiter, MERGE loses its delimiter (it
-/// runs into the node's next frame). Four corrupt frames, as the gateway must count them.
+/// Flips a bit of a frame's middle byte, never to a zero (that would split the frame).
+fn flip(frame: &mut [u8]) {
+    let i = frame.len() / 2;
+    frame[i] ^= if frame[i] == 0x04 { 0x08 } else { 0x04 };
+}
+
+/// Copies frames from `from` to `to`, `change(index, frame, delimiter)` on each non-empty one
+/// (counted from 1), until either side closes.
+fn frames(
+    mut from: UnixStream,
+    mut to: UnixStream,
+    change: impl Fn(usize, &mut Vec<u8>, &mut Vec<u8>),
+) {
+    let mut frame = Vec::new();
+    let mut index = 0;
+    let mut buf = [0u8; 512];
+    while let Ok(n) = from.read(&mut buf) {
+        if n == 0 {
+            return;
+        }
+        for &b in &buf[..n] {
+            if b != 0 {
+                frame.push(b);
+                continue;
+            }
+            if frame.is_empty() {
+                if to.write_all(&[0]).is_err() {
+                    return;
+                }
+                continue;
+            }
+            index += 1;
+            let mut out = std::mem::take(&mut frame);
+            let mut end = vec![0u8];
+            change(index, &mut out, &mut end);
+            out.extend(end);
+            if to.write_all(&out).is_err() {
+                return;
+            }
+        }
+    }
+}
+
+/// A proxy on node 0's line. Of the node's frames (counted from 1, empty ones not counted)
+/// number FLIP gets a bit flipped, TRUNCATE loses its second half, GARBAGE is preceded by 600
+/// bytes without a delimiter, MERGE loses its delimiter (it runs into the node's next frame):
+/// four corrupt frames, as the gateway must count them. Of the gateway's frames, number
+/// INPUT_FLIP gets a bit flipped: one corrupt frame, as the node must count it.
 fn corrupting_proxy(dir: &Path, qemu_sock: &Path) -> PathBuf {
     let path = dir.join("proxy.sock");
     let listener = UnixListener::bind(&path).unwrap();
@@ -385,52 +432,26 @@ fn corrupting_proxy(dir: &Path, qemu_sock: &Path) -> PathBuf {
                 Err(_) => return,
             }
         };
-        let (mut g_in, mut n_out) = (gateway.try_clone().unwrap(), node.try_clone().unwrap());
+        let (g_in, n_out) = (gateway.try_clone().unwrap(), node.try_clone().unwrap());
         std::thread::spawn(move || {
-            let _ = std::io::copy(&mut g_in, &mut n_out);
+            frames(g_in, n_out, |i, f, _| {
+                if i == INPUT_FLIP {
+                    flip(f);
+                }
+            })
         });
-        let (mut n_in, mut g_out) = (node, gateway);
-        let mut frame = Vec::new();
-        let mut index = 0;
-        let mut buf = [0u8; 512];
-        while let Ok(n) = n_in.read(&mut buf) {
-            if n == 0 {
-                break;
+        frames(node, gateway, |i, f, end| match i {
+            FLIP => flip(f),
+            TRUNCATE => f.truncate(f.len() / 2),
+            GARBAGE => {
+                let mut g = vec![0x5a; 600];
+                g.push(0);
+                g.append(f);
+                *f = g;
             }
-            for &b in &buf[..n] {
-                if b != 0 {
-                    frame.push(b);
-                    continue;
-                }
-                if frame.is_empty() {
-                    let _ = g_out.write_all(&[0]);
-                    continue;
-                }
-                index += 1;
-                let mut out = std::mem::take(&mut frame);
-                let mut end = vec![0u8];
-                match index {
-                    FLIP => {
-                        // Never to a zero: that would split the frame in two.
-                        let i = out.len() / 2;
-                        out[i] ^= if out[i] == 0x04 { 0x08 } else { 0x04 };
-                    }
-                    TRUNCATE => out.truncate(out.len() / 2),
-                    GARBAGE => {
-                        let mut g = vec![0x5a; 600];
-                        g.push(0);
-                        g.append(&mut out);
-                        out = g;
-                    }
-                    MERGE => end.clear(),
-                    _ => {}
-                }
-                out.extend(end);
-                if g_out.write_all(&out).is_err() {
-                    return;
-                }
-            }
-        }
+            MERGE => end.clear(),
+            _ => {}
+        });
     });
     path
 }
@@ -455,13 +476,16 @@ fn corrupt_and_truncated_frames_are_counted_skipped_and_the_run_goes_on() {
     assert_same(&c, &est, &want, u64::from(steps) + 1);
     assert_eq!(c.forwarded, u64::from(steps) + 1);
     assert_eq!(c.corrupt, 4, "{c:?}");
-    // The merged frame has no end until the node's next frame: one wait to the deadline.
-    assert_eq!(c.timeouts, 1, "{c:?}");
-    // Every sample sent again was answered again by the node, without a second decision.
+    // Two waits to the deadline: the merged frame has no end until the node's next frame, and
+    // the node skips the corrupt sample without an answer.
+    assert_eq!(c.timeouts, 2, "{c:?}");
+    // The node counted the corrupt sample; every sample sent again after one of the node's
+    // corrupt frames was answered again without a second decision; the one sent again after
+    // the corrupt sample was the node's first (a fresh decision).
     let [_, bad, decided, _, repeats, _] = c.nodes[0];
-    assert_eq!((bad, decided), (0, u64::from(steps) + 1));
-    assert_eq!(repeats, c.resent);
-    assert!(c.resent >= 4 && c.stale <= c.resent, "{c:?}");
+    assert_eq!((bad, decided), (1, u64::from(steps) + 1));
+    assert_eq!(repeats + 1, c.resent, "{c:?}");
+    assert!(c.stale <= c.resent, "{c:?}");
 }
 
 #[test]
