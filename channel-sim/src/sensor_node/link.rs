@@ -126,13 +126,19 @@ impl Link {
             };
             match r {
                 Ok(stream) => {
+                    // A node that stops reading must not hold the gateway for ever.
+                    let t = Some(Duration::from_secs(10));
+                    let _ = match &stream {
+                        Stream::Unix(s) => s.set_write_timeout(t),
+                        Stream::Tcp(s) => s.set_write_timeout(t),
+                    };
                     return Ok(Self {
                         endpoint: endpoint.clone(),
                         stream,
                         deframer: Deframer::new(),
                         pending: Vec::with_capacity(512),
                         at: 0,
-                    })
+                    });
                 }
                 Err(e)
                     if matches!(e.kind(), ErrorKind::NotFound | ErrorKind::ConnectionRefused)
