@@ -456,7 +456,7 @@ mod tests {
     #[test]
     fn the_node_state_is_small() {
         // docs/sensor-node.md: "a fixed 256 bytes at most" (on the host, usize is 8 bytes).
-        assert!(core::mem::size_of::<SensorNode>() <= 256);
+        assert!(size_of::<SensorNode>() <= 256);
     }
 
     #[test]
