@@ -31,7 +31,8 @@
 
 use crate::backpressure::{Backpressure, Gate, Mode, BLOCK_SLICE};
 use crate::scenario;
-use crate::sim::MAX_NY;
+use crate::sensor_node::{Endpoint, NodeLoop};
+use crate::sim::{Simulation, MAX_NY};
 use crate::wire::{slot_of, stream_header};
 use anyhow::{bail, Context, Result};
 use estpipe_wire::services::SlotService;
@@ -70,6 +71,15 @@ pub struct PublisherArgs {
     /// publishes node 0 also publishes the truth.
     #[arg(long)]
     pub node: Option<u8>,
+    /// Sensor nodes on serial lines as the channel (docs/sensor-node.md): node m's line,
+    /// `unix:PATH` or `tcp:HOST:PORT`, once per node in node order. The plant runs here with
+    /// the seed's random numbers, each node decides from its raw samples, the slots carry the
+    /// nodes' decisions, and every decision is compared with the simulated channel's.
+    #[arg(long = "sensor-node", value_name = "LINE", conflicts_with = "node")]
+    pub sensor_node: Vec<String>,
+    /// Seconds to wait for a sensor node's answer before sending its sample again.
+    #[arg(long, default_value_t = 2.0, value_parser = estpipe_process::flags::seconds)]
+    pub node_timeout: f64,
     /// Service-name prefix (use distinct prefixes for parallel runs).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
@@ -294,6 +304,28 @@ fn wait_for_subscriber(
     Ok(true)
 }
 
+/// Where the instants come from: the simulated channel, or sensor nodes on serial lines.
+enum Source {
+    Simulated(Box<dyn Simulation>),
+    Nodes(Box<NodeLoop>),
+}
+
+impl Source {
+    fn sim(&mut self) -> &mut dyn Simulation {
+        match self {
+            Self::Simulated(s) => s.as_mut(),
+            Self::Nodes(n) => n.as_mut(),
+        }
+    }
+
+    fn failure(&self) -> Option<&str> {
+        match self {
+            Self::Simulated(_) => None,
+            Self::Nodes(n) => n.failure(),
+        }
+    }
+}
+
 /// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]).
 pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // The flags' parsers check these on the command line; a caller building the arguments
@@ -316,6 +348,31 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
     }
     let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
+    let endpoints = args
+        .sensor_node
+        .iter()
+        .map(|s| Endpoint::parse(s))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| estpipe_process::flags::BadInput(format!("--sensor-node {e}")))?;
+    if !endpoints.is_empty() {
+        if args.node_timeout <= 0.0 {
+            return Err(estpipe_process::flags::BadInput(
+                "--node-timeout: must be positive".to_string(),
+            )
+            .into());
+        }
+        crate::sensor_node::config::loop_config(&*scenario)
+            .map_err(|e| estpipe_process::flags::BadInput(format!("--sensor-node: {e}")))?;
+        if endpoints.len() != scenario.nodes() {
+            return Err(estpipe_process::flags::BadInput(format!(
+                "--sensor-node: scenario {} has {} node(s), {} --sensor-node line(s) given",
+                scenario.name(),
+                scenario.nodes(),
+                endpoints.len()
+            ))
+            .into());
+        }
+    }
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let nodes = u8::try_from(scenario.nodes()).context("too many nodes")?;
     if let Some(n) = args.node {
@@ -414,6 +471,35 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         discarded: 0,
     };
 
+    // Sensor nodes are connected and configured before the wait for a subscriber, so that a
+    // node that is not there is said at once.
+    let mut source = if endpoints.is_empty() {
+        Source::Simulated(scenario.start(args.seed, args.run))
+    } else {
+        // connect-timeout 0 means "wait for ever" for the subscriber; for a node's line, a day.
+        let connect = Duration::from_secs_f64(if args.connect_timeout > 0.0 {
+            args.connect_timeout
+        } else {
+            86_400.0
+        });
+        say(&format!(
+            "{} sensor node(s) on {}",
+            endpoints.len(),
+            args.sensor_node.join(", ")
+        ));
+        Source::Nodes(Box::new(
+            NodeLoop::start(
+                &*scenario,
+                args.seed,
+                args.run,
+                &endpoints,
+                connect,
+                Duration::from_secs_f64(args.node_timeout),
+                &|| gate.stop_requested(),
+            )
+            .map_err(anyhow::Error::msg)?,
+        ))
+    };
     say(&format!(
         "scenario {} (seed {}, run {}), {steps} instants × {} at {} on prefix {:?}; \
          waiting for a subscriber",
@@ -449,8 +535,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
     }
 
-    let mut sim = scenario.start(args.seed, args.run);
-    let x0 = sim.initial_truth();
+    let x0 = source.sim().initial_truth();
     send_truth(Truth::new(0, sid, nx, &x0))?;
 
     let t0 = wire::monotonic_ns();
@@ -473,7 +558,11 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             report.interrupted = true;
             break;
         }
-        let inst = sim.next_instant();
+        let inst = source.sim().next_instant();
+        if source.failure().is_some() {
+            report.interrupted = true;
+            break;
+        }
         let mut x = inst.truth;
         if hooks.nan_truth_at == Some(inst.k) {
             x[0] = f64::NAN;
@@ -575,6 +664,16 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         report.instants,
         report.slots
     ));
+
+    if let Source::Nodes(nodes) = &mut source {
+        nodes.finish();
+        for line in nodes.report().lines() {
+            estpipe_process::errln!("channel-sim: {line}");
+        }
+        if let Some(e) = nodes.failure() {
+            bail!("sensor node: {e}");
+        }
+    }
 
     // Keep the data segment alive until the subscriber has read the tail and detached.
     let start = std::time::Instant::now();
