@@ -76,9 +76,17 @@ pub struct PublisherArgs {
     /// Seconds to wait for a subscriber (at start and after losing one); 0 = forever.
     #[arg(long, default_value_t = 30.0, value_parser = estpipe_process::flags::seconds)]
     pub connect_timeout: f64,
-    /// Seconds to wait after the END marker for the subscriber to drain and detach.
+    /// Seconds to wait after the last instant for the subscriber to take the END markers,
+    /// drain and detach (one deadline for all of it).
     #[arg(long, default_value_t = 5.0, value_parser = estpipe_process::flags::seconds)]
     pub linger: f64,
+    /// Seconds a subscriber's full queue may hold a blocking send before it counts as a
+    /// subscriber that does not read: from then on a slot that finds its queue full is
+    /// dropped for it (counted, one line) instead of holding the run (0 = never).
+    #[arg(long, value_name = "SECONDS",
+          default_value_t = crate::backpressure::DEFAULT_UNREAD_LIMIT_S,
+          value_parser = estpipe_process::flags::seconds)]
+    pub unread_limit: f64,
     /// Test hook: write this format version into every slot.
     #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true)]
@@ -142,6 +150,11 @@ pub struct PublisherReport {
     pub discarded: u64,
     /// Sends that blocked for a whole slice and were sent again (`--backpressure block`).
     pub resent: u64,
+    /// Slots dropped for a subscriber that does not read (`--unread-limit`), one per slot
+    /// and such subscriber.
+    pub unread_dropped: u64,
+    /// Subscribers found not reading.
+    pub unread_subscribers: u32,
 }
 
 fn stream_id() -> u64 {
@@ -221,6 +234,7 @@ impl SlotSender<'_> {
         let mut last_check = std::time::Instant::now();
         let mut internal_errors = 0u32;
         loop {
+            self.gate.begin_send();
             let mut s = self.publisher.loan_uninit()?;
             *s.user_header_mut() = self.header;
             let mut out = s.write_payload(slot);
@@ -232,7 +246,10 @@ impl SlotSender<'_> {
                     self.discarded += self.subscribers().saturating_sub(n) as u64;
                     return Ok(Sent::Done);
                 }
-                Ok(n) if n >= self.subscribers() => return Ok(Sent::Done),
+                // A subscriber that does not read had the slot dropped (`--unread-limit`).
+                Ok(n) if n + self.gate.drops_this_send() >= self.subscribers() => {
+                    return Ok(Sent::Done)
+                }
                 Ok(_) => std::thread::sleep(NOT_CONNECTED_PAUSE),
                 // Any signal interrupts iceoryx2's wait inside a blocked send (SIGCONT too),
                 // which then reports an internal error rather than the signal: unless it was
@@ -262,6 +279,18 @@ impl SlotSender<'_> {
             }
             self.resent += 1;
         }
+    }
+}
+
+/// Says once per subscriber that it does not read (`--unread-limit`), and counts it.
+fn report_unread(gate: &Gate, report: &mut PublisherReport, say: &impl Fn(&str)) {
+    let new = gate.take_newly_unread();
+    if new > 0 {
+        report.unread_subscribers += new;
+        say(&format!(
+            "{new} subscriber(s) of the slots did not read for --unread-limit; slots are              dropped for them while their queue is full instead of holding the stream              ({} so far)",
+            gate.unread_drops()
+        ));
     }
 }
 
@@ -310,6 +339,11 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             estpipe_process::flags::seconds,
         ),
         ("--linger", args.linger, estpipe_process::flags::seconds),
+        (
+            "--unread-limit",
+            args.unread_limit,
+            estpipe_process::flags::seconds,
+        ),
     ] {
         if let Err(e) = check(&value.to_string()) {
             return Err(estpipe_process::flags::BadInput(format!("{flag}: {e}")).into());
@@ -349,6 +383,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let truth = wire::truth_service(&node, &args.prefix)?;
     let ready = wire::ready_event_service(&node, &args.prefix)?;
     let gate = Gate::new();
+    gate.set_unread_limit(args.unread_limit);
     if let Some(pid) = args.parent_pid {
         gate.set_parent(pid);
     }
@@ -515,6 +550,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
         notifier.notify()?;
         report.instants = i;
+        report_unread(&gate, &mut report, &say);
         // A dead subscriber stays registered (and keeps its queue) until someone cleans up.
         // After the send: the scan of the node directory (sub-millisecond) runs in the slack
         // before the next instant is due rather than between its due time and its send.
@@ -547,6 +583,8 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // The marker waits for room whatever the mode (bounded by --linger): a discarded END
     // would leave the runner waiting for its deadline.
     gate.set_mode(Mode::Final);
+    // One deadline for the markers and the linger after them (a subscriber that never
+    // leaves kept the publisher for both, one after the other).
     let give_up = std::time::Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));
     for m in (0..nodes).filter(|&m| mine(m)) {
         let marker = Slot {
@@ -557,6 +595,8 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         sender.send(marker, Some(give_up))?;
     }
     notifier.notify()?;
+    report_unread(&gate, &mut report, &say);
+    report.unread_dropped = gate.unread_drops();
     report.discarded = sender.discarded;
     report.resent = sender.resent;
     if report.discarded > 0 {
@@ -576,10 +616,10 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         report.slots
     ));
 
-    // Keep the data segment alive until the subscriber has read the tail and detached.
-    let start = std::time::Instant::now();
+    // Keep the data segment alive until the subscriber has read the tail and detached (a
+    // subscriber that does not read is not waited for).
     let mut last_cleanup = std::time::Instant::now();
-    while n_subs() > 0 && start.elapsed().as_secs_f64() < args.linger {
+    while n_subs() > gate.unread_receivers() && std::time::Instant::now() < give_up {
         if last_cleanup.elapsed() > Duration::from_millis(100) {
             let _ = node.try_cleanup_dead_nodes();
             last_cleanup = std::time::Instant::now();

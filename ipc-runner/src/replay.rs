@@ -5,7 +5,7 @@
 use crate::estimator_args::EstimatorArgs;
 use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use crate::run::select;
-use crate::slot_log::{read_slots_within, LoggedInstant};
+use crate::slot_log::{read_slots_within, Interrupted, LoggedInstant};
 use crate::source::Source;
 use crate::Estimator;
 use anyhow::{Context, Result};
@@ -51,7 +51,9 @@ pub struct ReplayArgs {
 }
 
 /// Steps `estimators` over `instants`; returns per-instant estimates (`nx` per estimator)
-/// and the rejected counts.
+/// and the rejected counts. Stops after the instant during which SIGINT/SIGTERM/SIGHUP
+/// arrived (`estpipe_process::signal`, when installed): the estimates cover the instants
+/// stepped, `len / (nx · estimators)` of them.
 pub fn run_estimators(
     estimators: &mut [Box<dyn Estimator>],
     instants: &[LoggedInstant],
@@ -60,7 +62,10 @@ pub fn run_estimators(
     let mut out = Vec::with_capacity(instants.len() * nx * estimators.len());
     let mut rejected = vec![0; estimators.len()];
     let mut x = [0.0; MAX_NX];
-    for (k, obs) in instants {
+    for (i, (k, obs)) in instants.iter().enumerate() {
+        if i % 1024 == 1023 && estpipe_process::signal::termination_requested() {
+            break;
+        }
         for (e, est) in estimators.iter_mut().enumerate() {
             if est.step(*k, obs).is_err() {
                 rejected[e] += 1;
@@ -72,10 +77,16 @@ pub fn run_estimators(
     (out, rejected)
 }
 
+/// Exit code of a replay SIGINT/SIGTERM/SIGHUP stopped (as `run`'s).
+pub const EXIT_INTERRUPTED: i32 = 130;
+
 /// `ipc-runner replay`: checks `--output` and the memory budget, reads the log (bounded),
 /// steps the estimators, prints and writes the estimates. Bad input (flags, scenario, the
 /// log's content, an unwritable output) is an error of [`BadInput`] (exit code 2).
 pub fn main(args: &ReplayArgs) -> Result<i32> {
+    // SIGINT/SIGTERM/SIGHUP set a flag from here on: a replay stops between rows or instants
+    // and writes whole rows of what it computed (issue #39: it was killed mid-row).
+    estpipe_process::signal::install();
     if let Some(p) = &args.output {
         let inputs = given(&[
             ("--input", Some(args.input.as_path())),
@@ -111,7 +122,10 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     };
     // The estimators' count, for the bytes per instant (the log gives the horizon).
     let n_est = factory(1)?()?.len() as u64;
-    let per_instant = size_of::<LoggedInstant>() as u64 + product(&[8, n_est, nx as u64]);
+    // The instants' vector is held while it grows (the old and the new block at once: at
+    // most 1.5 times its final size, `slot_log::read_slots_within`), then the estimates.
+    let per_instant =
+        size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
     // The particles must leave room for at least one instant, or the log's first row would
     // be refused as "beyond the row limit" without a word about the particles.
     budget.check(
@@ -119,10 +133,33 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         pf.saturating_add(per_instant),
     )?;
     let max_instants = budget.bytes.saturating_sub(pf) / per_instant;
-    let instants = read_slots_within(&args.input, nodes, ny, max_instants)?;
+    let instants = match read_slots_within(&args.input, nodes, ny, max_instants) {
+        Err(e) if e.downcast_ref::<Interrupted>().is_some() => {
+            estpipe_process::errln!(
+                "ipc-runner: replay stopped by {} ({e}); nothing stepped, nothing written",
+                estpipe_process::signal::termination_signal().unwrap_or("a signal")
+            );
+            return Ok(EXIT_INTERRUPTED);
+        }
+        r => r?,
+    };
     let make = factory(u32::try_from(instants.len()).unwrap_or(u32::MAX))?;
     let mut estimators = make()?;
     let (est, rejected) = run_estimators(&mut estimators, &instants, nx);
+    let stepped = if estimators.is_empty() || nx == 0 {
+        instants.len()
+    } else {
+        est.len() / (nx * estimators.len())
+    };
+    let interrupted = stepped < instants.len();
+    let instants = &instants[..stepped];
+    if interrupted {
+        estpipe_process::errln!(
+            "ipc-runner: replay stopped by {} after {stepped} instants; the estimates so far \
+             follow",
+            estpipe_process::signal::termination_signal().unwrap_or("a signal")
+        );
+    }
     let count = |f: &dyn Fn(&Observation) -> bool| -> usize {
         instants
             .iter()
@@ -174,6 +211,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         }
         writeln!(w)?;
         for (i, (k, _)) in instants.iter().enumerate() {
+            // Whole rows only; after the signal the rows computed are still written.
             write!(w, "{k}")?;
             for v in &est[i * nx * ne..(i + 1) * nx * ne] {
                 write!(w, ",{v:e}")?;
@@ -184,5 +222,5 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         w.flush().with_context(|| format!("cannot write {p:?}"))?;
         estpipe_process::outln!("estimates written to {p:?}");
     }
-    Ok(0)
+    Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
 }
