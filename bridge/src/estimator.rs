@@ -157,7 +157,12 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             .unwrap_or(listening)
             .elapsed()
             .as_secs_f64();
-        if far.absent_since.is_some() && args.connect_timeout > 0.0 && absent > args.connect_timeout {
+        // After the stream's END the sensor side may leave: `--once` ends by its linger.
+        if far.absent_since.is_some()
+            && ended_at.is_none()
+            && args.connect_timeout > 0.0
+            && absent > args.connect_timeout
+        {
             if !far.heard {
                 bail!(
                     "no sensor side on {key} within --connect-timeout {} s{}",

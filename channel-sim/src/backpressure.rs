@@ -23,7 +23,11 @@
 //! seconds, slice after slice, is *unread*. From then on a slot that finds its queue full is
 //! dropped for it at once (counted, [`Gate::unread_drops`]) instead of blocking the others;
 //! it still gets every slot its queue has room for. The publisher says so in one line per
-//! such subscriber. A runner stopped for longer than the limit is treated the same way: it
+//! such subscriber. A subscriber that never reads at all never connects to the publisher
+//! (iceoryx2 0.10 connects a subscriber on its reads), so its queue never blocks: `send()`
+//! just reaches one subscriber fewer than there are, and the slot went again and again
+//! (7 500 times a second). Such a shortfall that lasts `--unread-limit` is a subscriber that
+//! does not read too ([`Gate::set_unconnected`]). A runner stopped for longer than the limit is treated the same way: it
 //! loses (and counts as lost in the IPC) what its full queue could not take.
 
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
@@ -108,6 +112,9 @@ pub struct Gate {
     drops_this_send: AtomicU64,
     /// Receivers newly found unread, not yet reported.
     newly_unread: AtomicU32,
+    /// Subscribers that never connected to this publisher (they connect on their first
+    /// read) and missed slots for `--unread-limit`: not waited for any more.
+    unconnected: AtomicU32,
 }
 
 impl Gate {
@@ -151,11 +158,34 @@ impl Gate {
         self.newly_unread.swap(0, Ordering::Relaxed)
     }
 
-    /// Receivers treated as unread now.
+    /// Receivers treated as unread now (those that blocked and those that never connected).
     pub fn unread_receivers(&self) -> usize {
         self.blocked
             .lock()
             .map_or(0, |b| b.iter().filter(|r| r.unread).count())
+            + self.unconnected() as usize
+    }
+
+    /// `--unread-limit` (`None`: never).
+    pub fn unread_limit(&self) -> Option<Duration> {
+        match self.unread_limit_ns.load(Ordering::Relaxed) {
+            0 => None,
+            ns => Some(Duration::from_nanos(ns)),
+        }
+    }
+
+    /// Subscribers that never connected and are no longer waited for.
+    pub fn unconnected(&self) -> u32 {
+        self.unconnected.load(Ordering::Relaxed)
+    }
+
+    /// `n` subscribers never connected within `--unread-limit` (0: none, e.g. after the
+    /// subscriber count changed); reported once when it grows.
+    pub fn set_unconnected(&self, n: u32) {
+        let old = self.unconnected.swap(n, Ordering::Relaxed);
+        if n > old {
+            self.newly_unread.fetch_add(n - old, Ordering::Relaxed);
+        }
     }
 
     /// What a full queue of receiver `id` gets after `elapsed` of this delivery: `Some(true)`

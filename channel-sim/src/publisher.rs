@@ -210,11 +210,23 @@ struct SlotSender<'a> {
     resent: u64,
     /// Slots a subscriber did not receive in discard mode (one per slot and subscriber).
     discarded: u64,
+    /// The number of subscribers when some were found never to connect.
+    unconnected_at: Option<usize>,
 }
 
 impl SlotSender<'_> {
     fn subscribers(&self) -> usize {
         self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Subscribers that never connected and are not waited for; forgotten when the number
+    /// of subscribers changed since (one left, or a new one came, which is waited for).
+    fn unconnected(&mut self) -> usize {
+        if self.unconnected_at.is_some_and(|s| s != self.subscribers()) {
+            self.unconnected_at = None;
+            self.gate.set_unconnected(0);
+        }
+        self.gate.unconnected() as usize
     }
 
     /// Sends `slot` (a marker: until `give_up`, even after a termination request). Blocking,
@@ -233,6 +245,8 @@ impl SlotSender<'_> {
         let blocking = self.gate.mode() != Mode::Discard;
         let mut last_check = std::time::Instant::now();
         let mut internal_errors = 0u32;
+        // Since when this slot has reached fewer subscribers than there are.
+        let mut short_since: Option<std::time::Instant> = None;
         loop {
             self.gate.begin_send();
             let mut s = self.publisher.loan_uninit()?;
@@ -246,11 +260,29 @@ impl SlotSender<'_> {
                     self.discarded += self.subscribers().saturating_sub(n) as u64;
                     return Ok(Sent::Done);
                 }
-                // A subscriber that does not read had the slot dropped (`--unread-limit`).
-                Ok(n) if n + self.gate.drops_this_send() >= self.subscribers() => {
+                // A subscriber that does not read had the slot dropped (`--unread-limit`), or
+                // never connected and is no longer waited for.
+                Ok(n) if n + self.gate.drops_this_send() + self.unconnected() >= self.subscribers() => {
                     return Ok(Sent::Done)
                 }
-                Ok(_) => std::thread::sleep(NOT_CONNECTED_PAUSE),
+                Ok(n) => {
+                    let since = *short_since.get_or_insert_with(std::time::Instant::now);
+                    if self.gate.unread_limit().is_some_and(|l| since.elapsed() >= l) {
+                        let subs = self.subscribers();
+                        let missing = subs.saturating_sub(n + self.gate.drops_this_send());
+                        self.unconnected_at = Some(subs);
+                        self.gate.set_unconnected(missing as u32);
+                        return Ok(Sent::Done);
+                    }
+                    // Backing off: a runner connects on its next read, within microseconds;
+                    // one that does not read must not get thousands of duplicates.
+                    let tries = since.elapsed().as_micros() / NOT_CONNECTED_PAUSE.as_micros();
+                    std::thread::sleep(
+                        NOT_CONNECTED_PAUSE
+                            .saturating_mul(u32::try_from(tries).unwrap_or(u32::MAX).max(1) / 4 + 1)
+                            .min(MAX_NOT_CONNECTED_PAUSE),
+                    )
+                }
                 // Any signal interrupts iceoryx2's wait inside a blocked send (SIGCONT too),
                 // which then reports an internal error rather than the signal: unless it was
                 // a stop, the slot goes again. A cause that repeats on every try is not a
@@ -296,6 +328,9 @@ fn report_unread(gate: &Gate, report: &mut PublisherReport, say: &impl Fn(&str))
 
 /// Pause before sending a slot again that a not yet connected subscriber missed.
 const NOT_CONNECTED_PAUSE: Duration = Duration::from_micros(50);
+
+/// The pause grows with the time the slot has been short (a quarter of it), up to this.
+const MAX_NOT_CONNECTED_PAUSE: Duration = Duration::from_millis(10);
 
 /// Internal errors one blocked send tolerates (each is a wait that a signal interrupted)
 /// before the error counts as real.
@@ -447,6 +482,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         service: &slots,
         resent: 0,
         discarded: 0,
+        unconnected_at: None,
     };
 
     say(&format!(
