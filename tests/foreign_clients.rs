@@ -135,14 +135,42 @@ fn python_read_slots_is_bounded_and_names_file_and_line() {
     let Some(py) = python() else { return };
     let dir = scratch("py-read-slots");
     let cases = [
-        ("huge-k", "k,node,delivered,y_0\n1,0,1,0.5\n1000000000,0,1,0.5\n", "line 3: k:"),
-        ("bad-k", "k,node,delivered,y_0\n1,0,1,0.5\nabc,0,1,0.5\n", "line 3: k:"),
+        (
+            "huge-k",
+            "k,node,delivered,y_0\n1,0,1,0.5\n1000000000,0,1,0.5\n",
+            "line 3: k:",
+        ),
+        (
+            "bad-k",
+            "k,node,delivered,y_0\n1,0,1,0.5\nabc,0,1,0.5\n",
+            "line 3: k:",
+        ),
         ("bad-y", "k,node,delivered,y_0\n1,0,1,zz\n", "line 2: y_0:"),
-        ("dup", "k,node,delivered,y_0\n1,0,1,0.5\n1,0,1,0.5\n", "line 3: node:"),
-        ("order", "k,node,delivered,y_0\n5,0,1,0.5\n2,0,1,0.5\n", "line 3: k:"),
-        ("delivered", "k,node,delivered,y_0\n1,0,2,0.5\n", "line 2: delivered:"),
-        ("no-column", "k,node,y_0\n1,0,0.5\n", "line 1: header lacks column 'delivered'"),
-        ("flags", "k,node,delivered,flags,y_0\n1,0,1,-1,0.5\n", "line 2: flags:"),
+        (
+            "dup",
+            "k,node,delivered,y_0\n1,0,1,0.5\n1,0,1,0.5\n",
+            "line 3: node:",
+        ),
+        (
+            "order",
+            "k,node,delivered,y_0\n5,0,1,0.5\n2,0,1,0.5\n",
+            "line 3: k:",
+        ),
+        (
+            "delivered",
+            "k,node,delivered,y_0\n1,0,2,0.5\n",
+            "line 2: delivered:",
+        ),
+        (
+            "no-column",
+            "k,node,y_0\n1,0,0.5\n",
+            "line 1: header lacks column 'delivered'",
+        ),
+        (
+            "flags",
+            "k,node,delivered,flags,y_0\n1,0,1,-1,0.5\n",
+            "line 2: flags:",
+        ),
     ];
     for (name, text, want) in cases {
         let p = dir.join(format!("{name}.csv"));
@@ -157,7 +185,9 @@ fn python_read_slots_is_bounded_and_names_file_and_line() {
         let (code, out, err) = run_python(&py, &code);
         assert_eq!(code, Some(0), "{name}: {out}\n{err}");
         assert!(
-            out.starts_with("ValueError:") && out.contains(p.to_str().unwrap()) && out.contains(want),
+            out.starts_with("ValueError:")
+                && out.contains(p.to_str().unwrap())
+                && out.contains(want),
             "{name}: want a ValueError naming {p:?} and {want:?}, got {out}{err}"
         );
     }
@@ -223,7 +253,8 @@ fn python_publisher_reads_a_slot_log_as_replay_does() {
     let st = bad.wait(30);
     assert_eq!(st.code(), Some(2), "{}", bad.err());
     assert!(
-        bad.err().contains(&format!("{} line 3: node:", dup.display())),
+        bad.err()
+            .contains(&format!("{} line 3: node:", dup.display())),
         "{}",
         bad.err()
     );
@@ -493,8 +524,14 @@ fn python_publish_slots_loses_nothing_at_full_speed() {
         assert!(st.success(), "runner {st:?}: {}", run.err());
         let r = common::report(&json);
         assert_eq!(r["ending"], "completed", "run {i} (--wait {wait}): {r}");
-        assert_eq!(r["counts"]["lost_in_ipc"], 0, "run {i} (--wait {wait}): {r}");
-        assert_eq!(r["counts"]["received"], steps, "run {i} (--wait {wait}): {r}");
+        assert_eq!(
+            r["counts"]["lost_in_ipc"], 0,
+            "run {i} (--wait {wait}): {r}"
+        );
+        assert_eq!(
+            r["counts"]["received"], steps,
+            "run {i} (--wait {wait}): {r}"
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -4,10 +4,10 @@
 //! outgrows the budget, a bridge whose sensor side is gone or only pretends to be there, and
 //! `--quiet` hiding the one error line. Each test fails on the code before the issue.
 
-#[path = "pipeline_common.rs"]
-mod common;
 #[path = "bridge_common.rs"]
 mod bridge_common;
+#[path = "pipeline_common.rs"]
+mod common;
 
 use common::{prefix, scratch, Proc};
 use estpipe_wire as wire;
@@ -64,13 +64,13 @@ fn a_subscriber_that_never_reads_does_not_hold_a_full_speed_run() {
     let n = node();
     let slots = wire::slot_service(&n, &p).unwrap();
     // Held, never read.
-    let _foreign = slots
-        .subscriber_builder()
-        .buffer_size(16)
-        .create()
-        .unwrap();
+    let _foreign = slots.subscriber_builder().buffer_size(16).create().unwrap();
     let json = dir.join("r.json");
-    let mut run = Proc::start(&dir, "runner", &run_args(&p, "3000", &json, &["--wait", "block"]));
+    let mut run = Proc::start(
+        &dir,
+        "runner",
+        &run_args(&p, "3000", &json, &["--wait", "block"]),
+    );
     run.wait_for_stderr("waiting for channel-sim", 30);
     let t = Instant::now();
     let mut publ = Proc::start(
@@ -201,7 +201,11 @@ fn a_briefly_stopped_runner_follows_the_stream_to_its_end() {
     let dir = scratch("stopped-runner");
     let p = prefix("stopped-runner");
     let json = dir.join("r.json");
-    let mut run = Proc::start(&dir, "runner", &run_args(&p, "5000", &json, &["--wait", "block"]));
+    let mut run = Proc::start(
+        &dir,
+        "runner",
+        &run_args(&p, "5000", &json, &["--wait", "block"]),
+    );
     run.wait_for_stderr("waiting for channel-sim", 30);
     let mut publ = Proc::start(&dir, "publisher", &channel_sim(&p, "5000", "2000", &[]));
     std::thread::sleep(Duration::from_millis(700));
@@ -234,7 +238,12 @@ fn max_gap_is_bounded() {
     let mut run = Proc::start(
         &dir,
         "runner",
-        &run_args(&p, "10", &json, &["--max-gap", "4294967295", "--connect-timeout", "1"]),
+        &run_args(
+            &p,
+            "10",
+            &json,
+            &["--max-gap", "4294967295", "--connect-timeout", "1"],
+        ),
     );
     let st = run.wait(30);
     assert_eq!(st.code(), Some(2), "{}", run.err());
@@ -308,7 +317,8 @@ fn replay_counts_the_growth_of_its_instants_in_the_budget() {
     let dir = scratch("replay-budget");
     let log = dir.join("log.csv");
     std::fs::write(&log, "k,node,delivered,y_0\n1,0,1,0.5\n5000000,0,1,0.5\n").unwrap();
-    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel-sim/scenarios/example.toml");
+    let config =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../channel-sim/scenarios/example.toml");
     let cmd = format!(
         "ulimit -v 3000000 && exec {:?} replay --config {:?} --input {:?}",
         common::node_exe(),
@@ -322,7 +332,10 @@ fn replay_counts_the_growth_of_its_instants_in_the_budget() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{:?}: {err}", o.status);
-    assert!(err.contains("line 3: k: k = 5000000") && err.contains("the budget holds"), "{err}");
+    assert!(
+        err.contains("line 3: k: k = 5000000") && err.contains("the budget holds"),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -376,7 +389,8 @@ fn a_rogue_liveliness_token_does_not_keep_the_estimator_side_waiting() {
     );
     est.wait_for_stderr("listening on", 30);
     let mut cfg = zenoh::Config::default();
-    cfg.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
     cfg.insert_json5(
         "connect/endpoints",
         &serde_json::to_string(&[&c.endpoint]).unwrap(),
@@ -396,7 +410,10 @@ fn a_rogue_liveliness_token_does_not_keep_the_estimator_side_waiting() {
         "{}",
         est.err()
     );
-    eprintln!("rogue token: the estimator side gave up after {:?}", t.elapsed());
+    eprintln!(
+        "rogue token: the estimator side gave up after {:?}",
+        t.elapsed()
+    );
 }
 
 /// Item 15: the sensor side killed mid-stream; the estimator side (`--connect-timeout 2`)
@@ -438,5 +455,45 @@ fn the_estimator_side_gives_up_a_sensor_side_gone_for_the_connect_timeout() {
     let r = c.report("bridge-estimator.json");
     assert_eq!(r["ending"], "the sensor side was lost", "{r}");
     assert!(r["slots"].as_u64().unwrap() > 0, "{r}");
-    eprintln!("sensor side killed: the estimator side ended after {:?}", t.elapsed());
+    eprintln!(
+        "sensor side killed: the estimator side ended after {:?}",
+        t.elapsed()
+    );
+}
+
+/// Item 16 (another): on a full disk the CSV writers' errors did not name the file. Every
+/// output goes to `/dev/full`; the run still ends with its one error line, which names each.
+#[test]
+fn a_full_disk_names_the_file_that_could_not_be_written() {
+    let dir = scratch("full-disk");
+    let p = prefix("full-disk");
+    let mut run = Proc::start(
+        &dir,
+        "runner",
+        &[
+            "run",
+            "--scenario",
+            "linear",
+            "--prefix",
+            &p,
+            "--steps",
+            "3000",
+            "--wait",
+            "block",
+            "--estimates-csv",
+            "/dev/full",
+        ],
+    );
+    run.wait_for_stderr("waiting for channel-sim", 30);
+    let mut publ = Proc::start(&dir, "publisher", &channel_sim(&p, "3000", "0", &[]));
+    assert!(publ.wait(30).success(), "{}", publ.err());
+    let st = run.wait(30);
+    let err = run.err();
+    assert!(!st.success(), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("error"))
+        .unwrap_or_else(|| panic!("no error line: {err}"));
+    assert!(line.contains("/dev/full"), "{line}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

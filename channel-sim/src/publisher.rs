@@ -262,12 +262,19 @@ impl SlotSender<'_> {
                 }
                 // A subscriber that does not read had the slot dropped (`--unread-limit`), or
                 // never connected and is no longer waited for.
-                Ok(n) if n + self.gate.drops_this_send() + self.unconnected() >= self.subscribers() => {
+                Ok(n)
+                    if n + self.gate.drops_this_send() + self.unconnected()
+                        >= self.subscribers() =>
+                {
                     return Ok(Sent::Done)
                 }
                 Ok(n) => {
                     let since = *short_since.get_or_insert_with(std::time::Instant::now);
-                    if self.gate.unread_limit().is_some_and(|l| since.elapsed() >= l) {
+                    if self
+                        .gate
+                        .unread_limit()
+                        .is_some_and(|l| since.elapsed() >= l)
+                    {
                         let subs = self.subscribers();
                         let missing = subs.saturating_sub(n + self.gate.drops_this_send());
                         self.unconnected_at = Some(subs);

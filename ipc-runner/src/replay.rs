@@ -124,8 +124,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     let n_est = factory(1)?()?.len() as u64;
     // The instants' vector is held while it grows (the old and the new block at once: at
     // most 1.5 times its final size, `slot_log::read_slots_within`), then the estimates.
-    let per_instant =
-        size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
+    let per_instant = size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
     // The particles must leave room for at least one instant, or the log's first row would
     // be refused as "beyond the row limit" without a word about the particles.
     budget.check(
@@ -203,20 +202,20 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         let mut w = std::io::BufWriter::new(
             std::fs::File::create(p).with_context(|| format!("cannot create {p:?}"))?,
         );
-        write!(w, "k")?;
+        write!(w, "k").with_context(|| format!("cannot write {p:?}"))?;
         for e in &estimators {
             for j in 0..nx {
-                write!(w, ",{}_{j}", e.name())?;
+                write!(w, ",{}_{j}", e.name()).with_context(|| format!("cannot write {p:?}"))?;
             }
         }
-        writeln!(w)?;
+        writeln!(w).with_context(|| format!("cannot write {p:?}"))?;
         for (i, (k, _)) in instants.iter().enumerate() {
             // Whole rows only; after the signal the rows computed are still written.
-            write!(w, "{k}")?;
+            write!(w, "{k}").with_context(|| format!("cannot write {p:?}"))?;
             for v in &est[i * nx * ne..(i + 1) * nx * ne] {
-                write!(w, ",{v:e}")?;
+                write!(w, ",{v:e}").with_context(|| format!("cannot write {p:?}"))?;
             }
-            writeln!(w)?;
+            writeln!(w).with_context(|| format!("cannot write {p:?}"))?;
         }
         // Dropping a BufWriter loses its last error: a full disk must fail the command.
         w.flush().with_context(|| format!("cannot write {p:?}"))?;

@@ -35,11 +35,11 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
     let mut w = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
     );
-    write!(w, "k,node,delivered,flags")?;
+    write!(w, "k,node,delivered,flags").with_context(|| format!("cannot write {path:?}"))?;
     for j in 0..ny {
-        write!(w, ",y_{j}")?;
+        write!(w, ",y_{j}").with_context(|| format!("cannot write {path:?}"))?;
     }
-    writeln!(w)?;
+    writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
     for o in slots {
         write!(
             w,
@@ -51,12 +51,12 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
         )?;
         for j in 0..ny {
             if o.delivered {
-                write!(w, ",{:e}", o.y[j])?;
+                write!(w, ",{:e}", o.y[j]).with_context(|| format!("cannot write {path:?}"))?;
             } else {
-                write!(w, ",")?;
+                write!(w, ",").with_context(|| format!("cannot write {path:?}"))?;
             }
         }
-        writeln!(w)?;
+        writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
     }
     // Dropping a BufWriter loses its last error: a full disk must fail the write.
     w.flush()

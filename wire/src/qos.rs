@@ -85,7 +85,11 @@ impl QosLimit {
     pub fn exceeded_by(&self, have: &QosLimit) -> Option<String> {
         [
             ("max_publishers", have.max_publishers, self.max_publishers),
-            ("max_subscribers", have.max_subscribers, self.max_subscribers),
+            (
+                "max_subscribers",
+                have.max_subscribers,
+                self.max_subscribers,
+            ),
             (
                 "subscriber_max_buffer_size",
                 have.subscriber_max_buffer_size,

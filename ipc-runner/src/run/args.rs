@@ -249,8 +249,7 @@ impl RunArgs {
         let shm = if self.no_publish_estimates || self.latest_estimates {
             0
         } else {
-            wire::services::QOS_LIMIT
-                .segment_bytes(size_of::<wire::Estimate>(), ESTIMATE_LOANS)
+            wire::services::QOS_LIMIT.segment_bytes(size_of::<wire::Estimate>(), ESTIMATE_LOANS)
         };
         Budget::mib(self.max_memory).check(
             &(format!(

@@ -49,7 +49,12 @@ impl StreamClock {
 
 /// The farthest node `k` may advance with `slot` (received at `recv_ns`): `max_gap`, plus
 /// the periods between the node's last send and this one's.
-pub(super) fn gap_bound(max_gap: u32, clock: Option<StreamClock>, slot: &Slot, recv_ns: u64) -> u64 {
+pub(super) fn gap_bound(
+    max_gap: u32,
+    clock: Option<StreamClock>,
+    slot: &Slot,
+    recv_ns: u64,
+) -> u64 {
     let base = u64::from(max_gap);
     match (clock, super::usable_send_ns(slot, recv_ns)) {
         (Some(c), Some(now)) => {
