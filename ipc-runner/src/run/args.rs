@@ -71,7 +71,7 @@ pub struct RunArgs {
     pub deadline_ms: f64,
     /// Instants a node's k (or its END/ABORT's) may advance past its last instant; the gap is
     /// filled with lost slots, a larger jump is a counted stream error (docs/wire.md).
-    /// At most [`MAX_MAX_GAP`]: the gap is stepped instant by instant.
+    /// At most 1000000: every instant of a gap is stepped.
     #[arg(long, default_value_t = super::assemble::DEFAULT_MAX_GAP,
           value_parser = clap::value_parser!(u32).range(0..=MAX_MAX_GAP as i64))]
     pub max_gap: u32,
