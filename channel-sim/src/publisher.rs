@@ -327,7 +327,9 @@ fn report_unread(gate: &Gate, report: &mut PublisherReport, say: &impl Fn(&str))
     if new > 0 {
         report.unread_subscribers += new;
         say(&format!(
-            "{new} subscriber(s) of the slots did not read for --unread-limit; slots are              dropped for them while their queue is full instead of holding the stream              ({} so far)",
+            "{new} subscriber(s) of the slots did not read for --unread-limit; slots are \
+             dropped for them while their queue is full instead of holding the stream \
+             ({} so far)",
             gate.unread_drops()
         ));
     }

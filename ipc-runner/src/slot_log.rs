@@ -235,7 +235,8 @@ pub fn read_slots_within(
                 at(
                     "k",
                     format!(
-                        "k = {k}: cannot allocate {want} instants ({e}); --max-memory MIB                          lowers the budget"
+                        "k = {k}: cannot allocate {want} instants ({e}); --max-memory MIB \
+                         lowers the budget"
                     ),
                 )
             })?;

@@ -143,7 +143,11 @@ fn within_limit(
     match QOS_LIMIT.exceeded_by(&have) {
         None => Ok(()),
         Some(what) => Err(ContractError::Refused(format!(
-            "service {name} was created with {what}, above what this side accepts              (max_publishers ≤ {}, max_subscribers ≤ {}, subscriber_max_buffer_size ≤ {},              subscriber_max_borrowed_samples ≤ {}, history_size ≤ {}, max_nodes ≤ {}: its              publishers would preallocate that much shared memory); remove it (stop the process              that created it) or use another --prefix (docs/wire.md, Services and QoS)",
+            "service {name} was created with {what}, above what this side accepts \
+             (max_publishers ≤ {}, max_subscribers ≤ {}, subscriber_max_buffer_size ≤ {}, \
+             subscriber_max_borrowed_samples ≤ {}, history_size ≤ {}, max_nodes ≤ {}: its \
+             publishers would preallocate that much shared memory); remove it (stop the process \
+             that created it) or use another --prefix (docs/wire.md, Services and QoS)",
             QOS_LIMIT.max_publishers,
             QOS_LIMIT.max_subscribers,
             QOS_LIMIT.subscriber_max_buffer_size,
@@ -216,7 +220,8 @@ pub fn latest_estimates_board(
 /// The end of the line refusing a latest-estimate blackboard left by an earlier run whose
 /// entries are not this runner's estimators.
 pub const LATEST_ENTRIES_DIFFER: &str =
-    "it was created by an earlier runner with other estimators and is kept by a reader still      open: close that reader (or use another --prefix)";
+    "it was created by an earlier runner with other estimators and is kept by a reader still \
+     open: close that reader (or use another --prefix)";
 
 /// Opens (or creates) the event service notified with [`READY_EVENT`] after each instant.
 pub fn ready_event_service(

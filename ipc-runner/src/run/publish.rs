@@ -39,7 +39,8 @@ impl LatestBoard {
         // prefix, alive (a dead one's port was cleaned up when this node started).
         let writer = service.writer_builder().create().map_err(|e| {
             wire::ContractError::Refused(format!(
-                "cannot write the blackboard {board} ({e:?}): another runner with                  --latest-estimates is using this --prefix; stop it or use another --prefix"
+                "cannot write the blackboard {board} ({e:?}): another runner with \
+                 --latest-estimates is using this --prefix; stop it or use another --prefix"
             ))
         })?;
         let entries = (0..names.len() as u32)
