@@ -43,9 +43,9 @@ pub fn write_slots(
     let mut w = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
     );
-    write!(w, "k,node,delivered,flags")?;
+    write!(w, "k,node,delivered,flags").with_context(|| format!("cannot write {path:?}"))?;
     for j in 0..ny {
-        write!(w, ",y_{j}")?;
+        write!(w, ",y_{j}").with_context(|| format!("cannot write {path:?}"))?;
     }
     let mut after = vec![
         0u32;
@@ -62,10 +62,10 @@ pub fn write_slots(
     }
     let mut order: Vec<usize> = (0..slots.len()).collect();
     if !after.is_empty() {
-        write!(w, ",late_after")?;
+        write!(w, ",late_after").with_context(|| format!("cannot write {path:?}"))?;
         order.sort_by_key(|&i| slots[i].k);
     }
-    writeln!(w)?;
+    writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
     for i in order {
         let o = &slots[i];
         write!(
@@ -78,21 +78,33 @@ pub fn write_slots(
         )?;
         for j in 0..ny {
             if o.delivered {
-                write!(w, ",{:e}", o.y[j])?;
+                write!(w, ",{:e}", o.y[j]).with_context(|| format!("cannot write {path:?}"))?;
             } else {
-                write!(w, ",")?;
+                write!(w, ",").with_context(|| format!("cannot write {path:?}"))?;
             }
         }
         if let Some(a) = after.get(i) {
-            write!(w, ",{a}")?;
+            write!(w, ",{a}").with_context(|| format!("cannot write {path:?}"))?;
         }
-        writeln!(w)?;
+        writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
     }
     // Dropping a BufWriter loses its last error: a full disk must fail the write.
     w.flush()
         .with_context(|| format!("cannot write {path:?}"))?;
     Ok(())
 }
+
+/// Reading stopped at this line on SIGINT/SIGTERM/SIGHUP.
+#[derive(Debug)]
+pub struct Interrupted(pub u64);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted while reading line {}", self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
 
 /// One instant as read from a slot log: k and every node's observation.
 pub type LoggedInstant = (u32, heapless::Vec<Observation, MAX_NODES>);
@@ -185,6 +197,10 @@ pub fn read_slots_within(
     // The line of each node's row in the current instant (0: none yet).
     let mut seen = [0u64; MAX_NODES];
     while let Some((ln, line)) = lines.next_line()? {
+        // SIGINT/SIGTERM while a long log is read (`replay` installs the flag).
+        if ln % 65_536 == 0 && estpipe_process::signal::termination_requested() {
+            return Err(anyhow::Error::new(Interrupted(ln)));
+        }
         if line.trim().is_empty() {
             continue;
         }
@@ -261,6 +277,24 @@ pub fn read_slots_within(
             ));
         }
         seen[node] = ln;
+        // Grown by doubling, but never past the budget's instants, and fallibly: a plain
+        // push doubled a 5-million-instant log to 8.4 million (3.36 GB) and aborted.
+        let need = k as usize;
+        if out.capacity() < need {
+            let want = need
+                .max(out.capacity().saturating_mul(2))
+                .min(usize::try_from(max_instants).unwrap_or(usize::MAX))
+                .max(need);
+            out.try_reserve_exact(want - out.len()).map_err(|e| {
+                at(
+                    "k",
+                    format!(
+                        "k = {k}: cannot allocate {want} instants ({e}); --max-memory MIB \
+                         lowers the budget"
+                    ),
+                )
+            })?;
+        }
         while out.last().map_or(0, |(lk, _)| *lk) < k {
             let next = out.last().map_or(1, |(lk, _)| lk + 1);
             out.push((next, blank(next)));

@@ -36,6 +36,7 @@ use estpipe_wire::{
 };
 use estpipe_wire::{MAX_NODES, MAX_NY};
 
+mod clock;
 mod counts;
 
 pub use counts::{Anomalies, Counts, Reason, Skipped};
@@ -116,6 +117,8 @@ struct NodeStream {
     next_k: u64,
     /// The node's END/ABORT: its last instant and whether it was an ABORT.
     end: Option<(u64, bool)>,
+    /// Its send clock, which may vouch for a jump past `--max-gap` ([`clock`]).
+    clock: Option<clock::StreamClock>,
 }
 
 /// One pending instant.
@@ -251,6 +254,7 @@ impl Assembler {
             n.sid = None;
             n.end = None;
             n.next_k = 1;
+            n.clock = None;
         }
         for p in self.ring.iter_mut() {
             p.known = 0;
@@ -385,7 +389,8 @@ impl Assembler {
         }
         // From what is still pending: a node that fell behind (its slots given up) may come
         // back.
-        if k - next.max(self.base) > u64::from(self.limits.max_gap) || !self.make_room(k, m, emit) {
+        let bound = clock::gap_bound(self.limits.max_gap, self.node[m].clock, slot, recv_ns);
+        if k - next.max(self.base) > bound || !self.make_room(k, m, bound, emit) {
             return self.skip(Reason::Gap);
         }
         if slot.period_ns > MAX_PERIOD_NS {
@@ -440,6 +445,7 @@ impl Assembler {
         };
         self.set(k, m, obs, recv_ns);
         self.node[m].next_k = k + 1;
+        self.node[m].clock = clock::StreamClock::after(self.node[m].clock, slot, recv_ns);
         self.advance(emit);
         self.expire(recv_ns, emit);
         pushed
@@ -511,9 +517,10 @@ impl Assembler {
         let m = usize::from(slot.node);
         let k = u64::from(slot.k);
         let last = self.node[m].next_k.max(self.base) - 1;
+        let bound = clock::gap_bound(self.limits.max_gap, self.node[m].clock, slot, recv_ns);
         if k + 1 < self.node[m].next_k
-            || k.saturating_sub(last) > u64::from(self.limits.max_gap)
-            || !self.make_room(k, m, emit)
+            || k.saturating_sub(last) > bound
+            || !self.make_room(k, m, bound, emit)
         {
             return self.skip(Reason::Marker);
         }
@@ -572,13 +579,19 @@ impl Assembler {
     }
 
     /// Makes instant `k` fit the window, handing on the oldest instants without their
-    /// missing slots; `false` if that would take more than `--max-gap` instants.
-    fn make_room(&mut self, k: u64, m: usize, emit: &mut impl FnMut(u32, &[Observation])) -> bool {
+    /// missing slots; `false` if that would take more than `bound` instants.
+    fn make_room(
+        &mut self,
+        k: u64,
+        m: usize,
+        bound: u64,
+        emit: &mut impl FnMut(u32, &[Observation]),
+    ) -> bool {
         let top = self.base + WINDOW as u64 - 1;
         if k <= top {
             return true;
         }
-        if k - top > u64::from(self.limits.max_gap) {
+        if k - top > bound {
             return false;
         }
         for _ in 0..k - top {

@@ -460,10 +460,12 @@ impl Loop<'_> {
     fn missed(&mut self, now: u64) -> Option<Ending> {
         let args = self.args;
         let Some(t_last) = self.deadline.last_data_ns else {
-            self.say(&format!(
-                "no data from channel-sim on prefix {:?} within {} s",
-                args.prefix, args.connect_timeout
-            ));
+            // The run's only line about why it failed: said also under --quiet.
+            estpipe_process::errln!(
+                "ipc-runner: no data from channel-sim on prefix {:?} within {} s",
+                args.prefix,
+                args.connect_timeout
+            );
             return Some(Ending::PublisherLost);
         };
         // The runner itself was late (stopped, not scheduled): the slots are there.

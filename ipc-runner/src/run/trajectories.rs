@@ -85,17 +85,17 @@ impl Trajectories {
                 head.push_str(&format!(",{n}_{j}"));
             }
         }
-        writeln!(w, "{head}")?;
+        writeln!(w, "{head}").with_context(|| format!("cannot write {path:?}"))?;
         let ne = self.names.len();
         for (i, (session, k)) in self.keys.iter().enumerate() {
-            write!(w, "{session},{k}")?;
+            write!(w, "{session},{k}").with_context(|| format!("cannot write {path:?}"))?;
             for v in &self.truth[i * self.nx..(i + 1) * self.nx] {
-                write!(w, ",{v:e}")?;
+                write!(w, ",{v:e}").with_context(|| format!("cannot write {path:?}"))?;
             }
             for v in &self.estimates[i * self.nx * ne..(i + 1) * self.nx * ne] {
-                write!(w, ",{v:e}")?;
+                write!(w, ",{v:e}").with_context(|| format!("cannot write {path:?}"))?;
             }
-            writeln!(w)?;
+            writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
         }
         // Dropping a BufWriter loses its last error: a full disk must fail the write.
         w.flush()
@@ -113,10 +113,12 @@ impl Trajectories {
         let mut w = std::io::BufWriter::new(
             std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
         );
-        writeln!(w, "session,k,t_s,transport_us,end_to_end_us")?;
+        writeln!(w, "session,k,t_s,transport_us,end_to_end_us")
+            .with_context(|| format!("cannot write {path:?}"))?;
         for ((session, k), tr) in self.keys.iter().zip(&self.timing) {
             let (t_s, transport, e2e) = self.latency_point(tr);
-            writeln!(w, "{session},{k},{t_s:.6},{transport:.3},{e2e:.3}")?;
+            writeln!(w, "{session},{k},{t_s:.6},{transport:.3},{e2e:.3}")
+                .with_context(|| format!("cannot write {path:?}"))?;
         }
         w.flush()
             .with_context(|| format!("cannot write {path:?}"))?;
