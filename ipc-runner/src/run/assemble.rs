@@ -38,6 +38,7 @@ use estpipe_wire::{MAX_NODES, MAX_NY};
 
 mod clock;
 mod counts;
+mod late;
 
 pub use counts::{Anomalies, Counts, Reason, Skipped};
 
@@ -449,28 +450,6 @@ impl Assembler {
         self.advance(emit);
         self.expire(recv_ns, emit);
         pushed
-    }
-
-    /// The slot's measurement, zero-padded (zero when it has none).
-    fn measurement(&self, slot: &Slot) -> [f64; MAX_NY] {
-        let mut y = [0.0; MAX_NY];
-        if let Some(v) = slot.measurement() {
-            y[..v.len()].copy_from_slice(v);
-        }
-        y
-    }
-
-    /// The slot of the last [`Pushed::Late`], as its instant's observations: every other node
-    /// lost (`FLAG_IPC_LOST`), what the estimators' `fold_late` takes. `None` after the first
-    /// call.
-    pub fn take_late(&mut self, out: &mut [Observation; MAX_NODES]) -> Option<(u32, usize)> {
-        let o = self.late.take()?;
-        let nodes = usize::from(self.nodes);
-        for (n, d) in out.iter_mut().enumerate().take(nodes) {
-            *d = Observation::dropped(o.k, n as u8, self.ny[n], FLAG_IPC_LOST);
-        }
-        out[usize::from(o.node)] = o;
-        Some((o.k, nodes))
     }
 
     /// The first slot of a session: whether this runner saw the stream start, and where the
