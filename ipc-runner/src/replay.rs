@@ -260,5 +260,16 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         w.flush().with_context(|| format!("cannot write {p:?}"))?;
         estpipe_process::outln!("estimates written to {p:?}");
     }
+    if !interrupted && estpipe_process::signal::termination_requested() {
+        // The signal came after the last instant was stepped: nothing was left out, but the
+        // user asked to stop and a script must see it (exit 130, as when stepping stopped).
+        estpipe_process::errln!(
+            "ipc-runner: replay stopped by {} after all {} instants were stepped; every \
+             estimate was written",
+            estpipe_process::signal::termination_signal().unwrap_or("a signal"),
+            instants.len()
+        );
+        return Ok(EXIT_INTERRUPTED);
+    }
     Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
 }
