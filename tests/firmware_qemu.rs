@@ -102,6 +102,22 @@ const BINS: &[(&str, HostRun, usize, usize)] = &[
         48 * 1024,
         8 * 1024,
     ),
+    // Late packets (issue #33): IKF and ADF under `FixedLag<_, _, 8>`, 29 of the 100 packets
+    // late (20 by one instant, 9 by eight). The layer keeps 9 copies of the estimator: ADF's
+    // 32 KiB / 4 KiB budget is for the estimator alone; these are held to 32 KiB (ikf-lag8) and
+    // 40 KiB (adf-lag8) of flash and 8 KiB of stack, as a regression guard.
+    (
+        "ikf-lag8",
+        || run::run_ikf_lag8_counts(&stream(), usize::MAX).0,
+        32 * 1024,
+        8 * 1024,
+    ),
+    (
+        "adf-lag8",
+        || run::run_adf_lag8_counts(&stream(), usize::MAX).0,
+        40 * 1024,
+        8 * 1024,
+    ),
     (
         "tobit-silence",
         || run::run_tobit_silence(&tobit_stream(), usize::MAX),
@@ -646,4 +662,225 @@ fn firmware_on_qemu_is_bit_exact_with_host() {
         "firmware_qemu: all {} estimators bit-exact with the host",
         BINS.len()
     );
+}
+
+/// The late-packet pattern of the fixed-lag binaries over a stream of `n` instants: how many
+/// packets it makes late, each within the lag and arriving within the stream.
+fn late_packets(n: usize) -> usize {
+    (1..=n)
+        .filter_map(|k| run::lateness(k, n, run::LAG).map(|l| (k, l)))
+        .inspect(|&(k, l)| assert!((1..=run::LAG).contains(&l) && k + l - 1 <= n, "{k}: {l}"))
+        .count()
+}
+
+/// Late packets on the microcontroller (issue #33): `ikf-lag8` and `adf-lag8` run IKF and ADF
+/// under `FixedLag<_, _, 8>` with 29 of the occlusion stream's 100 packets late (20 by one
+/// instant, 9 by eight), each folded in when it arrives. Every fold is within the lag, so the
+/// settled estimates (the digest), the final x̂ and the counts are the on-time run's, bit for
+/// bit; counted lost instead, the late packets give another estimate.
+#[test]
+fn host_fixed_lag_runs_give_the_on_time_estimates() {
+    use estimator_core::LagCounts;
+
+    let s = stream();
+    let n = s.steps as usize;
+    let late = late_packets(n);
+    let by = |l: usize| {
+        (1..=n)
+            .filter(|&k| run::lateness(k, n, run::LAG) == Some(l))
+            .count()
+    };
+    assert_eq!((late, by(1), by(run::LAG)), (29, 20, 9));
+    let runs = [
+        (
+            run::run_ikf_lag8_counts(&s, usize::MAX),
+            run::run_ikf(&s, usize::MAX),
+        ),
+        (
+            run::run_adf_lag8_counts(&s, usize::MAX),
+            run::run_adf(&s, usize::MAX),
+        ),
+    ];
+    for ((lagged, counts), on_time) in runs {
+        assert_eq!(
+            counts,
+            LagCounts {
+                folded: late as u32,
+                ..LagCounts::default()
+            },
+            "{}",
+            lagged.name
+        );
+        assert_eq!(lagged.name, format!("{}-lag8", on_time.name));
+        assert_eq!(
+            Summary {
+                name: on_time.name,
+                ..lagged
+            },
+            on_time,
+            "{}: the fixed-lag run is not the on-time run",
+            lagged.name
+        );
+        println!("{lagged}\n  {}", run::LateLine(&counts));
+    }
+    // The same stream with the late packets counted lost (dropped, for the IKF the same):
+    // another estimate, so the equality above says the folds happened.
+    let lost = run::drive(
+        "ikf",
+        s.instants(run::Link::Channel).map(|mut i| {
+            if run::lateness(i.k as usize, n, run::LAG).is_some() {
+                i.y = [None];
+            }
+            i
+        }),
+        usize::MAX,
+        || {
+            let (x0, p0) = run::prior();
+            Ok(run::Ikf::new(
+                run::model()?,
+                IntermittentKalmanFilter::new(x0, p0)?,
+            ))
+        },
+    );
+    let on_time = run::run_ikf(&s, usize::MAX);
+    assert_ne!(lost.digest, on_time.digest);
+    assert_ne!(lost.x_bits, on_time.x_bits);
+}
+
+/// Runs `build`'s estimator over the first `n` instants on time ([`run::drive`]) and under
+/// `FixedLag<_, _, 8>` with the firmware's late packets ([`run::drive_lag`]): the two
+/// summaries (counts, the digest of every settled estimate, the final x̂) must be equal, and
+/// every late packet folded in.
+fn lagged_is_on_time<const L: usize, const NX: usize, E, I>(
+    name: &'static str,
+    instants: impl Fn() -> I,
+    n: usize,
+    build: impl Fn() -> Result<E, estimator_core::Error>,
+) where
+    I: Iterator<Item = run::Instant<L>>,
+    E: run::Digested<NX> + Clone,
+    E::Measurement:
+        run::FromNodes<L> + estimator_core::Revise + estimator_core::LostMeasurement + Clone,
+{
+    let on_time = run::drive(name, instants(), n, &build);
+    let (lagged, counts) = run::drive_lag::<L, NX, { run::LAG }, E>(name, instants(), n, n, &build);
+    println!("{name} ({n} instants): {}", run::LateLine(&counts));
+    assert_eq!(lagged, on_time, "{name}: the fixed-lag run differs");
+    assert_eq!(counts.folded as usize, late_packets(n), "{name}");
+    assert_eq!((counts.too_old, counts.refused), (0, 0), "{name}");
+}
+
+/// The fixed-lag layer in `f32` on every firmware estimator whose measurement is a packet, on
+/// its own recorded stream: the four occlusion estimators, the NN estimator (over the 44
+/// instants before `f32` refuses its gain solve, see `host_f32_nn_matches_f64_until_f32_refuses`)
+/// and the Tobit fusion (every node's packet of an instant late together): with the
+/// firmware's late packets (every fold within the lag) each gives the on-time run's estimates
+/// bit for bit.
+#[test]
+fn host_fixed_lag_f32_is_bit_identical_on_the_recorded_streams() {
+    let s = stream();
+    let n = s.steps as usize;
+    let occ = || s.instants(run::Link::Channel);
+    let (x0, p0) = run::prior();
+    lagged_is_on_time::<1, 3, _, _>("ikf", occ, n, || {
+        Ok(run::Ikf::new(
+            run::model()?,
+            IntermittentKalmanFilter::new(x0, p0)?,
+        ))
+    });
+    lagged_is_on_time::<1, 3, _, _>("cce", occ, n, || {
+        let g = GaussSum::<f32, 1, 15>::uniform()?;
+        Ok(run::Cce::new(
+            run::model()?,
+            CrossCoupledEstimator::new(x0, p0, run::occlusion()?, &g)?,
+        ))
+    });
+    lagged_is_on_time::<1, 3, _, _>("adf", occ, n, || {
+        Ok(run::Adf::new(
+            run::model()?,
+            AssumedDensityFilter::new(x0, p0, run::occlusion()?)?,
+        ))
+    });
+    lagged_is_on_time::<1, 3, _, _>("kf-io", occ, n, || {
+        Ok(run::KfIo::new(
+            run::model()?,
+            KfIo::new(x0, p0, run::occlusion()?)?,
+        ))
+    });
+
+    let nn = nn_stream();
+    let ok = run::run_nn(&nn, usize::MAX).first_error as usize - 1;
+    assert!(ok >= 40, "{ok}");
+    lagged_is_on_time::<1, 3, _, _>(
+        "nn",
+        || nn.instants(run::Link::Channel),
+        ok,
+        || {
+            let e = Seed003Nn::seed003(NnBoundConfig::seed003_example())?;
+            Ok(run::Nn(estimator_core::OnModel::new(Seed003Example, e)))
+        },
+    );
+
+    let t = tobit_stream();
+    lagged_is_on_time::<3, 2, _, _>(
+        "tobit",
+        || t.instants(),
+        t.steps as usize,
+        run::Tobit::paper_example,
+    );
+}
+
+/// On QEMU, the fixed-lag binaries' results are the on-time binaries' (their `RESULT` lines
+/// but for the name: every settled estimate and the final x̂, bit for bit) and their `LATE`
+/// lines (the layer's counts) the host's.
+#[test]
+fn fixed_lag_firmware_gives_the_on_time_results() {
+    if let Some(why) = missing_tools() {
+        assert!(!require_qemu(), "REQUIRE_QEMU=1 but {why}");
+        use std::io::Write;
+        let _ = writeln!(
+            std::io::stderr(),
+            "SKIPPED fixed_lag_firmware_gives_the_on_time_results: {why} (set REQUIRE_QEMU=1 to fail)"
+        );
+        return;
+    }
+    let bin_dir = build_firmware();
+    type LagRun = fn(&Stream<'_>, usize) -> (Summary, estimator_core::LagCounts);
+    let bins: [(&str, LagRun, Summary); 2] = [
+        (
+            "ikf-lag8",
+            run::run_ikf_lag8_counts,
+            run::run_ikf(&stream(), usize::MAX),
+        ),
+        (
+            "adf-lag8",
+            run::run_adf_lag8_counts,
+            run::run_adf(&stream(), usize::MAX),
+        ),
+    ];
+    for (name, host, on_time) in bins {
+        let (code, text) = run_qemu(
+            &bin_dir.join(name),
+            &bin_dir.join(format!("{name}.late.txt")),
+        );
+        assert_eq!(code, 0, "{name}: QEMU exit status {code}, output:\n{text}");
+        let line = |tag: &str| {
+            text.lines()
+                .find_map(|l| l.strip_prefix(tag))
+                .unwrap_or("<none>")
+                .to_string()
+        };
+        let (_, counts) = host(&stream(), usize::MAX);
+        assert_eq!(
+            line("LATE "),
+            format!("{name} {}", run::LateLine(&counts)),
+            "{name}: late-packet counts"
+        );
+        assert_eq!(
+            line("RESULT "),
+            format!("{}", Summary { name, ..on_time }),
+            "{name}: not the on-time result"
+        );
+        println!("{name}: {} (the on-time result)", line("LATE "));
+    }
 }

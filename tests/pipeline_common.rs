@@ -98,6 +98,33 @@ impl Proc {
         assert_eq!(rc, 0, "kill {}", self.name);
     }
 
+    /// Waits until the child catches `sig` (its handler is installed: `SigCgt` in
+    /// `/proc/<pid>/status`), so a signal sent next is handled, not the default action
+    /// (panics after `secs`).
+    pub fn wait_for_handler(&self, sig: i32, secs: u64) {
+        let start = Instant::now();
+        let bit = 1u64 << (sig - 1);
+        loop {
+            let status =
+                std::fs::read_to_string(format!("/proc/{}/status", self.pid())).unwrap_or_default();
+            let caught = status
+                .lines()
+                .find_map(|l| l.strip_prefix("SigCgt:"))
+                .and_then(|h| u64::from_str_radix(h.trim(), 16).ok())
+                .unwrap_or(0);
+            if caught & bit != 0 {
+                return;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(secs),
+                "{} did not install a handler for signal {sig} within {secs} s\nstderr:\n{}",
+                self.name,
+                self.err()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
     /// Waits for exit (panics after `secs`, killing the child).
     pub fn wait(&mut self, secs: u64) -> ExitStatus {
         let mut c = self.child.take().expect("not yet waited");

@@ -11,4 +11,5 @@
 pub mod ads;
 pub mod compare;
 pub mod estimators;
+pub mod late;
 pub mod problems;

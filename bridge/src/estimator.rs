@@ -152,14 +152,35 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             break;
         }
         far.check(&z_alive, fwd.report, args.quiet);
-        if !far.seen
+        let absent = far
+            .absent_since
+            .unwrap_or(listening)
+            .elapsed()
+            .as_secs_f64();
+        // After the stream's END the sensor side may leave: `--once` ends by its linger.
+        if far.absent_since.is_some()
+            && ended_at.is_none()
             && args.connect_timeout > 0.0
-            && listening.elapsed().as_secs_f64() > args.connect_timeout
+            && absent > args.connect_timeout
         {
-            bail!(
-                "no sensor side on {key} within --connect-timeout {} s",
+            if !far.heard {
+                bail!(
+                    "no sensor side on {key} within --connect-timeout {} s{}",
+                    args.connect_timeout,
+                    if far.seen {
+                        " (a liveliness token was there, but no message came)"
+                    } else {
+                        ""
+                    }
+                );
+            }
+            estpipe_process::errln!(
+                "bridge: error: the sensor side on {key} is gone since {absent:.1} s \
+                 (--connect-timeout {} s)",
                 args.connect_timeout
             );
+            fwd.report.ending = FAR_SIDE_LOST.into();
+            break;
         }
         let mut busy = false;
         // Wait for the first slot of a pass (bounded, so estimates and signals are served).
@@ -168,6 +189,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             .map_err(|e| anyhow!("zenoh {key}/slots: {e}"))?;
         if let Some(sample) = first {
             busy = true;
+            far.heard_now();
             if fwd.message(&sample.payload().to_bytes(), &truth_pub)? {
                 ended_at.get_or_insert_with(Instant::now);
             }
@@ -208,12 +230,42 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
 /// (declared by the sensor side, withdrawn by zenoh when its session ends, also when it is
 /// killed). A bridge that vanishes is logged and counted; the stream goes on when it returns,
 /// its gap counted as lost on the network.
-#[derive(Debug, Default)]
+///
+/// `--connect-timeout` holds whenever the far side is absent (issue #39: once one had been
+/// seen the estimator side waited for ever, and a rogue liveliness token kept it waiting
+/// with no sensor side at all): absent from the start until a message arrives, and again
+/// from the token's withdrawal until the next message. A token alone is not presence.
+#[derive(Debug)]
 struct FarSide {
+    /// A token was declared at some point.
     seen: bool,
+    /// A message came at some point.
+    heard: bool,
+    /// Since when no sensor side is known to be there (`None`: one is).
+    absent_since: Option<Instant>,
 }
 
+impl Default for FarSide {
+    fn default() -> Self {
+        Self {
+            seen: false,
+            heard: false,
+            absent_since: Some(Instant::now()),
+        }
+    }
+}
+
+/// `BridgeReport::ending` when the sensor side stayed away for `--connect-timeout` (exit
+/// code 3, as a runner's lost publisher).
+pub const FAR_SIDE_LOST: &str = "the sensor side was lost";
+
 impl FarSide {
+    /// A message from the far side arrived.
+    fn heard_now(&mut self) {
+        self.heard = true;
+        self.absent_since = None;
+    }
+
     fn check(
         &mut self,
         alive: &zenoh::pubsub::Subscriber<
@@ -232,6 +284,7 @@ impl FarSide {
                 }
                 zenoh::sample::SampleKind::Delete => {
                     report.far_side_lost += 1;
+                    self.absent_since.get_or_insert_with(Instant::now);
                     if !quiet {
                         estpipe_process::errln!(
                             "bridge: sensor side gone (its slots count as lost on the network \

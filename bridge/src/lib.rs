@@ -46,7 +46,11 @@ pub fn main(args: &BridgeArgs) -> anyhow::Result<i32> {
         std::fs::write(p, json + "\n")
             .map_err(|e| anyhow::anyhow!("--report {}: {e}", p.display()))?;
     }
-    Ok(0)
+    Ok(if report.ending == estimator::FAR_SIDE_LOST {
+        3
+    } else {
+        0
+    })
 }
 
 /// Runs the bridge until its stream ends (`--once`) or SIGINT/SIGTERM; the report of what

@@ -24,6 +24,7 @@ pub mod plant;
 pub mod publisher;
 pub mod rng;
 pub mod scenario;
+pub mod sensor_node;
 pub mod sim;
 pub mod validate;
 pub mod wire;

@@ -31,7 +31,8 @@
 
 use crate::backpressure::{Backpressure, Gate, Mode, BLOCK_SLICE};
 use crate::scenario;
-use crate::sim::MAX_NY;
+use crate::sensor_node::{Endpoint, NodeLoop};
+use crate::sim::{Simulation, MAX_NY};
 use crate::wire::{slot_of, stream_header};
 use anyhow::{bail, Context, Result};
 use estpipe_wire::services::SlotService;
@@ -70,15 +71,32 @@ pub struct PublisherArgs {
     /// publishes node 0 also publishes the truth.
     #[arg(long)]
     pub node: Option<u8>,
+    /// Sensor nodes on serial lines as the channel (docs/sensor-node.md): node m's line,
+    /// `unix:PATH` or `tcp:HOST:PORT`, once per node in node order. The plant runs here with
+    /// the seed's random numbers, each node decides from its raw samples, the slots carry the
+    /// nodes' decisions, and every decision is compared with the simulated channel's.
+    #[arg(long = "sensor-node", value_name = "LINE", conflicts_with = "node")]
+    pub sensor_node: Vec<String>,
+    /// Seconds to wait for a sensor node's answer before sending its sample again.
+    #[arg(long, default_value_t = 2.0, value_parser = estpipe_process::flags::seconds)]
+    pub node_timeout: f64,
     /// Service-name prefix (use distinct prefixes for parallel runs).
     #[arg(long, default_value = wire::DEFAULT_PREFIX)]
     pub prefix: String,
     /// Seconds to wait for a subscriber (at start and after losing one); 0 = forever.
     #[arg(long, default_value_t = 30.0, value_parser = estpipe_process::flags::seconds)]
     pub connect_timeout: f64,
-    /// Seconds to wait after the END marker for the subscriber to drain and detach.
+    /// Seconds to wait after the last instant for the subscriber to take the END markers,
+    /// drain and detach (one deadline for all of it).
     #[arg(long, default_value_t = 5.0, value_parser = estpipe_process::flags::seconds)]
     pub linger: f64,
+    /// Seconds a subscriber's full queue may hold a blocking send before it counts as a
+    /// subscriber that does not read: from then on a slot that finds its queue full is
+    /// dropped for it (counted, one line) instead of holding the run (0 = never).
+    #[arg(long, value_name = "SECONDS",
+          default_value_t = crate::backpressure::DEFAULT_UNREAD_LIMIT_S,
+          value_parser = estpipe_process::flags::seconds)]
+    pub unread_limit: f64,
     /// Test hook: write this format version into every slot.
     #[cfg(feature = "test-hooks")]
     #[arg(long, hide = true)]
@@ -142,6 +160,11 @@ pub struct PublisherReport {
     pub discarded: u64,
     /// Sends that blocked for a whole slice and were sent again (`--backpressure block`).
     pub resent: u64,
+    /// Slots dropped for a subscriber that does not read (`--unread-limit`), one per slot
+    /// and such subscriber.
+    pub unread_dropped: u64,
+    /// Subscribers found not reading.
+    pub unread_subscribers: u32,
 }
 
 fn stream_id() -> u64 {
@@ -197,11 +220,23 @@ struct SlotSender<'a> {
     resent: u64,
     /// Slots a subscriber did not receive in discard mode (one per slot and subscriber).
     discarded: u64,
+    /// The number of subscribers when some were found never to connect.
+    unconnected_at: Option<usize>,
 }
 
 impl SlotSender<'_> {
     fn subscribers(&self) -> usize {
         self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Subscribers that never connected and are not waited for; forgotten when the number
+    /// of subscribers changed since (one left, or a new one came, which is waited for).
+    fn unconnected(&mut self) -> usize {
+        if self.unconnected_at.is_some_and(|s| s != self.subscribers()) {
+            self.unconnected_at = None;
+            self.gate.set_unconnected(0);
+        }
+        self.gate.unconnected() as usize
     }
 
     /// Sends `slot` (a marker: until `give_up`, even after a termination request). Blocking,
@@ -220,7 +255,10 @@ impl SlotSender<'_> {
         let blocking = self.gate.mode() != Mode::Discard;
         let mut last_check = std::time::Instant::now();
         let mut internal_errors = 0u32;
+        // Since when this slot has reached fewer subscribers than there are.
+        let mut short_since: Option<std::time::Instant> = None;
         loop {
+            self.gate.begin_send();
             let mut s = self.publisher.loan_uninit()?;
             *s.user_header_mut() = self.header;
             let mut out = s.write_payload(slot);
@@ -232,8 +270,36 @@ impl SlotSender<'_> {
                     self.discarded += self.subscribers().saturating_sub(n) as u64;
                     return Ok(Sent::Done);
                 }
-                Ok(n) if n >= self.subscribers() => return Ok(Sent::Done),
-                Ok(_) => std::thread::sleep(NOT_CONNECTED_PAUSE),
+                // A subscriber that does not read had the slot dropped (`--unread-limit`), or
+                // never connected and is no longer waited for.
+                Ok(n)
+                    if n + self.gate.drops_this_send() + self.unconnected()
+                        >= self.subscribers() =>
+                {
+                    return Ok(Sent::Done)
+                }
+                Ok(n) => {
+                    let since = *short_since.get_or_insert_with(std::time::Instant::now);
+                    if self
+                        .gate
+                        .unread_limit()
+                        .is_some_and(|l| since.elapsed() >= l)
+                    {
+                        let subs = self.subscribers();
+                        let missing = subs.saturating_sub(n + self.gate.drops_this_send());
+                        self.unconnected_at = Some(subs);
+                        self.gate.set_unconnected(missing as u32);
+                        return Ok(Sent::Done);
+                    }
+                    // Backing off: a runner connects on its next read, within microseconds;
+                    // one that does not read must not get thousands of duplicates.
+                    let tries = since.elapsed().as_micros() / NOT_CONNECTED_PAUSE.as_micros();
+                    std::thread::sleep(
+                        NOT_CONNECTED_PAUSE
+                            .saturating_mul(u32::try_from(tries).unwrap_or(u32::MAX).max(1) / 4 + 1)
+                            .min(MAX_NOT_CONNECTED_PAUSE),
+                    )
+                }
                 // Any signal interrupts iceoryx2's wait inside a blocked send (SIGCONT too),
                 // which then reports an internal error rather than the signal: unless it was
                 // a stop, the slot goes again. A cause that repeats on every try is not a
@@ -265,8 +331,25 @@ impl SlotSender<'_> {
     }
 }
 
+/// Says once per subscriber that it does not read (`--unread-limit`), and counts it.
+fn report_unread(gate: &Gate, report: &mut PublisherReport, say: &impl Fn(&str)) {
+    let new = gate.take_newly_unread();
+    if new > 0 {
+        report.unread_subscribers += new;
+        say(&format!(
+            "{new} subscriber(s) of the slots did not read for --unread-limit; slots are \
+             dropped for them while their queue is full instead of holding the stream \
+             ({} so far)",
+            gate.unread_drops()
+        ));
+    }
+}
+
 /// Pause before sending a slot again that a not yet connected subscriber missed.
 const NOT_CONNECTED_PAUSE: Duration = Duration::from_micros(50);
+
+/// The pause grows with the time the slot has been short (a quarter of it), up to this.
+const MAX_NOT_CONNECTED_PAUSE: Duration = Duration::from_millis(10);
 
 /// Internal errors one blocked send tolerates (each is a wait that a signal interrupted)
 /// before the error counts as real.
@@ -294,6 +377,28 @@ fn wait_for_subscriber(
     Ok(true)
 }
 
+/// Where the instants come from: the simulated channel, or sensor nodes on serial lines.
+enum Source {
+    Simulated(Box<dyn Simulation>),
+    Nodes(Box<NodeLoop>),
+}
+
+impl Source {
+    fn sim(&mut self) -> &mut dyn Simulation {
+        match self {
+            Self::Simulated(s) => s.as_mut(),
+            Self::Nodes(n) => n.as_mut(),
+        }
+    }
+
+    fn failure(&self) -> Option<&str> {
+        match self {
+            Self::Simulated(_) => None,
+            Self::Nodes(n) => n.failure(),
+        }
+    }
+}
+
 /// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]).
 pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // The flags' parsers check these on the command line; a caller building the arguments
@@ -310,12 +415,42 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             estpipe_process::flags::seconds,
         ),
         ("--linger", args.linger, estpipe_process::flags::seconds),
+        (
+            "--unread-limit",
+            args.unread_limit,
+            estpipe_process::flags::seconds,
+        ),
     ] {
         if let Err(e) = check(&value.to_string()) {
             return Err(estpipe_process::flags::BadInput(format!("{flag}: {e}")).into());
         }
     }
     let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
+    let endpoints = args
+        .sensor_node
+        .iter()
+        .map(|s| Endpoint::parse(s))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| estpipe_process::flags::BadInput(format!("--sensor-node {e}")))?;
+    if !endpoints.is_empty() {
+        if args.node_timeout <= 0.0 {
+            return Err(estpipe_process::flags::BadInput(
+                "--node-timeout: must be positive".to_string(),
+            )
+            .into());
+        }
+        crate::sensor_node::config::loop_config(&*scenario)
+            .map_err(|e| estpipe_process::flags::BadInput(format!("--sensor-node: {e}")))?;
+        if endpoints.len() != scenario.nodes() {
+            return Err(estpipe_process::flags::BadInput(format!(
+                "--sensor-node: scenario {} has {} node(s), {} --sensor-node line(s) given",
+                scenario.name(),
+                scenario.nodes(),
+                endpoints.len()
+            ))
+            .into());
+        }
+    }
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let nodes = u8::try_from(scenario.nodes()).context("too many nodes")?;
     if let Some(n) = args.node {
@@ -349,6 +484,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let truth = wire::truth_service(&node, &args.prefix)?;
     let ready = wire::ready_event_service(&node, &args.prefix)?;
     let gate = Gate::new();
+    gate.set_unread_limit(args.unread_limit);
     if let Some(pid) = args.parent_pid {
         gate.set_parent(pid);
     }
@@ -412,8 +548,38 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         service: &slots,
         resent: 0,
         discarded: 0,
+        unconnected_at: None,
     };
 
+    // Sensor nodes are connected and configured before the wait for a subscriber, so that a
+    // node that is not there is said at once.
+    let mut source = if endpoints.is_empty() {
+        Source::Simulated(scenario.start(args.seed, args.run))
+    } else {
+        // connect-timeout 0 means "wait for ever" for the subscriber; for a node's line, a day.
+        let connect = Duration::from_secs_f64(if args.connect_timeout > 0.0 {
+            args.connect_timeout
+        } else {
+            86_400.0
+        });
+        say(&format!(
+            "{} sensor node(s) on {}",
+            endpoints.len(),
+            args.sensor_node.join(", ")
+        ));
+        Source::Nodes(Box::new(
+            NodeLoop::start(
+                &*scenario,
+                args.seed,
+                args.run,
+                &endpoints,
+                connect,
+                Duration::from_secs_f64(args.node_timeout),
+                &|| gate.stop_requested(),
+            )
+            .map_err(anyhow::Error::msg)?,
+        ))
+    };
     say(&format!(
         "scenario {} (seed {}, run {}), {steps} instants × {} at {} on prefix {:?}; \
          waiting for a subscriber",
@@ -449,8 +615,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
     }
 
-    let mut sim = scenario.start(args.seed, args.run);
-    let x0 = sim.initial_truth();
+    let x0 = source.sim().initial_truth();
     send_truth(Truth::new(0, sid, nx, &x0))?;
 
     let t0 = wire::monotonic_ns();
@@ -473,7 +638,11 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
             report.interrupted = true;
             break;
         }
-        let inst = sim.next_instant();
+        let inst = source.sim().next_instant();
+        if source.failure().is_some() {
+            report.interrupted = true;
+            break;
+        }
         let mut x = inst.truth;
         if hooks.nan_truth_at == Some(inst.k) {
             x[0] = f64::NAN;
@@ -515,6 +684,7 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         }
         notifier.notify()?;
         report.instants = i;
+        report_unread(&gate, &mut report, &say);
         // A dead subscriber stays registered (and keeps its queue) until someone cleans up.
         // After the send: the scan of the node directory (sub-millisecond) runs in the slack
         // before the next instant is due rather than between its due time and its send.
@@ -547,6 +717,8 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // The marker waits for room whatever the mode (bounded by --linger): a discarded END
     // would leave the runner waiting for its deadline.
     gate.set_mode(Mode::Final);
+    // One deadline for the markers and the linger after them (a subscriber that never
+    // leaves kept the publisher for both, one after the other).
     let give_up = std::time::Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));
     for m in (0..nodes).filter(|&m| mine(m)) {
         let marker = Slot {
@@ -557,6 +729,8 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         sender.send(marker, Some(give_up))?;
     }
     notifier.notify()?;
+    report_unread(&gate, &mut report, &say);
+    report.unread_dropped = gate.unread_drops();
     report.discarded = sender.discarded;
     report.resent = sender.resent;
     if report.discarded > 0 {
@@ -576,10 +750,20 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         report.slots
     ));
 
-    // Keep the data segment alive until the subscriber has read the tail and detached.
-    let start = std::time::Instant::now();
+    if let Source::Nodes(nodes) = &mut source {
+        nodes.finish();
+        for line in nodes.report().lines() {
+            estpipe_process::errln!("channel-sim: {line}");
+        }
+        if let Some(e) = nodes.failure() {
+            bail!("sensor node: {e}");
+        }
+    }
+
+    // Keep the data segment alive until the subscriber has read the tail and detached (a
+    // subscriber that does not read is not waited for).
     let mut last_cleanup = std::time::Instant::now();
-    while n_subs() > 0 && start.elapsed().as_secs_f64() < args.linger {
+    while n_subs() > gate.unread_receivers() && std::time::Instant::now() < give_up {
         if last_cleanup.elapsed() > Duration::from_millis(100) {
             let _ = node.try_cleanup_dead_nodes();
             last_cleanup = std::time::Instant::now();

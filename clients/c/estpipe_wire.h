@@ -18,7 +18,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define ESTPIPE_WIRE_VERSION 5u
+#define ESTPIPE_WIRE_VERSION 6u
 
 #define ESTPIPE_MAX_NX 8
 #define ESTPIPE_MAX_NY 4
@@ -101,6 +101,8 @@ typedef struct estpipe_Estimate {
     uint64_t slot_send_ns;
     uint64_t receive_ns;
     uint64_t step_done_ns;
+    uint32_t late_folded;
+    uint32_t revised_from;
 } estpipe_Estimate;
 
 /* The true state (evaluation only): the payload of <prefix>/truth. */
@@ -156,7 +158,9 @@ _Static_assert(offsetof(estpipe_Estimate, p) == 120, "estpipe_Estimate.p offset"
 _Static_assert(offsetof(estpipe_Estimate, slot_send_ns) == 408, "estpipe_Estimate.slot_send_ns offset");
 _Static_assert(offsetof(estpipe_Estimate, receive_ns) == 416, "estpipe_Estimate.receive_ns offset");
 _Static_assert(offsetof(estpipe_Estimate, step_done_ns) == 424, "estpipe_Estimate.step_done_ns offset");
-_Static_assert(sizeof(estpipe_Estimate) == 432, "estpipe_Estimate size");
+_Static_assert(offsetof(estpipe_Estimate, late_folded) == 432, "estpipe_Estimate.late_folded offset");
+_Static_assert(offsetof(estpipe_Estimate, revised_from) == 436, "estpipe_Estimate.revised_from offset");
+_Static_assert(sizeof(estpipe_Estimate) == 440, "estpipe_Estimate size");
 _Static_assert(_Alignof(estpipe_Estimate) == 8, "estpipe_Estimate alignment");
 
 _Static_assert(offsetof(estpipe_Truth, version) == 0, "estpipe_Truth.version offset");

@@ -39,6 +39,14 @@ pub enum Error {
         /// The instant it was given.
         got: usize,
     },
+    /// A late packet for an instant older than the fixed-lag history keeps
+    /// ([`FixedLag`](crate::FixedLag)): it is dropped.
+    TooLate {
+        /// The oldest instant a late packet may still belong to (`newest + 1` when none).
+        oldest: usize,
+        /// The packet's instant.
+        got: usize,
+    },
 }
 
 /// Result alias used throughout the crate.
@@ -56,6 +64,10 @@ impl fmt::Display for Error {
             Error::OutOfOrder { expected, got } => {
                 write!(f, "step for instant {got}, expected instant {expected}")
             }
+            Error::TooLate { oldest, got } => write!(
+                f,
+                "late packet for instant {got} is older than the fixed lag keeps (oldest {oldest})"
+            ),
         }
     }
 }

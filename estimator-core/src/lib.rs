@@ -18,7 +18,9 @@
 //!
 //! * [`estimator`]: the [`Estimator`] trait every estimator implements, and [`OnModel`], which
 //!   pairs a filter with its model; [`estimate`]: the [`Estimate`] `(x̂, P)` they hold;
-//!   [`packet`]: the [`Packet`] an instant delivers (delivered, dropped, lost).
+//!   [`packet`]: the [`Packet`] an instant delivers (delivered, dropped, lost);
+//!   [`catch_up`](mod@catch_up): instants that never arrived, stepped as lost; [`fixed_lag`]: packets that
+//!   arrived late, folded into their instant by stepping again from it.
 //! * [`filter`]: the estimators, by family — the Kalman filter and its intermittent variant,
 //!   [`filter::occlusion`] (seed 001), [`filter::nn`] and [`filter::coupled_kf`] (seed 003),
 //!   [`filter::tobit`] (seed 004).
@@ -103,6 +105,7 @@ pub mod error;
 pub mod estimate;
 pub mod estimator;
 pub mod filter;
+pub mod fixed_lag;
 pub mod gauss;
 pub mod gsum;
 pub mod linalg;
@@ -117,5 +120,6 @@ pub use covariance_update::{CovarianceForm, CovarianceUpdate, JosephForm, Standa
 pub use error::{Error, Result};
 pub use estimate::Estimate;
 pub use estimator::{Estimator, OnModel};
+pub use fixed_lag::{FixedLag, LagCounts, Revise, Revision};
 pub use packet::Packet;
 pub use real::Real;

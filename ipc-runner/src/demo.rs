@@ -77,6 +77,14 @@ pub struct DemoArgs {
     /// bridge`); the summary adds the network hop.
     #[arg(long, value_enum, default_value_t = Via::Shm)]
     pub via: Via,
+    /// Sensor nodes in the loop (docs/sensor-node.md): `qemu` starts one emulated
+    /// Cortex-M4F per node of the scenario running the node firmware (`--node-firmware`);
+    /// the publisher feeds each its raw samples over its UART and publishes its decisions.
+    #[arg(long, value_enum, value_name = "HOW")]
+    pub sensor_node: Option<SensorNodes>,
+    /// The sensor-node firmware (an ELF for QEMU's mps2-an386).
+    #[arg(long, value_name = "ELF", default_value = crate::sensor_nodes::DEFAULT_FIRMWARE)]
+    pub node_firmware: PathBuf,
     /// Publisher executable (default: this executable's hidden `channel-sim` subcommand).
     #[arg(long)]
     pub channel_sim: Option<PathBuf>,
@@ -95,6 +103,13 @@ pub struct DemoArgs {
     #[arg(long, value_name = "MIB", default_value_t = crate::limits::DEFAULT_MAX_MEMORY_MIB,
           value_parser = clap::value_parser!(u64).range(1..))]
     pub max_memory: u64,
+}
+
+/// Where the sensor nodes of `--sensor-node` run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SensorNodes {
+    /// One QEMU `mps2-an386` per node.
+    Qemu,
 }
 
 /// How the demo's slots reach its runner.
@@ -335,7 +350,20 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         Via::Shm => (prefix.clone(), Vec::new()),
         Via::Zenoh => start_bridges(&prefix, &args.out)?,
     };
+    let mut nodes = match args.sensor_node {
+        Some(SensorNodes::Qemu) => Some(crate::sensor_nodes::QemuNodes::start(
+            &args.node_firmware,
+            spec.nodes(),
+            &args.out,
+        )?),
+        None => None,
+    };
     let mut cmd = publisher_command(args.channel_sim.as_deref())?;
+    if let Some(n) = &nodes {
+        for line in n.lines() {
+            cmd.args(["--sensor-node", line]);
+        }
+    }
     if let Some(c) = &args.config {
         cmd.arg("--config").arg(c);
     } else {
@@ -376,6 +404,13 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.latency_csv = Some(args.out.join("latency.csv"));
     rargs.json = Some(args.out.join("report.json"));
 
+    if let Some(n) = &nodes {
+        estpipe_process::errln!(
+            "demo: {} sensor node(s) on QEMU mps2-an386 running {}",
+            n.lines().len(),
+            args.node_firmware.display()
+        );
+    }
     estpipe_process::errln!(
         "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
          (prefix {prefix}, publisher pid {child_pid})",
@@ -443,6 +478,17 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     if let Some(s) = status {
         if !s.success() {
             estpipe_process::errln!("demo: {publisher} exited with {s}");
+        }
+    }
+    // The gateway ended every node's run (Finish): the emulators leave by themselves.
+    if let Some(n) = nodes.as_mut() {
+        let total = n.lines().len();
+        let clean = n.finish(CHILD_LINGER);
+        if clean < total {
+            estpipe_process::errln!(
+                "demo: {} of {total} sensor node(s) did not end cleanly",
+                total - clean
+            );
         }
     }
     // The bridges leave by themselves once the stream ended and the estimates went quiet.

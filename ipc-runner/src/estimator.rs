@@ -25,6 +25,19 @@ impl CovarianceKind {
     }
 }
 
+/// What [`Estimator::fold_late`] made of a late slot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LateFold {
+    /// Folded in: the estimate is the one the slot would have given on time.
+    Folded,
+    /// Nothing new (the instant's slot of that node was already known).
+    Unchanged,
+    /// Older than the estimator's history (`--lag`), or an estimator without one: dropped.
+    TooOld,
+    /// The estimator refused the re-step; it kept its estimate.
+    Refused,
+}
+
 /// An estimator as the application drives it (f64, dynamic dimensions at this level; the
 /// const-generic core types live inside each implementation).
 pub trait Estimator: Send {
@@ -33,6 +46,19 @@ pub trait Estimator: Send {
     /// Processes instant `k ≥ 1` given every node's observation of that instant (dropped
     /// packets included). On error the estimator keeps its previous state.
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), estimator_core::Error>;
+    /// Keeps the history of `--lag lag` from now on (called once, before the first step;
+    /// docs/pipeline.md "Late packets"); `false` for an estimator that keeps none (its late
+    /// slots are then [`LateFold::TooOld`]). Default: none.
+    fn set_lag(&mut self, _lag: u32) -> bool {
+        false
+    }
+    /// Folds slots of instant `k` that arrived after `k` was stepped into the estimate, as if
+    /// they had come on time (the core's fixed-lag layer, docs/pipeline.md "Late packets"):
+    /// `obs` is every node's observation of `k`, lost (`FLAG_IPC_LOST`) except the late ones.
+    /// Default: [`LateFold::TooOld`], for an estimator that keeps no history.
+    fn fold_late(&mut self, _k: u32, _obs: &[Observation]) -> LateFold {
+        LateFold::TooOld
+    }
     /// Writes the current estimate x̂_k into `out[..nx]`.
     fn estimate(&self, out: &mut [f64]);
     /// Writes the covariance of the current estimate, row-major, into `out[..nx·nx]` and

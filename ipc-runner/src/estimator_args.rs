@@ -1,5 +1,5 @@
 //! The estimator options of `eval`, `run`, `demo` and `replay` (`--estimators`,
-//! `--particles`, `--loss-rate`, `--gate`), declared once, and the one check of what they
+//! `--particles`, `--loss-rate`, `--gate`, `--lag`), declared once, and the one check of what they
 //! select from the estimators built for a scenario: the commands can never disagree about
 //! what a name means.
 
@@ -33,6 +33,13 @@ pub struct EstimatorArgs {
     /// `<name>+gate`; the summary counts the rejections. Default: off.
     #[arg(long, value_name = "P", value_parser = crate::estimators::gate_probability)]
     pub gate: Option<f64>,
+    /// Fixed lag L in instants (docs/pipeline.md, "Late packets"): a slot that arrives after
+    /// its instant was stepped, at most L instants late, is folded into its instant and the
+    /// estimators step again from there, so the estimate is the one an on-time arrival would
+    /// have given (the next published estimate carries it). 0 (default): late slots are lost.
+    #[arg(long, default_value_t = 0, value_name = "L",
+          value_parser = clap::value_parser!(u32).range(0..=i64::from(crate::estimators::MAX_LAG)))]
+    pub lag: u32,
 }
 
 /// Where a command's estimators get their observations, which decides what it can run.
@@ -70,6 +77,7 @@ impl EstimatorArgs {
             estimators: Vec::new(),
             loss_rate: self.loss_rate,
             gate: self.gate,
+            lag: self.lag,
             ..EvalOptions::default()
         }
     }

@@ -3,7 +3,7 @@
 
 pub mod estimator;
 
-pub use estimator::{CovarianceKind, Estimator};
+pub use estimator::{CovarianceKind, Estimator, LateFold};
 pub mod bridge;
 pub mod cli;
 pub mod demo;
@@ -15,6 +15,7 @@ pub mod limits;
 pub mod plot;
 pub mod replay;
 pub mod run;
+pub mod sensor_nodes;
 pub mod slot_log;
 pub mod source;
 pub mod stream_header;

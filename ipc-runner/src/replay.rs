@@ -5,7 +5,7 @@
 use crate::estimator_args::EstimatorArgs;
 use crate::limits::{check_outputs, given, product, BadInput, Budget};
 use crate::run::select;
-use crate::slot_log::{read_slots_within, LoggedInstant};
+use crate::slot_log::{read_slots_within, Interrupted, LoggedInstant};
 use crate::source::Source;
 use crate::Estimator;
 use anyhow::{Context, Result};
@@ -50,17 +50,31 @@ pub struct ReplayArgs {
     pub max_memory: u64,
 }
 
-/// Steps `estimators` over `instants`; returns per-instant estimates (`nx` per estimator)
-/// and the rejected counts.
+/// Steps `estimators` over `instants`, and folds in each slot of `late` after the instant it
+/// came after (what `run --lag` did live; an estimator without the lag leaves it lost);
+/// returns per-instant estimates (`nx` per estimator, as published at each instant: before
+/// the slots that came after it) and the rejected counts.
+///
+/// Stops after the instant during which SIGINT/SIGTERM/SIGHUP arrived
+/// (`estpipe_process::signal`, when installed): the estimates cover the instants stepped,
+/// `len / (nx · estimators)` of them.
 pub fn run_estimators(
     estimators: &mut [Box<dyn Estimator>],
     instants: &[LoggedInstant],
+    late: &[(u32, Observation)],
     nx: usize,
 ) -> (Vec<f64>, Vec<u64>) {
     let mut out = Vec::with_capacity(instants.len() * nx * estimators.len());
     let mut rejected = vec![0; estimators.len()];
     let mut x = [0.0; MAX_NX];
-    for (k, obs) in instants {
+    // By the instant each came after (stable: the log's order within one instant).
+    let mut by_arrival: Vec<&(u32, Observation)> = late.iter().collect();
+    by_arrival.sort_by_key(|(after, _)| *after);
+    let mut next = by_arrival.into_iter().peekable();
+    for (i, (k, obs)) in instants.iter().enumerate() {
+        if i % 1024 == 1023 && estpipe_process::signal::termination_requested() {
+            break;
+        }
         for (e, est) in estimators.iter_mut().enumerate() {
             if est.step(*k, obs).is_err() {
                 rejected[e] += 1;
@@ -68,14 +82,32 @@ pub fn run_estimators(
             est.estimate(&mut x[..nx]);
             out.extend_from_slice(&x[..nx]);
         }
+        // The live run folded each late slot in when it came, after the instant `after`.
+        while let Some((_, o)) = next.next_if(|(after, _)| *after <= *k) {
+            let mut all: heapless::Vec<Observation, { estpipe_wire::MAX_NODES }> =
+                heapless::Vec::new();
+            for n in 0..obs.len() {
+                let lost = Observation::dropped(o.k, n as u8, o.ny, FLAG_IPC_LOST);
+                let _ = all.push(if n == usize::from(o.node) { *o } else { lost });
+            }
+            for est in estimators.iter_mut() {
+                est.fold_late(o.k, &all);
+            }
+        }
     }
     (out, rejected)
 }
+
+/// Exit code of a replay SIGINT/SIGTERM/SIGHUP stopped (as `run`'s).
+pub const EXIT_INTERRUPTED: i32 = 130;
 
 /// `ipc-runner replay`: checks `--output` and the memory budget, reads the log (bounded),
 /// steps the estimators, prints and writes the estimates. Bad input (flags, scenario, the
 /// log's content, an unwritable output) is an error of [`BadInput`] (exit code 2).
 pub fn main(args: &ReplayArgs) -> Result<i32> {
+    // SIGINT/SIGTERM/SIGHUP set a flag from here on: a replay stops between rows or instants
+    // and writes whole rows of what it computed (issue #39: it was killed mid-row).
+    estpipe_process::signal::install();
     if let Some(p) = &args.output {
         let inputs = given(&[
             ("--input", Some(args.input.as_path())),
@@ -111,7 +143,9 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     };
     // The estimators' count, for the bytes per instant (the log gives the horizon).
     let n_est = factory(1)?()?.len() as u64;
-    let per_instant = size_of::<LoggedInstant>() as u64 + product(&[8, n_est, nx as u64]);
+    // The instants' vector is held while it grows (the old and the new block at once: at
+    // most 1.5 times its final size, `slot_log::read_slots_within`), then the estimates.
+    let per_instant = size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
     // The particles must leave room for at least one instant, or the log's first row would
     // be refused as "beyond the row limit" without a word about the particles.
     budget.check(
@@ -119,10 +153,34 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         pf.saturating_add(per_instant),
     )?;
     let max_instants = budget.bytes.saturating_sub(pf) / per_instant;
-    let instants = read_slots_within(&args.input, nodes, ny, max_instants)?;
+    let log = match read_slots_within(&args.input, nodes, ny, max_instants) {
+        Err(e) if e.downcast_ref::<Interrupted>().is_some() => {
+            estpipe_process::errln!(
+                "ipc-runner: replay stopped by {} ({e}); nothing stepped, nothing written",
+                estpipe_process::signal::termination_signal().unwrap_or("a signal")
+            );
+            return Ok(EXIT_INTERRUPTED);
+        }
+        r => r?,
+    };
+    let instants = &log.instants;
     let make = factory(u32::try_from(instants.len()).unwrap_or(u32::MAX))?;
     let mut estimators = make()?;
-    let (est, rejected) = run_estimators(&mut estimators, &instants, nx);
+    let (est, rejected) = run_estimators(&mut estimators, instants, &log.late, nx);
+    let stepped = if estimators.is_empty() || nx == 0 {
+        instants.len()
+    } else {
+        est.len() / (nx * estimators.len())
+    };
+    let interrupted = stepped < instants.len();
+    let instants = &instants[..stepped];
+    if interrupted {
+        estpipe_process::errln!(
+            "ipc-runner: replay stopped by {} after {stepped} instants; the estimates so far \
+             follow",
+            estpipe_process::signal::termination_signal().unwrap_or("a signal")
+        );
+    }
     let count = |f: &dyn Fn(&Observation) -> bool| -> usize {
         instants
             .iter()
@@ -143,17 +201,34 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         args.input,
         instants.len() * nodes - delivered - ipc_lost - net_lost
     );
+    if !log.late.is_empty() {
+        estpipe_process::outln!(
+            "{} slot(s) arrived late: {}",
+            log.late.len(),
+            if args.estimator.lag > 0 {
+                format!(
+                    "folded in where at most --lag {} instants late, lost otherwise",
+                    args.estimator.lag
+                )
+            } else {
+                "lost (no --lag)".to_string()
+            }
+        );
+    }
     let ne = estimators.len();
     for (e, est_e) in estimators.iter().enumerate() {
-        let last = est
-            .len()
-            .checked_sub(nx * ne)
-            .map(|i| &est[i + e * nx..i + (e + 1) * nx]);
+        // After the last instant and every late slot folded in after it.
+        let mut last = [0.0; MAX_NX];
+        est_e.estimate(&mut last[..nx]);
         estpipe_process::outln!(
             "{:<12} rejected {:>5}   final estimate {:?}",
             est_e.name(),
             rejected[e],
-            last.unwrap_or(&[])
+            if instants.is_empty() {
+                &[][..]
+            } else {
+                &last[..nx]
+            }
         );
         if let Some((tested, rejected)) = crate::estimators::gate_counts(&**est_e) {
             estpipe_process::outln!(
@@ -166,23 +241,35 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         let mut w = std::io::BufWriter::new(
             std::fs::File::create(p).with_context(|| format!("cannot create {p:?}"))?,
         );
-        write!(w, "k")?;
+        write!(w, "k").with_context(|| format!("cannot write {p:?}"))?;
         for e in &estimators {
             for j in 0..nx {
-                write!(w, ",{}_{j}", e.name())?;
+                write!(w, ",{}_{j}", e.name()).with_context(|| format!("cannot write {p:?}"))?;
             }
         }
-        writeln!(w)?;
+        writeln!(w).with_context(|| format!("cannot write {p:?}"))?;
         for (i, (k, _)) in instants.iter().enumerate() {
-            write!(w, "{k}")?;
+            // Whole rows only; after the signal the rows computed are still written.
+            write!(w, "{k}").with_context(|| format!("cannot write {p:?}"))?;
             for v in &est[i * nx * ne..(i + 1) * nx * ne] {
-                write!(w, ",{v:e}")?;
+                write!(w, ",{v:e}").with_context(|| format!("cannot write {p:?}"))?;
             }
-            writeln!(w)?;
+            writeln!(w).with_context(|| format!("cannot write {p:?}"))?;
         }
         // Dropping a BufWriter loses its last error: a full disk must fail the command.
         w.flush().with_context(|| format!("cannot write {p:?}"))?;
         estpipe_process::outln!("estimates written to {p:?}");
     }
-    Ok(0)
+    if !interrupted && estpipe_process::signal::termination_requested() {
+        // The signal came after the last instant was stepped: nothing was left out, but the
+        // user asked to stop and a script must see it (exit 130, as when stepping stopped).
+        estpipe_process::errln!(
+            "ipc-runner: replay stopped by {} after all {} instants were stepped; every \
+             estimate was written",
+            estpipe_process::signal::termination_signal().unwrap_or("a signal"),
+            instants.len()
+        );
+        return Ok(EXIT_INTERRUPTED);
+    }
+    Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
 }

@@ -12,7 +12,8 @@
 //! | `delivered`   | 0 / 1   | 1 if a measurement reached the estimator, 0 if the packet was dropped |
 //! | `flags`       | integer | channel-side flags (`channel_sim::sim::FLAG_*`; 0 if unknown); bit 31 (`FLAG_IPC_LOST`, 2147483648) marks a slot that never reached the receiver |
 //! | `y_0` … `y_{ny−1}` | float | the measurement; ignored (may be empty) when `delivered = 0` |
-//! | `tokens`      | integer, optional | the bucket level a delivered packet reported (wire version 5's `tokens`); empty when none |
+//! | `tokens`      | integer, optional | the bucket level a delivered packet reported (the wire's `tokens`); empty when none |
+//! | `late_after`  | integer, optional | a slot that arrived late: the newest instant handed on when it came (0 or absent: on time) |
 //!
 //! A row with `delivered = 0` is a packet the channel dropped (a dropout, which may carry
 //! information: occlusion, event trigger), unless its flags have `FLAG_IPC_LOST`: then the
@@ -31,17 +32,44 @@ use estpipe_wire::FLAG_IPC_LOST;
 use std::io::Write;
 use std::path::Path;
 
-/// Writes observations as a slot log.
-pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> {
+/// Writes observations as a slot log. `late_after` lists the slots (by index in `slots`)
+/// that arrived late and the newest instant handed on when they came: with any, the log has
+/// a `late_after` column and its rows are ordered by k (a late slot among its instant's).
+pub fn write_slots(
+    path: &Path,
+    slots: &[Observation],
+    ny: usize,
+    late_after: &[(usize, u32)],
+) -> Result<()> {
     let mut w = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
     );
-    write!(w, "k,node,delivered,flags")?;
+    write!(w, "k,node,delivered,flags").with_context(|| format!("cannot write {path:?}"))?;
     for j in 0..ny {
-        write!(w, ",y_{j}")?;
+        write!(w, ",y_{j}").with_context(|| format!("cannot write {path:?}"))?;
     }
-    writeln!(w, ",tokens")?;
-    for o in slots {
+    write!(w, ",tokens").with_context(|| format!("cannot write {path:?}"))?;
+    let mut after = vec![
+        0u32;
+        if late_after.is_empty() {
+            0
+        } else {
+            slots.len()
+        }
+    ];
+    for &(i, k) in late_after {
+        if let Some(a) = after.get_mut(i) {
+            *a = k;
+        }
+    }
+    let mut order: Vec<usize> = (0..slots.len()).collect();
+    if !after.is_empty() {
+        write!(w, ",late_after").with_context(|| format!("cannot write {path:?}"))?;
+        order.sort_by_key(|&i| slots[i].k);
+    }
+    writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
+    for i in order {
+        let o = &slots[i];
         write!(
             w,
             "{},{},{},{}",
@@ -49,24 +77,42 @@ pub fn write_slots(path: &Path, slots: &[Observation], ny: usize) -> Result<()> 
             o.node,
             u8::from(o.delivered),
             o.flags
-        )?;
+        )
+        .with_context(|| format!("cannot write {path:?}"))?;
         for j in 0..ny {
             if o.delivered {
-                write!(w, ",{:e}", o.y[j])?;
+                write!(w, ",{:e}", o.y[j]).with_context(|| format!("cannot write {path:?}"))?;
             } else {
-                write!(w, ",")?;
+                write!(w, ",").with_context(|| format!("cannot write {path:?}"))?;
             }
         }
         match o.tokens {
-            Some(t) => writeln!(w, ",{t}")?,
-            None => writeln!(w, ",")?,
+            Some(t) => write!(w, ",{t}"),
+            None => write!(w, ","),
         }
+        .with_context(|| format!("cannot write {path:?}"))?;
+        if let Some(a) = after.get(i) {
+            write!(w, ",{a}").with_context(|| format!("cannot write {path:?}"))?;
+        }
+        writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
     }
     // Dropping a BufWriter loses its last error: a full disk must fail the write.
     w.flush()
         .with_context(|| format!("cannot write {path:?}"))?;
     Ok(())
 }
+
+/// Reading stopped at this line on SIGINT/SIGTERM/SIGHUP.
+#[derive(Debug)]
+pub struct Interrupted(pub u64);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted while reading line {}", self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
 
 /// One instant as read from a slot log: k and every node's observation.
 pub type LoggedInstant = (u32, heapless::Vec<Observation, MAX_NODES>);
@@ -75,10 +121,20 @@ pub type LoggedInstant = (u32, heapless::Vec<Observation, MAX_NODES>);
 pub const DEFAULT_MAX_INSTANTS: u64 =
     crate::limits::DEFAULT_MAX_MEMORY_MIB * (1 << 20) / size_of::<LoggedInstant>() as u64;
 
+/// A slot log as read: the instants, and the slots that arrived late.
+#[derive(Clone, Debug, Default)]
+pub struct SlotLog {
+    /// Every k from 1 to the last, all nodes present (a late slot is lost at its instant).
+    pub instants: Vec<LoggedInstant>,
+    /// The slots that arrived late (a `late_after` above 0): the newest instant handed on
+    /// when each came, and the slot; in file order.
+    pub late: Vec<(u32, Observation)>,
+}
+
 /// Reads a slot log; returns the instants (every k from 1 to the last, all nodes present),
 /// with at most [`DEFAULT_MAX_INSTANTS`] of them.
 pub fn read_slots(path: &Path, nodes: usize, ny: usize) -> Result<Vec<LoggedInstant>> {
-    read_slots_within(path, nodes, ny, DEFAULT_MAX_INSTANTS)
+    Ok(read_slots_within(path, nodes, ny, DEFAULT_MAX_INSTANTS)?.instants)
 }
 
 /// [`read_slots`] with a bound on the k span: a row whose k exceeds `max_instants` is refused
@@ -91,7 +147,7 @@ pub fn read_slots_within(
     nodes: usize,
     ny: usize,
     max_instants: u64,
-) -> Result<Vec<LoggedInstant>> {
+) -> Result<SlotLog> {
     if ny > MAX_NY || nodes > MAX_NODES {
         bail!("scenario dimensions exceed the wire limits");
     }
@@ -134,6 +190,8 @@ pub fn read_slots_within(
     };
     let (ck, cn, cd, cf) = (idx("k")?, idx("node")?, idx("delivered")?, find("flags")?);
     let ct = find("tokens")?;
+    let cl = find("late_after")?;
+    let mut late: Vec<(u32, Observation)> = Vec::new();
     let cy: Vec<usize> = (0..ny)
         .map(|j| idx(&format!("y_{j}")))
         .collect::<Result<_>>()?;
@@ -148,6 +206,10 @@ pub fn read_slots_within(
     // The line of each node's row in the current instant (0: none yet).
     let mut seen = [0u64; MAX_NODES];
     while let Some((ln, line)) = lines.next_line()? {
+        // SIGINT/SIGTERM while a long log is read (`replay` installs the flag).
+        if ln % 65_536 == 0 && estpipe_process::signal::termination_requested() {
+            return Err(anyhow::Error::new(Interrupted(ln)));
+        }
         if line.trim().is_empty() {
             continue;
         }
@@ -181,6 +243,18 @@ pub fn read_slots_within(
         };
         if k == 0 {
             return Err(at("k", "k must be ≥ 1 (k = 0 is the prior)".into()));
+        }
+        let late_after: u32 = match cl {
+            Some(c) if !get(c).is_empty() => get(c)
+                .parse()
+                .map_err(|e| at("late_after", format!("{:?} ({e})", get(c))))?,
+            _ => 0,
+        };
+        if late_after != 0 && late_after < k {
+            return Err(at(
+                "late_after",
+                format!("{late_after} is before the slot's own instant k = {k}"),
+            ));
         }
         if node >= nodes {
             return Err(at(
@@ -220,6 +294,24 @@ pub fn read_slots_within(
             ));
         }
         seen[node] = ln;
+        // Grown by doubling, but never past the budget's instants, and fallibly: a plain
+        // push doubled a 5-million-instant log to 8.4 million (3.36 GB) and aborted.
+        let need = k as usize;
+        if out.capacity() < need {
+            let want = need
+                .max(out.capacity().saturating_mul(2))
+                .min(usize::try_from(max_instants).unwrap_or(usize::MAX))
+                .max(need);
+            out.try_reserve_exact(want - out.len()).map_err(|e| {
+                at(
+                    "k",
+                    format!(
+                        "k = {k}: cannot allocate {want} instants ({e}); --max-memory MIB \
+                         lowers the budget"
+                    ),
+                )
+            })?;
+        }
         while out.last().map_or(0, |(lk, _)| *lk) < k {
             let next = out.last().map_or(1, |(lk, _)| lk + 1);
             out.push((next, blank(next)));
@@ -232,8 +324,7 @@ pub fn read_slots_within(
                     .map_err(|e| at(&format!("y_{j}"), format!("{:?} ({e})", get(c))))?;
             }
         }
-        let obs = &mut out.last_mut().expect("pushed above").1[node];
-        *obs = Observation {
+        let o = Observation {
             k,
             node: node as u8,
             delivered,
@@ -242,8 +333,18 @@ pub fn read_slots_within(
             flags,
             tokens,
         };
+        if late_after > 0 {
+            // Lost at its instant; held until the instant it came after (one per row, so
+            // bounded like the rows).
+            late.push((late_after, o));
+        } else {
+            out.last_mut().expect("pushed above").1[node] = o;
+        }
     }
-    Ok(out)
+    Ok(SlotLog {
+        instants: out,
+        late,
+    })
 }
 
 #[cfg(test)]
@@ -270,7 +371,7 @@ mod tests {
             },
             Observation::dropped(3, 0, 2, 16),
         ];
-        write_slots(&p, &slots, 2).unwrap();
+        write_slots(&p, &slots, 2, &[]).unwrap();
         let r = read_slots(&p, 2, 2).unwrap();
         assert_eq!(r.len(), 3);
         assert_eq!(r[0].1[1], slots[0]);
@@ -308,7 +409,7 @@ mod tests {
         );
         // The same node at the next k is no duplicate.
         std::fs::write(&p, "k,node,delivered,y_0\n1,0,1,0.5\n2,0,1,0.25\n").unwrap();
-        assert_eq!(read_slots_within(&p, 2, 1, 10).unwrap().len(), 2);
+        assert_eq!(read_slots_within(&p, 2, 1, 10).unwrap().instants.len(), 2);
         let e = refuse("k,node,delivered,y_0\n1,0,1,0.5\n11,0,0,\n", 10);
         assert!(
             e.contains("line 3: k: k = 11 means replaying 11 instants")

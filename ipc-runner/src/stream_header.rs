@@ -21,7 +21,7 @@ pub struct StreamHeaderArgs {
     pub estimator_spec: Option<PathBuf>,
 }
 
-/// `{"wire_version":5,"scenario":"linear","nodes":1,"nx":2,"ny":[1],"model":"0x…"}`: the
+/// `{"wire_version":6,"scenario":"linear","nodes":1,"nx":2,"ny":[1],"model":"0x…"}`: the
 /// model as a hex string, since a 64-bit integer does not survive every JSON parser.
 pub fn to_json(h: &StreamHeader) -> serde_json::Value {
     serde_json::json!({

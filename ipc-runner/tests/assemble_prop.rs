@@ -18,7 +18,7 @@
 //! release.
 
 use channel_sim::Observation;
-use estpipe_wire::{Slot, StreamHeader, SLOT_ABORT, SLOT_END};
+use estpipe_wire::{Slot, StreamHeader, FLAG_IPC_LOST, SLOT_ABORT, SLOT_END};
 use ipc_runner::run::assemble::{Assembler, Limits, Pushed, WINDOW};
 use proptest::prelude::*;
 
@@ -155,6 +155,7 @@ fn hostile_case(seed: u64, nodes: u8, max_gap: u32, paced: bool, slots: usize) {
     let limits = Limits {
         max_gap,
         instant_deadline_ns: if paced { 50 } else { 0 },
+        lag: (seed % 4) as u32,
     };
     let period = if paced { 10 } else { 0 };
     let mut a = Assembler::new(&h, limits);
@@ -205,6 +206,19 @@ fn hostile_case(seed: u64, nodes: u8, max_gap: u32, paced: bool, slots: usize) {
             );
         }
         assert_eq!(a.counts.slots_seen(), before + 1, "{s:?} → {p:?}");
+        let mut late = [Observation::dropped(0, 0, 0, 0); estpipe_wire::MAX_NODES];
+        match a.take_late(&mut late) {
+            // A late slot: of an instant already handed on, within the lag, the others lost.
+            Some((k, n)) => {
+                assert_eq!(p, Pushed::Late);
+                let lateness = a.next_instant() - u64::from(k);
+                assert!(lateness >= 1 && lateness <= seed % 4, "{lateness}");
+                assert_eq!(n, usize::from(nodes));
+                let known = late[..n].iter().filter(|o| o.flags & FLAG_IPC_LOST == 0);
+                assert_eq!(known.count(), 1);
+            }
+            None => assert_ne!(p, Pushed::Late),
+        }
         if rng.chance(10) {
             a.expire(now, &mut |k, o: &[Observation]| check.on(k, o));
         }

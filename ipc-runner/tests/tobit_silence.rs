@@ -7,7 +7,7 @@
 //!   whose trigger did not fire, every blocked send is a silence it does not call held, and it
 //!   never loses track (no loss in the example); with 5 % of the slots lost in transport it
 //!   goes unknown after a loss and resynchronises from the level the next delivered packet
-//!   reports (wire version 5's `tokens`), never holding a wrong level;
+//!   reports (wire version 6's `tokens`), never holding a wrong level;
 //! * the silence views are consistent with their reported matrices: the error lies inside the
 //!   95 % ellipse in at least 95 % of the run-instants (fused and local);
 //! * what the example measures (docs/tobit-fusion.md has the 2000-run table): the

@@ -64,6 +64,13 @@ pub struct Estimate {
     pub receive_ns: u64,
     /// `CLOCK_MONOTONIC` when this estimator's step finished.
     pub step_done_ns: u64,
+    /// Slots that arrived late and were folded into this estimator since its previous estimate
+    /// (`--lag`, docs/pipeline.md "Late packets"): this estimate is the one they would have
+    /// given on time. 0: no revision.
+    pub late_folded: u32,
+    /// The oldest instant those late slots belonged to (0 when `late_folded` is 0): the
+    /// estimates published for instants `revised_from..k` are superseded.
+    pub revised_from: u32,
 }
 
 impl Estimate {
@@ -85,6 +92,8 @@ impl Estimate {
             slot_send_ns: 0,
             receive_ns: 0,
             step_done_ns: 0,
+            late_folded: 0,
+            revised_from: 0,
         }
     }
 

@@ -87,6 +87,7 @@ pub fn layouts() -> Vec<TypeLayout> {
                 version: "u32", k: "u32", stream_id: "u64", seq: "u64", estimator: "u32",
                 nx: "u32", name: "[u8; 16]", status: "u32", cov_kind: "u32", x: "[f64; 8]",
                 p: "[f64; 36]", slot_send_ns: "u64", receive_ns: "u64", step_done_ns: "u64",
+                late_folded: "u32", revised_from: "u32",
             ),
         ),
         layout::<Truth>(

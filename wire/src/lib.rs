@@ -69,7 +69,7 @@ pub use truth::Truth;
 /// non-overflowing (back-pressure). Version 3 made every sensor node its own stream (its own
 /// stream id, `seq = k − 1`, its own END/ABORT marker) and lets the slot service admit one
 /// publisher per node ([`MAX_NODES`]).
-pub const WIRE_VERSION: u32 = 5;
+pub const WIRE_VERSION: u32 = 6;
 
 /// Largest state dimension (fixed so payloads are fixed-size).
 pub const MAX_NX: usize = 8;

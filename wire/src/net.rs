@@ -37,7 +37,7 @@ pub const SLOT_LEN: usize = 96;
 /// Bytes of an encoded [`Truth`].
 pub const TRUTH_LEN: usize = 88;
 /// Bytes of an encoded [`Estimate`].
-pub const ESTIMATE_LEN: usize = 432;
+pub const ESTIMATE_LEN: usize = 440;
 /// Bytes of a whole slot message (tag, header, slot).
 pub const SLOT_MESSAGE_LEN: usize = TAG_LEN + HEADER_LEN + SLOT_LEN;
 /// Bytes of a whole truth message.
@@ -359,6 +359,8 @@ pub fn encode_estimate(e: &Estimate) -> [u8; ESTIMATE_MESSAGE_LEN] {
     w.u64(e.slot_send_ns);
     w.u64(e.receive_ns);
     w.u64(e.step_done_ns);
+    w.u32(e.late_folded);
+    w.u32(e.revised_from);
     buf
 }
 
@@ -384,6 +386,8 @@ pub fn decode_estimate(buf: &[u8]) -> Result<Estimate, NetError> {
         slot_send_ns: r.u64(),
         receive_ns: r.u64(),
         step_done_ns: r.u64(),
+        late_folded: r.u32(),
+        revised_from: r.u32(),
     };
     if e.version != WIRE_VERSION {
         return Err(NetError::Version(e.version));

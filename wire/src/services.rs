@@ -16,7 +16,7 @@
 
 use crate::error::ContractError;
 use crate::explain;
-pub use crate::qos::PubSubQos;
+pub use crate::qos::{PubSubQos, QosLimit, QOS_LIMIT};
 use crate::{Estimate, Slot, StreamHeader, Truth};
 use iceoryx2::port::event_id::EventId;
 use iceoryx2::prelude::*;
@@ -110,7 +110,8 @@ where
     H: ZeroCopySend + core::fmt::Debug + 'static,
 {
     let name = service_name(prefix, what)?;
-    node.service_builder(&name)
+    let service = node
+        .service_builder(&name)
         .publish_subscribe::<T>()
         .user_header::<H>()
         .max_publishers(qos.max_publishers)
@@ -119,7 +120,42 @@ where
         .history_size(qos.history_size)
         .enable_safe_overflow(qos.safe_overflow)
         .open_or_create()
-        .map_err(|e| explain::pubsub_open::<T, H>(node, &name, qos, &format!("{e:?}")))
+        .map_err(|e| explain::pubsub_open::<T, H>(node, &name, qos, &format!("{e:?}")))?;
+    within_limit(&name, service.static_config())?;
+    Ok(service)
+}
+
+/// Refuses a service whose QoS is above [`QOS_LIMIT`] (iceoryx2 only checks that an opened
+/// service offers *at least* what the opener asks for; its creator chooses how much every
+/// publisher preallocates).
+fn within_limit(
+    name: &ServiceName,
+    c: &iceoryx2::service::static_config::publish_subscribe::StaticConfig,
+) -> Result<(), ContractError> {
+    let have = QosLimit {
+        max_publishers: c.max_publishers(),
+        max_subscribers: c.max_subscribers(),
+        subscriber_max_buffer_size: c.subscriber_max_buffer_size(),
+        subscriber_max_borrowed_samples: c.subscriber_max_borrowed_samples(),
+        history_size: c.history_size(),
+        max_nodes: c.max_nodes(),
+    };
+    match QOS_LIMIT.exceeded_by(&have) {
+        None => Ok(()),
+        Some(what) => Err(ContractError::Refused(format!(
+            "service {name} was created with {what}, above what this side accepts \
+             (max_publishers ≤ {}, max_subscribers ≤ {}, subscriber_max_buffer_size ≤ {}, \
+             subscriber_max_borrowed_samples ≤ {}, history_size ≤ {}, max_nodes ≤ {}: its \
+             publishers would preallocate that much shared memory); remove it (stop the process \
+             that created it) or use another --prefix (docs/wire.md, Services and QoS)",
+            QOS_LIMIT.max_publishers,
+            QOS_LIMIT.max_subscribers,
+            QOS_LIMIT.subscriber_max_buffer_size,
+            QOS_LIMIT.subscriber_max_borrowed_samples,
+            QOS_LIMIT.history_size,
+            QOS_LIMIT.max_nodes
+        ))),
+    }
 }
 
 /// Opens (or creates) the slot service.
@@ -149,6 +185,12 @@ pub fn estimate_service(
 /// ones as jumps in `seq`), and writing an entry allocates nothing — publish-subscribe in
 /// iceoryx2 0.10 allocates a reference count per loaned sample. Created by the runner (it
 /// knows the estimators); readers open it with `blackboard_opener::<u32>()`.
+///
+/// A blackboard lives as long as a port of it does: a reader left open after its runner
+/// ended keeps it (issue #39: the next `--latest-estimates` runner failed with
+/// `AlreadyExists`). Such a board is opened again instead, and the caller writes it if it
+/// can (its one writer, the old runner, is gone; its entries are this runner's
+/// estimators: [`LATEST_ENTRIES_DIFFER`] otherwise).
 pub fn latest_estimates_board(
     node: &Node<ipc::Service>,
     prefix: &str,
@@ -163,9 +205,23 @@ pub fn latest_estimates_board(
         let i = i as u32;
         b = b.add(i, Estimate::none_yet(i, *n));
     }
-    b.create()
-        .map_err(|e| explain::other_open(&name, "blackboard", &format!("{e:?}")))
+    match b.create() {
+        Ok(board) => Ok(board),
+        Err(iceoryx2::service::builder::blackboard::BlackboardCreateError::AlreadyExists) => node
+            .service_builder(&name)
+            .blackboard_opener::<u32>()
+            .max_readers(LATEST_MAX_READERS)
+            .open()
+            .map_err(|e| explain::other_open(&name, "blackboard", &format!("{e:?}"))),
+        Err(e) => Err(explain::other_open(&name, "blackboard", &format!("{e:?}"))),
+    }
 }
+
+/// The end of the line refusing a latest-estimate blackboard left by an earlier run whose
+/// entries are not this runner's estimators.
+pub const LATEST_ENTRIES_DIFFER: &str =
+    "it was created by an earlier runner with other estimators and is kept by a reader still \
+     open: close that reader (or use another --prefix)";
 
 /// Opens (or creates) the event service notified with [`READY_EVENT`] after each instant.
 pub fn ready_event_service(

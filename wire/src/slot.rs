@@ -28,7 +28,7 @@ pub const FLAG_OCCLUDED: u32 = 1 << 4;
 /// [`Slot::flags`]: [`Slot::tokens`] holds the shared token bucket's level ξ_{t−1} that this
 /// node's grant used (seed 004, eq. 18): a delivered packet tells the receiver the bucket's
 /// level, so the receiver's mirror of the bucket can resynchronise after a lost packet
-/// (docs/tobit-fusion.md, "Silence that speaks"). Since wire version 5.
+/// (docs/tobit-fusion.md, "Silence that speaks"). Since wire version 6.
 pub const FLAG_TOKENS: u32 = 1 << 5;
 /// Added by the runner, never written on the wire: the node's slot of this instant never
 /// reached the estimators — lost inside the IPC (a gap in the node's sequence numbers),

@@ -131,6 +131,10 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
     for (name, f) in est {
         out.push((Box::leak(name.into_boxed_str()), repeat(f)));
     }
+    // A late packet through the fixed-lag layer (issue #33).
+    for (name, f) in benches::late::kernels() {
+        out.push((Box::leak(name.into_boxed_str()), repeat(f)));
+    }
     out
 }
 

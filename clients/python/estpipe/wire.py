@@ -10,7 +10,7 @@ import time
 
 import iceoryx2 as iox2
 
-WIRE_VERSION = 5
+WIRE_VERSION = 6
 
 MAX_NX = 8
 MAX_NY = 4
@@ -27,6 +27,7 @@ FLAG_CENSORED = 1 << 2
 FLAG_RANDOM_LOSS = 1 << 3
 FLAG_OCCLUDED = 1 << 4
 FLAG_TOKENS = 1 << 5
+FLAG_NET_LOST = 1 << 30
 FLAG_IPC_LOST = 1 << 31
 
 STATUS_OK = 0
@@ -43,7 +44,56 @@ MAX_SUBSCRIBER_BUFFER = 4096
 ESTIMATE_HISTORY = 16
 
 
-class Slot(ctypes.Structure):
+_INT_RANGES = {
+    ctypes.c_uint8: (0, (1 << 8) - 1),
+    ctypes.c_uint16: (0, (1 << 16) - 1),
+    ctypes.c_uint32: (0, (1 << 32) - 1),
+    ctypes.c_uint64: (0, (1 << 64) - 1),
+}
+
+
+class Checked(ctypes.Structure):
+    """A ctypes structure that refuses an out-of-range integer instead of wrapping it.
+
+    ctypes stores `flags = -1` as 0xffffffff and `nodes = 257` as 1 without a word; here every
+    integer field (keyword arguments included) raises `ValueError` naming the structure, the
+    field, the value and its range, and a non-integer raises `TypeError`. Array fields are
+    plain ctypes arrays: write them through the structure's helpers or check them yourself.
+    """
+
+    def __init__(self, **fields):
+        super().__init__()
+        for name, value in fields.items():
+            setattr(self, name, value)
+
+    def __setattr__(self, name, value):
+        ctype = dict(self._fields_).get(name)
+        bounds = _INT_RANGES.get(ctype)
+        if bounds is not None:
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise TypeError(
+                    f"{type(self).__name__}.{name}: {value!r} is not an integer"
+                )
+            lo, hi = bounds
+            if not lo <= value <= hi:
+                raise ValueError(
+                    f"{type(self).__name__}.{name}: {value} is outside {lo}..={hi}"
+                )
+        elif ctype is None and not name.startswith("_"):
+            raise AttributeError(f"{type(self).__name__} has no field {name!r}")
+        super().__setattr__(name, value)
+
+
+def _in_range(what: str, value, lo: int, hi: int) -> int:
+    """`value` as an int in lo..=hi, else `ValueError` naming `what`."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{what}: {value!r} is not an integer")
+    if not lo <= value <= hi:
+        raise ValueError(f"{what}: {value} is outside {lo}..={hi}")
+    return value
+
+
+class Slot(Checked):
     """One sensor node's observation of one sampling instant (payload of <prefix>/slots)."""
 
     _fields_ = [
@@ -70,7 +120,7 @@ class Slot(ctypes.Structure):
         return "estpipe::wire::Slot"
 
 
-class StreamHeader(ctypes.Structure):
+class StreamHeader(Checked):
     """The stream's shape: the iceoryx2 user header of every slot."""
 
     _fields_ = [
@@ -90,20 +140,49 @@ class StreamHeader(ctypes.Structure):
 
     @classmethod
     def from_json(cls, h: dict) -> "StreamHeader":
-        """The header `ipc-runner stream-header` prints (a dict parsed from its JSON)."""
-        out = cls()
-        out.version = h["wire_version"]
-        out.nodes = h["nodes"]
-        out.nx = h["nx"]
-        for m, n in enumerate(h["ny"]):
-            out.ny[m] = n
-        out.model = int(h["model"], 16)
-        name = h["scenario"].encode()[:32]
+        """The header `ipc-runner stream-header` prints (a dict parsed from its JSON).
+
+        Checked as the runner checks a header (docs/wire.md, StreamHeader): `ValueError`
+        naming the field for a missing key, another wire version, `nodes` or `nx` outside
+        1..=8, `ny` not one entry 0..=4 per node, a model that is not a 64-bit hex string,
+        a name over 32 bytes.
+        """
+        if not isinstance(h, dict):
+            raise ValueError(f"stream header: expected a JSON object, got {type(h).__name__}")
+        for key in ("wire_version", "nodes", "nx", "ny", "model", "scenario"):
+            if key not in h:
+                raise ValueError(f"stream header: missing {key!r}")
+        version = _in_range("stream header: wire_version", h["wire_version"], 0, (1 << 32) - 1)
+        if version != WIRE_VERSION:
+            raise ValueError(
+                f"stream header: wire_version {version}, but this client speaks {WIRE_VERSION}"
+            )
+        nodes = _in_range("stream header: nodes", h["nodes"], 1, MAX_NODES)
+        nx = _in_range("stream header: nx", h["nx"], 1, MAX_NX)
+        ny = h["ny"]
+        if not isinstance(ny, list) or len(ny) != nodes:
+            raise ValueError(f"stream header: ny must list {nodes} entries, got {ny!r}")
+        model = h["model"]
+        if not isinstance(model, str) or not model.startswith("0x"):
+            raise ValueError(f"stream header: model {model!r} is not a 0x… hex string")
+        try:
+            model = int(model, 16)
+        except ValueError:
+            raise ValueError(f"stream header: model {h['model']!r} is not hex") from None
+        model = _in_range("stream header: model", model, 0, (1 << 64) - 1)
+        if not isinstance(h["scenario"], str):
+            raise ValueError("stream header: scenario must be a string")
+        name = h["scenario"].encode()
+        if len(name) > 32:
+            raise ValueError(f"stream header: scenario name is {len(name)} bytes, at most 32")
+        out = cls(version=version, nodes=nodes, nx=nx, model=model)
+        for m, n in enumerate(ny):
+            out.ny[m] = _in_range(f"stream header: ny[{m}]", n, 0, MAX_NY)
         ctypes.memmove(out.scenario, name, len(name))
         return out
 
 
-class Estimate(ctypes.Structure):
+class Estimate(Checked):
     """One estimator's estimate (payload of <prefix>/estimates)."""
 
     _fields_ = [
@@ -121,6 +200,8 @@ class Estimate(ctypes.Structure):
         ("slot_send_ns", ctypes.c_uint64),
         ("receive_ns", ctypes.c_uint64),
         ("step_done_ns", ctypes.c_uint64),
+        ("late_folded", ctypes.c_uint32),
+        ("revised_from", ctypes.c_uint32),
     ]
 
     @staticmethod
@@ -142,7 +223,7 @@ class Estimate(ctypes.Structure):
         return [[self.p[packed_index(n, i, j)] for j in range(n)] for i in range(n)]
 
 
-class Truth(ctypes.Structure):
+class Truth(Checked):
     """The true state (payload of <prefix>/truth, evaluation only)."""
 
     _fields_ = [

@@ -3,14 +3,21 @@
     ipc-runner stream-header --scenario linear > header.json
     python3 publish_slots.py --prefix mine --header header.json --slots slots.csv --rate 1000
 
+The log is read as `ipc-runner replay` reads it (estpipe.read_slots, rule for rule), so the
+runner's estimates equal replay's: a delivered row goes out with its measurement, a row with
+delivered = 0 as a channel dropout, and a row flagged lost (FLAG_IPC_LOST, or FLAG_NET_LOST
+undelivered), a node missing from an instant or a missing instant is *not sent*: the gap in
+the node's seq is the runner's lost slot (docs/wire.md, Stream rules). Rows replay refuses
+are refused here too, with the file, line and field, before anything is sent (exit code 2).
+
 Every slot carries the stream header (the shape and model fingerprint the runner checks); the
-slots of an instant go out in node order with dense sequence numbers, then one notification
-on <prefix>/slots-ready; an END marker closes the stream. A full runner queue blocks the send
-(iceoryx2 RetryUntilDelivered), so nothing is lost.
+slots of an instant go out in node order, then one notification on <prefix>/slots-ready; each
+node's END marker (k = the log's last instant) closes the stream. Each slot is sent until
+every subscriber has it (estpipe.send_slot: iceoryx2 0.10 discards a slot for a runner that
+has not yet connected to this publisher), so nothing is lost at any rate.
 """
 
 import argparse
-import ctypes
 import json
 import os
 import sys
@@ -41,18 +48,20 @@ def wait_for_subscriber(node, service, timeout):
         node.wait(iox2.Duration.from_millis(2))
 
 
-def send(publisher, header, slot):
-    sample = publisher.loan_uninit()
-    ctypes.memmove(sample.user_header_ptr, ctypes.byref(header), ctypes.sizeof(header))
-    sample.write_payload(slot).send()
-
-
 def main() -> int:
     args = parse_args()
-    with open(args.header) as f:
-        header = estpipe.StreamHeader.from_json(json.load(f))
-    nodes, ny = header.nodes, list(header.ny)
-    instants = estpipe.read_slots(args.slots, nodes, ny)
+    if not (args.rate >= 0 and args.rate <= 1e6):
+        print(f"publish_slots.py: error: --rate {args.rate} is not in [0, 1e6]", file=sys.stderr)
+        return 2
+    try:
+        with open(args.header) as f:
+            header = estpipe.StreamHeader.from_json(json.load(f))
+        nodes, ny = header.nodes, list(header.ny)
+        instants = estpipe.read_slots(args.slots, nodes, ny)
+    except (OSError, ValueError) as e:
+        print(f"publish_slots.py: error: {args.header if isinstance(e, OSError) else ''}"
+              f"{e}", file=sys.stderr)
+        return 2
 
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
     node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
@@ -69,9 +78,10 @@ def main() -> int:
     stream_id = (os.getpid() << 32) ^ estpipe.monotonic_ns()
     period_ns = round(1e9 / args.rate) if args.rate > 0 else 0
     t0 = estpipe.monotonic_ns()
-    # Per node, the last instant sent: its END/ABORT marker's k and seq (since wire version 3).
+    # Per node, the last instant of its stream: its END/ABORT marker's k and seq (since wire
+    # version 3). A lost slot is not sent but still counts: the marker's k covers it.
     last_sent = [0] * nodes
-    sent = 0
+    sent = lost = again = 0
     try:
         for i, (k, obs) in enumerate(instants):
             if period_ns:
@@ -79,7 +89,12 @@ def main() -> int:
                 now = estpipe.monotonic_ns()
                 if due > now:
                     node.wait(iox2.Duration.from_nanos(due - now))
-            for m, (delivered, flags, y) in enumerate(obs):
+            for m, (state, flags, y) in enumerate(obs):
+                last_sent[m] = k
+                if state == estpipe.LOST:
+                    lost += 1
+                    continue
+                delivered = state == estpipe.DELIVERED
                 slot = estpipe.Slot(
                     version=estpipe.WIRE_VERSION,
                     kind=estpipe.SLOT_DATA,
@@ -90,19 +105,23 @@ def main() -> int:
                     nodes=nodes,
                     ny=ny[m],
                     delivered=int(delivered),
-                    flags=flags,
+                    # Never on the wire (docs/wire.md, Constants): a delivered row's
+                    # measurement is used whatever its flags, as replay uses it.
+                    flags=flags & ~(estpipe.FLAG_IPC_LOST | estpipe.FLAG_NET_LOST),
                     period_ns=period_ns,
                     stream_start_ns=t0,
                 )
                 slot.y[:] = y
                 slot.send_ns = estpipe.monotonic_ns()
-                send(publisher, header, slot)
-                last_sent[m] = k
+                again += estpipe.send_slot(publisher, service, header, slot)
                 sent += 1
             notifier.notify_with_custom_event_id(ready)
         kind = estpipe.SLOT_END
-    except iox2.NodeWaitFailure:
+    except (iox2.NodeWaitFailure, KeyboardInterrupt):
         kind = estpipe.SLOT_ABORT
+    except estpipe.NotDelivered as e:
+        print(f"publish_slots.py: error: {e}", file=sys.stderr)
+        return 1
     # Every node's stream ends with its own marker (seq = k = its last instant sent).
     for m in range(nodes):
         end = estpipe.Slot(
@@ -117,7 +136,10 @@ def main() -> int:
             stream_start_ns=t0,
             send_ns=estpipe.monotonic_ns(),
         )
-        send(publisher, header, end)
+        try:
+            estpipe.send_slot(publisher, service, header, end)
+        except estpipe.NotDelivered as e:
+            print(f"publish_slots.py: {e} (END marker)", file=sys.stderr)
     notifier.notify_with_custom_event_id(ready)
     # The runner reads the tail from our data segment: stay until it has detached.
     start = estpipe.monotonic_ns()
@@ -128,7 +150,8 @@ def main() -> int:
             node.wait(iox2.Duration.from_millis(2))
         except iox2.NodeWaitFailure:
             break
-    print(f"published {sent} slots of {len(instants)} instants", file=sys.stderr)
+    print(f"published {sent} slots of {len(instants)} instants ({lost} lost slots not sent, "
+          f"{again} sent again)", file=sys.stderr)
     return 0
 
 

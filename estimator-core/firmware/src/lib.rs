@@ -13,6 +13,7 @@ use core::ptr::{addr_of, read_volatile, write_volatile};
 
 use cortex_m_semihosting::hio;
 
+use estimator_core::LagCounts;
 use run::{Source, Summary, Vectors};
 
 /// Exit status: run completed (estimator errors, if any, are in the result line).
@@ -139,6 +140,38 @@ pub fn main_with<S: Source>(vectors: Vectors, driver: fn(&S, usize) -> Summary) 
     let s = driver(&stream, usize::MAX);
     report(&s, stack_peak());
     exit(EXIT_OK);
+}
+
+/// The body of the fixed-lag binaries: as [`main_with`], with a driver that also returns the
+/// layer's counts of late packets, printed after the result as
+/// `LATE <name> folded=… unchanged=… too_old=… refused=…`.
+pub fn main_with_lag<S: Source>(
+    vectors: Vectors,
+    driver: fn(&S, usize) -> (Summary, LagCounts),
+) -> ! {
+    let stream = open_or_exit(&vectors);
+    if let Some(n) = cmdline_steps() {
+        let s = driver(&stream, n);
+        core::hint::black_box(s);
+        exit(EXIT_OK);
+    }
+    paint_stack();
+    let (s, counts) = driver(&stream, usize::MAX);
+    report_lag(&s, &counts, stack_peak());
+    exit(EXIT_OK);
+}
+
+/// The result, the late-packet counts and the stack lines (as [`report`]'s).
+#[inline(never)]
+fn report_lag(s: &Summary, c: &LagCounts, (peak, overflow): (usize, bool)) {
+    out!("RESULT {s}\n");
+    out!("LATE {} {}\n", s.name, run::LateLine(c));
+    out!(
+        "STACK {} peak={}{}\n",
+        s.name,
+        peak,
+        if overflow { " (window overrun)" } else { "" }
+    );
 }
 
 // The two helpers below are not inlined so that their formatting temporaries are not part of

@@ -11,7 +11,7 @@
 //! Where the mirror cannot follow, it knows it: a packet lost in transport may have been a
 //! transmission that spent tokens, so after a lost packet the level is *unknown* and no
 //! silence counts as held, until a delivered packet reports the level its grant used (wire
-//! version 5: the slot's `tokens`, docs/wire.md). A reported level resynchronises the mirror;
+//! version 6: the slot's `tokens`, docs/wire.md). A reported level resynchronises the mirror;
 //! one that differs from a known mirror level is counted (a mismatch: the mirror had been
 //! wrong), and one that is impossible (above the capacity, or too low for the grant of a node
 //! that sent) is counted and ignored. A delivered packet the mirror's level would not have

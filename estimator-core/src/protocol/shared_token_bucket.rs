@@ -104,7 +104,7 @@ impl<const L: usize> SharedTokenBucket<L> {
     pub fn grants(&self) -> [bool; L] {
         let mut g = [false; L];
         for m in 0..L {
-            g[m] = self.costs[m] as u64 * L as u64 <= self.level as u64;
+            g[m] = share_covers(self.level, L, self.costs[m]);
         }
         g
     }
@@ -130,6 +130,15 @@ impl<const L: usize> SharedTokenBucket<L> {
         self.level = next as u32;
         Ok(self.level)
     }
+}
+
+/// β_m (eq. 18) of one node of `nodes` sharing a bucket at `level` tokens: its share
+/// ξ/L (eq. 16) covers its cost c_m, tested exactly as `L c_m ≤ ξ`. What a sensor node that
+/// is told the shared level (and not the other nodes' decisions) decides by itself.
+#[inline]
+#[must_use]
+pub fn share_covers(level: u32, nodes: usize, cost: u32) -> bool {
+    u64::from(cost) * nodes as u64 <= u64::from(level)
 }
 
 /// One node's decision at one instant.

@@ -1,16 +1,18 @@
 //! The application's dynamic [`Estimator`] over a core one: a name, the estimate and its
 //! covariance as `f64`s, diagnostics, and the stepping: the slot observations become the core
 //! measurement ([`FromSlots`]), the core's [`CatchUp`](estimator_core::CatchUp) fills missed
-//! instants ([`Fed`]) and, with `--gate P`, the core's [`Gated`] runs the innovation gate with
-//! its lock-out rule (docs/gate.md). Nothing here re-implements a step.
+//! instants ([`Fed`]), with `--gate P` the core's [`Gated`] runs the innovation gate with its
+//! lock-out rule (docs/gate.md), and with `--lag L` the core's fixed-lag layer folds in late
+//! slots ([`Lagged`], docs/pipeline.md "Late packets"). Nothing here re-implements a step.
 
 use estimator_core::filter::{Gated, GatedStep, InnovationGate};
-use estimator_core::{Error, LostMeasurement};
+use estimator_core::{Error, LostMeasurement, Revise};
 use estpipe_wire::Observation;
 
 use super::fed::Fed;
+use super::lagged::Lagged;
 use super::slots::FromSlots;
-use crate::{CovarianceKind, Estimator};
+use crate::{CovarianceKind, Estimator, LateFold};
 
 /// An estimator's name and its name behind the gate (`<name>+gate`, so that no report can be
 /// mistaken for the ungated estimator's), both fixed at compile time by [`name!`].
@@ -36,48 +38,74 @@ pub(crate) use name;
 /// Reports an estimator's per-step diagnostics (see [`Estimator::diagnostics`]).
 pub(crate) type Diagnostics<E> = fn(&E, &mut dyn FnMut(&'static str, f64));
 
-/// The gated step of a [`Fed`] estimator on an instant's observations, taken where `E`'s
-/// bounds say it has one (an estimator without an innovation, such as `nn`, runs ungated).
-type GatedFedStep<E> = fn(&mut Gated<f64, Fed<E>>, usize, &[Observation]) -> Result<(), Error>;
+/// The measurement of a core estimator on `NX` states.
+type Meas<E, const NX: usize> = <E as estimator_core::Estimator<f64, NX>>::Measurement;
 
-fn gated_fed_step<E, const NX: usize>(
-    g: &mut Gated<f64, Fed<E>>,
+/// A [`Fed`] estimator behind the core's gate, with or without its history.
+type GatedFed<E, const NX: usize> = Lagged<Gated<f64, Fed<E>>, Meas<E, NX>>;
+
+/// The gated estimator's step.
+type GatedStepFn<E, const NX: usize> =
+    fn(&mut GatedFed<E, NX>, usize, &Meas<E, NX>) -> Result<(), Error>;
+/// The gated estimator's fold of a late part.
+type GatedFoldFn<E, const NX: usize> = fn(&mut GatedFed<E, NX>, usize, &Meas<E, NX>) -> LateFold;
+
+/// The gated estimator's step and fold, taken where `E`'s bounds say it has a gated step (an
+/// estimator without an innovation, such as `nn`, runs ungated).
+struct GatedOps<E, const NX: usize>
+where
+    E: estimator_core::Estimator<f64, NX>,
+{
+    step: GatedStepFn<E, NX>,
+    fold: GatedFoldFn<E, NX>,
+}
+
+fn gated_step<E, const NX: usize>(
+    g: &mut GatedFed<E, NX>,
     k: usize,
-    obs: &[Observation],
+    y: &Meas<E, NX>,
 ) -> Result<(), Error>
 where
     E: GatedStep<f64, NX> + Clone,
-    E::Measurement: FromSlots + LostMeasurement,
+    E::Measurement: FromSlots + LostMeasurement + Revise + Clone,
 {
-    use estimator_core::Estimator as _;
-    g.step(k, &E::Measurement::from_slots(obs))
+    g.step(k, y)
 }
 
-/// How a [`Fed`] estimator steps: on its own, or behind the core's gate.
-enum Stepping<E> {
-    Plain(Fed<E>),
-    Gated(Gated<f64, Fed<E>>, GatedFedStep<E>),
+fn gated_fold<E, const NX: usize>(g: &mut GatedFed<E, NX>, k: usize, y: &Meas<E, NX>) -> LateFold
+where
+    E: GatedStep<f64, NX> + Clone,
+    E::Measurement: FromSlots + LostMeasurement + Revise + Clone,
+{
+    g.fold(k, y)
 }
 
-impl<E> Stepping<E> {
+/// How a [`Fed`] estimator steps: on its own, or behind the core's gate; with the history of
+/// `--lag` or without.
+enum Stepping<E, const NX: usize>
+where
+    E: estimator_core::Estimator<f64, NX>,
+{
+    Plain(Lagged<Fed<E>, Meas<E, NX>>),
+    Gated(GatedFed<E, NX>, GatedOps<E, NX>),
+}
+
+impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Stepping<E, NX> {
     fn fed(&self) -> &Fed<E> {
         match self {
-            Self::Plain(f) => f,
-            Self::Gated(g, _) => &g.estimator,
-        }
-    }
-    fn fed_mut(&mut self) -> &mut Fed<E> {
-        match self {
-            Self::Plain(f) => f,
-            Self::Gated(g, _) => &mut g.estimator,
+            Self::Plain(f) => f.inner(),
+            Self::Gated(g, _) => &g.inner().estimator,
         }
     }
 }
 
 /// A core estimator `E` on `NX` states under a name.
-pub(crate) struct Adapted<E, const NX: usize> {
+pub(crate) struct Adapted<E, const NX: usize>
+where
+    E: estimator_core::Estimator<f64, NX>,
+{
     name: Name,
-    stepping: Stepping<E>,
+    stepping: Stepping<E, NX>,
     diagnostics: Diagnostics<E>,
     full_information: bool,
     cov_kind: CovarianceKind,
@@ -88,7 +116,7 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
     pub(crate) fn new(name: Name, fed: Fed<E>) -> Self {
         Self {
             name,
-            stepping: Stepping::Plain(fed),
+            stepping: Stepping::Plain(Lagged::Off(fed)),
             diagnostics: trace_p,
             full_information: false,
             cov_kind: CovarianceKind::Estimate,
@@ -123,7 +151,7 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
 impl<E, const NX: usize> Adapted<E, NX>
 where
     E: GatedStep<f64, NX> + Clone,
-    E::Measurement: FromSlots + LostMeasurement,
+    E::Measurement: FromSlots + LostMeasurement + Revise + Clone,
 {
     /// Behind the χ² innovation gate of probability `p` when `gate` is `Some(p)`, under its
     /// gated name (docs/gate.md); unchanged with `None`.
@@ -131,10 +159,14 @@ where
         if let Some(p) = gate {
             let gate = InnovationGate::chi2(p)?;
             self.stepping = match self.stepping {
-                Stepping::Plain(fed) => {
-                    Stepping::Gated(Gated::new(fed, gate), gated_fed_step::<E, NX>)
-                }
-                gated @ Stepping::Gated(..) => gated,
+                Stepping::Plain(Lagged::Off(fed)) => Stepping::Gated(
+                    Lagged::Off(Gated::new(fed, gate)),
+                    GatedOps {
+                        step: gated_step::<E, NX>,
+                        fold: gated_fold::<E, NX>,
+                    },
+                ),
+                other => other,
             };
         }
         Ok(self)
@@ -164,7 +196,7 @@ fn trace_p<E: estimator_core::Estimator<f64, NX>, const NX: usize>(
 impl<E, const NX: usize> Estimator for Adapted<E, NX>
 where
     E: estimator_core::Estimator<f64, NX> + Clone + Send,
-    E::Measurement: FromSlots + LostMeasurement,
+    E::Measurement: FromSlots + LostMeasurement + Revise + Clone + Send,
 {
     fn name(&self) -> &'static str {
         match self.stepping {
@@ -179,19 +211,43 @@ where
     /// error is still returned, and counted by the commands. Nothing changes in a run without
     /// errors.
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        use estimator_core::Estimator as _;
         let k = k as usize;
+        let y = E::Measurement::from_slots(obs);
         let done = match &mut self.stepping {
-            Stepping::Plain(f) => f.step(k, &E::Measurement::from_slots(obs)),
-            Stepping::Gated(g, step) => step(g, k, obs),
+            Stepping::Plain(f) => f.step(k, &y),
+            Stepping::Gated(g, ops) => (ops.step)(g, k, &y),
         };
         if let Err(e) = done {
             if !matches!(e, Error::OutOfOrder { .. }) {
-                // Still an error if even the prediction fails: the state is then kept.
-                let _ = self.stepping.fed_mut().step(k, &E::Measurement::lost());
+                // Still an error if even the prediction fails: the state is then kept. With a
+                // history the prediction is the recorded step (a re-step takes the same path).
+                let lost = E::Measurement::lost();
+                let _ = match &mut self.stepping {
+                    Stepping::Plain(f) => f.step(k, &lost),
+                    Stepping::Gated(Lagged::Off(g), _) => {
+                        estimator_core::Estimator::step(&mut g.estimator, k, &lost)
+                    }
+                    Stepping::Gated(g, ops) => (ops.step)(g, k, &lost),
+                };
             }
         }
         done
+    }
+
+    fn set_lag(&mut self, lag: u32) -> bool {
+        match &mut self.stepping {
+            Stepping::Plain(f) => f.set_lag(lag),
+            Stepping::Gated(g, _) => g.set_lag(lag),
+        }
+        lag > 0
+    }
+
+    fn fold_late(&mut self, k: u32, obs: &[Observation]) -> LateFold {
+        let (k, late) = (k as usize, E::Measurement::from_slots(obs));
+        match &mut self.stepping {
+            Stepping::Plain(f) => f.fold(k, &late),
+            Stepping::Gated(g, ops) => (ops.fold)(g, k, &late),
+        }
     }
 
     fn estimate(&self, out: &mut [f64]) {
@@ -207,7 +263,7 @@ where
         (self.diagnostics)(self.core(), sink);
         // Counts so far: eval's mean over runs at k = T times the valid runs is the total.
         if let Stepping::Gated(g, _) = &self.stepping {
-            let s = g.state();
+            let s = g.inner().state();
             sink("gate_tested", f64::from(s.counts.tested));
             sink("gate_rejected", f64::from(s.counts.rejected));
             sink("gate_forced", f64::from(s.forced));

@@ -17,6 +17,15 @@ pub(crate) struct ModelHook<E> {
     varying: Option<(Arc<EstimatorSpec>, Remodel<E>)>,
 }
 
+// Not derived: that would ask `E: Clone`, and the hook holds only a spec and a function.
+impl<E> Clone for ModelHook<E> {
+    fn clone(&self) -> Self {
+        Self {
+            varying: self.varying.clone(),
+        }
+    }
+}
+
 impl<E> CoreRemodel<E> for ModelHook<E> {
     fn remodel(&mut self, e: &mut E, k: usize) -> Result<(), Error> {
         if let Some((spec, remodel)) = &self.varying {

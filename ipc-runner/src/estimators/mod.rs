@@ -18,6 +18,7 @@ mod adapter;
 mod fed;
 pub mod ikf;
 pub mod kf;
+mod lagged;
 pub mod nn;
 pub mod occlusion;
 mod particles_rng;
@@ -33,6 +34,8 @@ use estpipe_spec::EstimatorSpec;
 use estpipe_wire::Observation;
 
 use crate::Estimator;
+
+pub use lagged::MAX_LAG;
 
 /// What a run's estimators are built for beyond the spec: the seed and run index (the
 /// particle filters draw their own random streams from them) and the observations of instant
@@ -81,6 +84,13 @@ pub struct EvalOptions {
     /// diagnostics `gate_tested`, `gate_rejected` count the measurements so far. `None`: no
     /// gate, the estimators of today, bit for bit.
     pub gate: Option<f64>,
+    /// `--lag L` (docs/pipeline.md, "Late packets"): the estimators keep the last
+    /// [`MAX_LAG`] instants and fold in a slot that arrives up to `L` instants late, as if it
+    /// had come on time. 0: no history, the estimators of today, bit for bit.
+    pub lag: u32,
+    /// `eval` only: the transport delays slots by whole instants (`--transport-delay`);
+    /// `None`: every slot on time.
+    pub transport_delay: Option<crate::eval::delay::Delay>,
 }
 
 impl Default for EvalOptions {
@@ -95,6 +105,8 @@ impl Default for EvalOptions {
             transport_loss: 0.0,
             transport_loss_unmarked: false,
             gate: None,
+            lag: 0,
+            transport_delay: None,
         }
     }
 }
@@ -170,6 +182,11 @@ pub fn build_all(
     if !options.estimators.is_empty() {
         // `--estimators cce --gate P` selects `cce+gate`.
         all.retain(|e| options.estimators.iter().any(|n| names_match(e.name(), n)));
+    }
+    if options.lag > 0 {
+        for e in &mut all {
+            e.set_lag(options.lag);
+        }
     }
     Ok(all)
 }

@@ -43,18 +43,19 @@ use estimator_core::catch_up::LostMeasurement;
 use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
 use estimator_core::filter::{Gated, GatedStep, InnovationGate, MirroredFusion, TobitFusion};
 use estimator_core::protocol::shared_token_bucket::SharedTokenBucket;
-use estimator_core::{Error, Estimator as CoreEstimator, OnModel};
+use estimator_core::{Error, Estimator as CoreEstimator, OnModel, Revise};
 use estpipe_spec::channel::{TobitCensoring, TriggeredTokenBucket};
 use estpipe_spec::{EstimatorSpec, LinearModel};
-use estpipe_wire::Observation;
+use estpipe_wire::{Observation, MAX_NODES};
 use nalgebra::SVector;
 
 use super::adapter::{name, write_row_major, Name};
 use super::fed::{linear, on_model, Fed};
+use super::lagged::Lagged;
 use super::slots::FromSlots;
 use super::snapshot::{fixed, Snapshot};
 use super::{EvalOptions, RunStart};
-use crate::{CovarianceKind, Estimator};
+use crate::{CovarianceKind, Estimator, LateFold};
 
 /// The names of the local views, node 1 first.
 pub const LOCAL_NAMES: [&str; 8] = [
@@ -270,7 +271,7 @@ type OnMirrored<const NX: usize, const NY: usize, const L: usize> =
 trait FusionFilter<const NX: usize, const NY: usize, const L: usize>:
     GatedStep<f64, NX> + Clone + Send + 'static
 where
-    Self::Measurement: FromSlots + LostMeasurement,
+    Self::Measurement: FromSlots + LostMeasurement + Revise + Clone + Send,
 {
     /// The fusion filter.
     fn fusion(&self) -> &TobitFusion<f64, NX, NY, L>;
@@ -347,7 +348,7 @@ fn set_inputs<const NX: usize, const NY: usize, const L: usize, E: FusionFilter<
     model: &LinearModel,
     k: usize,
 ) where
-    E::Measurement: FromSlots + LostMeasurement,
+    E::Measurement: FromSlots + LostMeasurement + Revise + Clone + Send,
 {
     for m in on.models_mut() {
         m.set_input(model, k);
@@ -356,18 +357,21 @@ fn set_inputs<const NX: usize, const NY: usize, const L: usize, E: FusionFilter<
 
 /// The views' one filter: stepped by whichever view asks first at an instant, its result
 /// kept for the others.
-struct Shared<E> {
-    /// The filter, behind the core's gate with `--gate` (its counts are all nodes').
-    fed: Gated<f64, Fed<E>>,
+struct Shared<E, M> {
+    /// The filter, behind the core's gate with `--gate` (its counts are all nodes'), with the
+    /// history of `--lag`.
+    fed: Lagged<Gated<f64, Fed<E>>, M>,
     gated: bool,
     done_k: u32,
     last: Result<(), Error>,
+    /// The last late fold: its instant, its observations and what it did (every view asks).
+    folded: Option<(u32, [Observation; MAX_NODES], LateFold)>,
 }
 
-struct View<E, const NX: usize, const NY: usize, const L: usize> {
+struct View<E, M, const NX: usize, const NY: usize, const L: usize> {
     name: &'static str,
     node: Option<usize>,
-    shared: Arc<Mutex<Shared<E>>>,
+    shared: Arc<Mutex<Shared<E, M>>>,
 }
 
 /// The views of one fusion filter: `locals[0..L]`, then `fused`.
@@ -380,24 +384,25 @@ fn push_views<const NX: usize, const NY: usize, const L: usize, E>(
     fused: Name,
 ) where
     E: FusionFilter<NX, NY, L>,
-    E::Measurement: FromSlots + LostMeasurement,
+    E::Measurement: FromSlots + LostMeasurement + Revise + Clone + Send,
 {
     // Gated views are named `<name>+gate` (docs/gate.md).
     let named = |n: Name| if gated { n.gated } else { n.plain };
     let shared = Arc::new(Mutex::new(Shared {
-        fed: Gated::new(fed, gate),
+        fed: Lagged::Off(Gated::new(fed, gate)),
         gated,
         done_k: 0,
         last: Ok(()),
+        folded: None,
     }));
     for m in 0..L {
-        out.push(Box::new(View::<E, NX, NY, L> {
+        out.push(Box::new(View::<E, E::Measurement, NX, NY, L> {
             name: named(locals[m]),
             node: Some(m),
             shared: Arc::clone(&shared),
         }));
     }
-    out.push(Box::new(View::<E, NX, NY, L> {
+    out.push(Box::new(View::<E, E::Measurement, NX, NY, L> {
         name: named(fused),
         node: None,
         shared,
@@ -439,17 +444,23 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
     Ok(out)
 }
 
-impl<E> Shared<E> {
+impl<E, M> Shared<E, M> {
+    /// The filter behind its gate.
+    fn gated(&self) -> &Gated<f64, Fed<E>> {
+        self.fed.inner()
+    }
+
     /// The core estimator.
     fn filter(&self) -> &E {
-        &self.fed.estimator.estimator
+        &self.gated().estimator.estimator
     }
 }
 
-impl<const NX: usize, const NY: usize, const L: usize, E> Estimator for View<E, NX, NY, L>
+impl<const NX: usize, const NY: usize, const L: usize, E> Estimator
+    for View<E, E::Measurement, NX, NY, L>
 where
     E: FusionFilter<NX, NY, L>,
-    E::Measurement: FromSlots + LostMeasurement,
+    E::Measurement: FromSlots + LostMeasurement + Revise + Clone + Send,
 {
     fn name(&self) -> &'static str {
         self.name
@@ -459,14 +470,39 @@ where
         let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         if s.done_k != k {
             let y = FromSlots::from_slots(obs);
-            s.last = if s.gated {
-                CoreEstimator::step(&mut s.fed, k as usize, &y)
-            } else {
-                CoreEstimator::step(&mut s.fed.estimator, k as usize, &y)
+            let gated = s.gated;
+            s.last = match &mut s.fed {
+                // Without `--gate` and `--lag`, the plain step (the gate held is never asked);
+                // with a lag, the off gate's step, which admits without computing anything.
+                Lagged::Off(g) if !gated => CoreEstimator::step(&mut g.estimator, k as usize, &y),
+                fed => fed.step(k as usize, &y),
             };
             s.done_k = k;
         }
         s.last
+    }
+
+    fn set_lag(&mut self, lag: u32) -> bool {
+        let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        // Every view asks; the history is set once, before the first step.
+        if matches!(s.fed, Lagged::Off(_)) && s.done_k == 0 {
+            s.fed.set_lag(lag);
+        }
+        lag > 0
+    }
+
+    fn fold_late(&mut self, k: u32, obs: &[Observation]) -> LateFold {
+        let mut s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((fk, fobs, done)) = &s.folded {
+            if *fk == k && fobs.get(..obs.len()) == Some(obs) {
+                return *done;
+            }
+        }
+        let done = s.fed.fold(k as usize, &FromSlots::from_slots(obs));
+        let mut all = [Observation::dropped(0, 0, 0, 0); MAX_NODES];
+        all[..obs.len().min(MAX_NODES)].copy_from_slice(&obs[..obs.len().min(MAX_NODES)]);
+        s.folded = Some((k, all, done));
+        done
     }
 
     fn estimate(&self, out: &mut [f64]) {
@@ -525,7 +561,7 @@ where
         let s = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         // The views share one filter: every view reports its counts over all nodes.
         if s.gated {
-            let g = s.fed.state();
+            let g = s.gated().state();
             sink("gate_tested", f64::from(g.counts.tested));
             sink("gate_rejected", f64::from(g.counts.rejected));
             sink("gate_forced", f64::from(g.forced));

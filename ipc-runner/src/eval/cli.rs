@@ -62,6 +62,13 @@ pub struct EvalArgs {
     /// The transport losses look like channel dropouts (the receiver sees only "no packet").
     #[arg(long, requires = "transport_loss")]
     pub transport_loss_unmarked: bool,
+    /// A transport stage after the channel that delays slots by whole instants (its own random
+    /// stream): `mix:P:D` late with probability P, then 1..=D instants late uniformly; or
+    /// `geom:P`, each further instant with probability P. A late slot is missing at its
+    /// instant; with `--lag L` the estimators fold it in when it arrives (docs/pipeline.md,
+    /// "Late packets").
+    #[arg(long, value_name = "DIST")]
+    pub transport_delay: Option<super::delay::Delay>,
     /// The estimators and their options (as in `run`, `demo` and `replay`); the summary and
     /// JSON count the gate's rejections.
     #[command(flatten)]
@@ -186,6 +193,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         seed: args.seed,
         transport_loss: args.transport_loss,
         transport_loss_unmarked: args.transport_loss_unmarked,
+        transport_delay: args.transport_delay,
         ..args.estimator.options()
     };
     // Every estimator that applies, built once for run 0 before any work: what refuses to

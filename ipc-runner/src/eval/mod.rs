@@ -49,6 +49,7 @@
 //! ```
 
 pub mod cli;
+pub mod delay;
 pub mod nn_bound;
 pub mod report;
 
@@ -404,8 +405,11 @@ pub fn run_one(
         t.truth[..nx].copy_from_slice(&truth0[..nx]);
     }
 
-    let transport = options.transport_loss > 0.0;
+    let transport = options.transport_loss > 0.0 || options.transport_delay.is_some();
     let mut after_transport: heapless::Vec<Observation, MAX_NODES> = heapless::Vec::new();
+    // Late slots in flight: (the instant after whose step it arrives, the slot).
+    let mut in_flight: Vec<(u32, Observation)> = Vec::new();
+    let nodes = scenario.nodes();
     for k in 1..=options.horizon {
         let instant = sim.next_instant();
         let truth = &instant.truth[..nx];
@@ -423,7 +427,9 @@ pub fn run_one(
             for (o, counts) in instant.obs.iter().zip(&mut channel) {
                 let seq = u64::from(o.k - 1) * nodes + u64::from(o.node);
                 let mut o = *o;
-                if transport_lost(options.seed, run, seq, options.transport_loss) {
+                if options.transport_loss > 0.0
+                    && transport_lost(options.seed, run, seq, options.transport_loss)
+                {
                     counts.transport_lost += 1;
                     let flags = if options.transport_loss_unmarked {
                         0
@@ -431,6 +437,14 @@ pub fn run_one(
                         FLAG_IPC_LOST
                     };
                     o = Observation::dropped(o.k, o.node, o.ny, flags);
+                } else if let Some(delay) = &options.transport_delay {
+                    let d = delay.of(options.seed, run, seq);
+                    if d > 0 {
+                        counts.transport_late += 1;
+                        counts.transport_too_old += u64::from(d > options.lag);
+                        in_flight.push((k + d - 1, o));
+                        o = Observation::dropped(o.k, o.node, o.ny, FLAG_IPC_LOST);
+                    }
                 }
                 let _ = after_transport.push(o);
             }
@@ -466,6 +480,12 @@ pub fn run_one(
                 }
             }
         }
+        // The late slots arriving now, after instant k was stepped and scored (delay module
+        // docs): folded in by estimators with a history, the improvement seen from k + 1 on.
+        if !in_flight.is_empty() && options.lag > 0 {
+            fold_arrivals(k, nodes, &mut in_flight, &mut estimators, &records);
+        }
+        in_flight.retain(|(at, _)| *at > k);
     }
     Ok(RunOutput {
         run,
@@ -474,6 +494,31 @@ pub fn run_one(
         trajectory,
         truth_nonfinite,
     })
+}
+
+/// Hands every slot of `in_flight` arriving after instant `k` to the estimators still running
+/// (each slot with the other nodes of its instant lost, [`crate::Estimator::fold_late`]).
+fn fold_arrivals(
+    k: u32,
+    nodes: usize,
+    in_flight: &mut [(u32, Observation)],
+    estimators: &mut [Box<dyn crate::Estimator>],
+    records: &[RunEstimator],
+) {
+    // Oldest instant first, as a receiver would order what it holds.
+    in_flight.sort_by_key(|(at, o)| (*at, o.k, o.node));
+    for (_, o) in in_flight.iter().filter(|(at, _)| *at == k) {
+        let mut obs: heapless::Vec<Observation, MAX_NODES> = heapless::Vec::new();
+        for n in 0..nodes {
+            let lost = Observation::dropped(o.k, n as u8, o.ny, FLAG_IPC_LOST);
+            let _ = obs.push(if n == usize::from(o.node) { *o } else { lost });
+        }
+        for (e, rec) in estimators.iter_mut().zip(records) {
+            if rec.sq_err.is_some() && !e.full_information() {
+                e.fold_late(o.k, &obs);
+            }
+        }
+    }
 }
 
 /// Whether `eval`'s transport stage loses slot `seq` (`(k − 1)·nodes + node`) of run `run`:

@@ -5,7 +5,8 @@
 //! ```text
 //! { "scenario", "runs", ["runs_requested",] "horizon", "seed", "ending", ["error",]
 //!   "truth_nonfinite",
-//!   ["transport_loss", "transport_loss_unmarked", "loss_rate", "gate",]   (only when set)
+//!   ["transport_loss", "transport_loss_unmarked", "transport_delay", "lag", "loss_rate",
+//!    "gate",]   (only when set)
 //!   "estimators": { NAME: { "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
 //!                           "median_run_avg", "diverged_runs", "valid_runs",
 //!                           "first_error", "mse_per_state": [[MSE_i(k)]…],
@@ -13,7 +14,8 @@
 //!                           <diagnostic name>: [mean over runs per k]… } },
 //!   "channel": { "delivery_rate", "nodes": [ { "node", "instants", "delivered", "dropped",
 //!                "sent", "triggered", "blocked", "censored", "random_loss", "occluded",
-//!                ["transport_lost",] "delivery_rate" }… ] } }
+//!                ["transport_lost", "transport_late", "transport_too_old",]
+//!                "delivery_rate" }… ] } }
 //! ```
 //! MSE(k) is the mean over valid runs of ‖x_k − x̂_k‖²; `avg_mse` the mean of MSE(k) over
 //! k = 1..=T (equivalently the mean of the valid runs' averages), `avg_mse_se` its Monte-Carlo
@@ -64,6 +66,15 @@ pub struct EvalResult {
     /// `--transport-loss-unmarked` (not written when false).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub transport_loss_unmarked: bool,
+    /// `--transport-delay` (not written when every slot is on time).
+    #[serde(
+        skip_serializing_if = "Option::is_none",
+        serialize_with = "display_opt"
+    )]
+    pub transport_delay: Option<super::delay::Delay>,
+    /// `--lag` (not written when 0).
+    #[serde(skip_serializing_if = "is_zero_u32")]
+    pub lag: u32,
     /// `--loss-rate` of the `-mix` estimators (not written when 0).
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub loss_rate: f64,
@@ -108,6 +119,10 @@ pub struct EstimatorResult {
     /// Named diagnostics, mean over valid runs per k.
     #[serde(flatten, serialize_with = "ordered_map")]
     pub diagnostics: Vec<(String, Vec<f64>)>,
+    /// Every valid run's index and its mean squared error over k = 1..=T, in run order (not
+    /// written: for paired comparisons of evaluations with the same seed).
+    #[serde(skip)]
+    pub run_averages: Vec<(u64, f64)>,
 }
 
 /// What a gated estimator's innovation gate did over the valid runs (docs/gate.md).
@@ -176,6 +191,13 @@ pub struct NodeCounts {
     /// written when 0). The counts above are the channel's, before that stage.
     #[serde(skip_serializing_if = "is_zero")]
     pub transport_lost: u64,
+    /// Slots `eval`'s delaying transport made late (`--transport-delay`; not written when 0):
+    /// missing at their instant, then folded in by the estimators with `--lag`.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub transport_late: u64,
+    /// Of those, the ones later than `--lag`: lost for good (not written when 0).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub transport_too_old: u64,
     /// delivered / instants.
     pub delivery_rate: f64,
 }
@@ -213,6 +235,21 @@ fn is_zero_f64(v: &f64) -> bool {
     *v == 0.0
 }
 
+fn is_zero_u32(v: &u32) -> bool {
+    *v == 0
+}
+
+/// An option written as its `Display` string (the form its flag takes).
+fn display_opt<S: Serializer, D: std::fmt::Display>(
+    v: &Option<D>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    match v {
+        Some(d) => s.collect_str(d),
+        None => s.serialize_none(),
+    }
+}
+
 fn ordered_map<S: Serializer, V: Serialize>(
     entries: &[(String, V)],
     s: S,
@@ -244,6 +281,8 @@ struct EstimatorAcc {
     n_k: Vec<u64>,
     valid: u64,
     run_avgs: Vec<f64>,
+    /// The run index of each of `run_avgs`.
+    run_ids: Vec<u64>,
     diverged: u64,
     first_error: Option<String>,
     diag: Vec<(&'static str, Vec<f64>, Vec<u64>)>,
@@ -326,6 +365,7 @@ impl Accumulator {
             }
             if run_n > 0 {
                 acc.run_avgs.push(run_sum / run_n as f64);
+                acc.run_ids.push(out.run);
             }
             for (j, (name, values)) in rec.diagnostics.into_iter().enumerate() {
                 // The same names in the same order run after run: index j first.
@@ -359,6 +399,8 @@ impl Accumulator {
             total.random_loss += c.random_loss;
             total.occluded += c.occluded;
             total.transport_lost += c.transport_lost;
+            total.transport_late += c.transport_late;
+            total.transport_too_old += c.transport_too_old;
         }
         if out.trajectory.is_some() {
             self.trajectory = out.trajectory;
@@ -411,7 +453,14 @@ impl Accumulator {
                     })
                     .collect();
                 let gate = GateTotals::of(&diagnostics, n as u64);
+                let run_averages = acc
+                    .run_ids
+                    .iter()
+                    .copied()
+                    .zip(acc.run_avgs.clone())
+                    .collect();
                 let result = EstimatorResult {
+                    run_averages,
                     mse,
                     avg_mse,
                     avg_mse_se: (var / n).sqrt(),
@@ -444,6 +493,8 @@ impl Accumulator {
             truth_nonfinite: self.truth_nonfinite,
             transport_loss: self.options.transport_loss,
             transport_loss_unmarked: self.options.transport_loss_unmarked,
+            transport_delay: self.options.transport_delay,
+            lag: self.options.lag,
             loss_rate: self.options.loss_rate,
             gate: self.options.gate,
             estimators,
@@ -591,6 +642,18 @@ impl EvalResult {
                 } else {
                     "marked lost (the estimators see a loss)"
                 }
+            );
+        }
+        if let Some(d) = self.transport_delay {
+            let late: u64 = self.channel.nodes.iter().map(|c| c.transport_late).sum();
+            let old: u64 = self.channel.nodes.iter().map(|c| c.transport_too_old).sum();
+            let slots: u64 = self.channel.nodes.iter().map(|c| c.instants).sum();
+            let _ = writeln!(
+                s,
+                "transport delay {d}: {late} of {slots} slots late; with --lag {} the estimators \
+                 folded in {} and {old} were too old (lost)",
+                self.lag,
+                late - old
             );
         }
         if self.loss_rate > 0.0 {

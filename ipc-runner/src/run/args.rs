@@ -6,6 +6,13 @@ use estpipe_wire as wire;
 use serde::Serialize;
 use std::path::PathBuf;
 
+/// Largest `--max-gap` (as the bridge's): every instant of a gap is stepped, so a larger
+/// bound let one forged slot keep a core busy for minutes.
+pub const MAX_MAX_GAP: u32 = 1_000_000;
+
+/// Estimate samples the runner's publisher may loan at once (docs/wire.md, Services and QoS).
+const ESTIMATE_LOANS: usize = 17;
+
 /// Longest slot queue `--buffer` accepts (iceoryx2 preallocates it in shared memory).
 pub const MAX_BUFFER: usize = 1 << 16;
 
@@ -64,7 +71,9 @@ pub struct RunArgs {
     pub deadline_ms: f64,
     /// Instants a node's k (or its END/ABORT's) may advance past its last instant; the gap is
     /// filled with lost slots, a larger jump is a counted stream error (docs/wire.md).
-    #[arg(long, default_value_t = super::assemble::DEFAULT_MAX_GAP)]
+    /// At most 1000000: every instant of a gap is stepped.
+    #[arg(long, default_value_t = super::assemble::DEFAULT_MAX_GAP,
+          value_parser = clap::value_parser!(u32).range(0..=MAX_MAX_GAP as i64))]
     pub max_gap: u32,
     /// Paced streams: how long an instant waits for its other nodes' slots after its first
     /// one arrived before it is handed on without them (counted as lost by the deadline);
@@ -82,7 +91,9 @@ pub struct RunArgs {
     /// After losing the publisher, wait for channel-sim to come back instead of failing.
     #[arg(long)]
     pub wait_for_restart: bool,
-    /// Slot queue length of the subscriber (older slots are overwritten when it is full).
+    /// Slot queue length of the subscriber. The slot service never overwrites: a full queue
+    /// makes a blocking publisher wait and a discarding one drop the slot, which the runner
+    /// counts as lost in the IPC (docs/wire.md, Back-pressure).
     #[arg(long, default_value_t = 256, value_parser = buffer_len)]
     pub buffer: usize,
     /// Pin the loop to this CPU (best effort).
@@ -233,8 +244,15 @@ impl RunArgs {
             particles as u64,
             crate::eval::pf_bytes_per_particle(nx as usize),
         ]);
+        // The estimate publisher's data segment: iceoryx2 sizes it by the QoS of whoever
+        // created `<prefix>/estimates`, accepted up to `QOS_LIMIT` (docs/wire.md).
+        let shm = if self.no_publish_estimates || self.latest_estimates {
+            0
+        } else {
+            wire::services::QOS_LIMIT.segment_bytes(size_of::<wire::Estimate>(), ESTIMATE_LOANS)
+        };
         Budget::mib(self.max_memory).check(
-            &format!(
+            &(format!(
                 "--steps {} ({}{nx} states{}{})",
                 self.steps,
                 if n_est > 0 {
@@ -251,9 +269,13 @@ impl RunArgs {
                     format!(", --particles {particles}")
                 } else {
                     String::new()
-                }
-            ),
-            recording.saturating_add(pf),
+                },
+            ) + if shm > 0 {
+                " and the estimate queue's shared memory at the accepted QoS limit"
+            } else {
+                ""
+            }),
+            recording.saturating_add(pf).saturating_add(shm),
         )
     }
 }

@@ -36,7 +36,9 @@ use estpipe_wire::{
 };
 use estpipe_wire::{MAX_NODES, MAX_NY};
 
+mod clock;
 mod counts;
+mod late;
 
 pub use counts::{Anomalies, Counts, Reason, Skipped};
 
@@ -67,6 +69,9 @@ pub struct Limits {
     /// nodes' slots (0: for ever). Blocking mode (`period_ns = 0`) never loses a slot by a
     /// deadline.
     pub instant_deadline_ns: u64,
+    /// `--lag`: a slot at most this many instants late (its instant and those after it handed
+    /// on) is handed on by itself ([`Pushed::Late`]) instead of skipped as late.
+    pub lag: u32,
 }
 
 impl Default for Limits {
@@ -74,6 +79,7 @@ impl Default for Limits {
         Self {
             max_gap: DEFAULT_MAX_GAP,
             instant_deadline_ns: (DEFAULT_INSTANT_DEADLINE_MS * 1e6) as u64,
+            lag: 0,
         }
     }
 }
@@ -91,6 +97,9 @@ pub enum Pushed {
     NewStream,
     /// A node's END/ABORT; other nodes' streams go on.
     Marker,
+    /// A data slot of an instant already handed on, at most [`Limits::lag`] instants late:
+    /// [`Assembler::take_late`] gives it, for the estimators' fixed-lag history.
+    Late,
     /// The last node's END marker: every stream is complete, every instant handed on.
     End,
     /// The last node's marker, and some node's was an ABORT (its publisher stopped early).
@@ -109,6 +118,8 @@ struct NodeStream {
     next_k: u64,
     /// The node's END/ABORT: its last instant and whether it was an ABORT.
     end: Option<(u64, bool)>,
+    /// Its send clock, which may vouch for a jump past `--max-gap` ([`clock`]).
+    clock: Option<clock::StreamClock>,
 }
 
 /// One pending instant.
@@ -149,6 +160,8 @@ pub struct Assembler {
     /// Bit m: node m's stream goes on from another publisher (a relay that restarted), so
     /// the slots missing before its next one were lost while nothing forwarded them.
     relay_gap: u16,
+    /// The slot of the last [`Pushed::Late`].
+    late: Option<Observation>,
     /// Running counts (over all sessions).
     pub counts: Counts,
 }
@@ -161,6 +174,11 @@ pub fn same_stream_shape(h: &StreamHeader, expected: &StreamHeader) -> bool {
         && h.nx == expected.nx
         && h.ny == expected.ny
         && h.model == expected.model
+}
+
+/// The bucket level a delivered packet reports with `FLAG_TOKENS` (docs/wire.md), late or not.
+fn reported_level(slot: &Slot, delivered: bool) -> Option<u32> {
+    (slot.flags & estpipe_wire::FLAG_TOKENS != 0 && delivered).then_some(slot.tokens)
 }
 
 /// The slot's `send_ns` if it can be used for latency: not 0 and not after `recv_ns`.
@@ -197,6 +215,7 @@ impl Assembler {
             node: [NodeStream::default(); MAX_NODES],
             first_seen: None,
             relay_gap: 0,
+            late: None,
             counts: Counts::default(),
         };
         a.reset();
@@ -241,6 +260,7 @@ impl Assembler {
             n.sid = None;
             n.end = None;
             n.next_k = 1;
+            n.clock = None;
         }
         for p in self.ring.iter_mut() {
             p.known = 0;
@@ -352,13 +372,32 @@ impl Assembler {
         }
         if k < self.base {
             // Its instant was handed on without it (deadline or overrun); what lies between
-            // was given up with it.
+            // was given up with it. Within the lag it is still information (its lateness:
+            // the instants handed on from its own to the newest).
             self.node[m].next_k = k + 1;
+            let lateness = self.base - k;
+            if lateness <= u64::from(self.limits.lag)
+                && fault.is_none()
+                && slot.flags & FLAG_NET_LOST == 0
+            {
+                self.counts.late_folded += 1;
+                self.late = Some(Observation {
+                    k: slot.k,
+                    node: slot.node,
+                    delivered: slot.delivered == 1,
+                    ny: self.ny[m],
+                    y: self.measurement(slot),
+                    flags: slot.flags & !FLAG_IPC_LOST,
+                    tokens: reported_level(slot, slot.delivered == 1),
+                });
+                return Pushed::Late;
+            }
             return self.skip(Reason::Late);
         }
         // From what is still pending: a node that fell behind (its slots given up) may come
         // back.
-        if k - next.max(self.base) > u64::from(self.limits.max_gap) || !self.make_room(k, m, emit) {
+        let bound = clock::gap_bound(self.limits.max_gap, self.node[m].clock, slot, recv_ns);
+        if k - next.max(self.base) > bound || !self.make_room(k, m, bound, emit) {
             return self.skip(Reason::Gap);
         }
         if slot.period_ns > MAX_PERIOD_NS {
@@ -381,11 +420,12 @@ impl Assembler {
                 (o, Pushed::Refused(f))
             }
             None => {
-                let mut y = [0.0; MAX_NY];
                 let net_lost = slot.flags & FLAG_NET_LOST != 0;
-                if let Some(v) = slot.measurement().filter(|_| !net_lost) {
-                    y[..v.len()].copy_from_slice(v);
-                }
+                let y = if net_lost {
+                    [0.0; MAX_NY]
+                } else {
+                    self.measurement(slot)
+                };
                 if net_lost {
                     // A bridge's stand-in for a slot the network lost (docs/bridge.md). Its
                     // count says lost, so it is handed on as lost: a foreign publisher that
@@ -406,17 +446,14 @@ impl Assembler {
                     ny: self.ny[m],
                     y,
                     flags: slot.flags & !FLAG_IPC_LOST,
-                    // The bucket level a delivered packet reports (docs/wire.md, since 5).
-                    tokens: (slot.flags & estpipe_wire::FLAG_TOKENS != 0
-                        && slot.delivered == 1
-                        && !net_lost)
-                        .then_some(slot.tokens),
+                    tokens: reported_level(slot, slot.delivered == 1 && !net_lost),
                 };
                 (o, Pushed::Data)
             }
         };
         self.set(k, m, obs, recv_ns);
         self.node[m].next_k = k + 1;
+        self.node[m].clock = clock::StreamClock::after(self.node[m].clock, slot, recv_ns);
         self.advance(emit);
         self.expire(recv_ns, emit);
         pushed
@@ -466,9 +503,10 @@ impl Assembler {
         let m = usize::from(slot.node);
         let k = u64::from(slot.k);
         let last = self.node[m].next_k.max(self.base) - 1;
+        let bound = clock::gap_bound(self.limits.max_gap, self.node[m].clock, slot, recv_ns);
         if k + 1 < self.node[m].next_k
-            || k.saturating_sub(last) > u64::from(self.limits.max_gap)
-            || !self.make_room(k, m, emit)
+            || k.saturating_sub(last) > bound
+            || !self.make_room(k, m, bound, emit)
         {
             return self.skip(Reason::Marker);
         }
@@ -527,13 +565,19 @@ impl Assembler {
     }
 
     /// Makes instant `k` fit the window, handing on the oldest instants without their
-    /// missing slots; `false` if that would take more than `--max-gap` instants.
-    fn make_room(&mut self, k: u64, m: usize, emit: &mut impl FnMut(u32, &[Observation])) -> bool {
+    /// missing slots; `false` if that would take more than `bound` instants.
+    fn make_room(
+        &mut self,
+        k: u64,
+        m: usize,
+        bound: u64,
+        emit: &mut impl FnMut(u32, &[Observation]),
+    ) -> bool {
         let top = self.base + WINDOW as u64 - 1;
         if k <= top {
             return true;
         }
-        if k - top > u64::from(self.limits.max_gap) {
+        if k - top > bound {
             return false;
         }
         for _ in 0..k - top {

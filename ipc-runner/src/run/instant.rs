@@ -53,6 +53,9 @@ pub(super) struct Runner {
     pub(super) slot: SlotTimes,
     /// The latest instant processed.
     pub(super) last_k: u32,
+    /// Per estimator, the late slots folded in since its last estimate and the oldest instant
+    /// they belonged to (the estimate message's `late_folded`, `revised_from`).
+    revised: Vec<(u32, u32)>,
 }
 
 impl Runner {
@@ -100,6 +103,7 @@ impl Runner {
             session: 1,
             slot: SlotTimes::default(),
             last_k: 0,
+            revised: vec![(0, 0); n_est],
         })
     }
 
@@ -124,6 +128,7 @@ impl Runner {
             self.step_ns[e] = (t0, t1);
             let seq = self.est_seq;
             self.est_seq += 1;
+            let (late_folded, revised_from) = std::mem::take(&mut self.revised[e]);
             if !self.out.is_on() {
                 continue;
             }
@@ -142,6 +147,8 @@ impl Runner {
                 slot_send_ns: self.slot.send_ns,
                 receive_ns: self.slot.recv_ns,
                 step_done_ns: t1,
+                late_folded,
+                revised_from,
             };
             Estimate::pack_covariance(nx, &self.p_full[..nx * nx], &mut msg.p);
             self.out.send(t, e, msg);
@@ -167,6 +174,28 @@ impl Runner {
         }
         self.evaluate(t, k, done_ns);
         self.out.loan_ahead(t);
+    }
+
+    /// A slot of instant `k` that arrived after `k` was handed on, within `--lag`: every
+    /// estimator folds it into its history (docs/pipeline.md, "Late packets"); the next
+    /// estimates carry the revision. `obs` is the instant's observations, the other nodes lost.
+    pub(super) fn on_late(&mut self, k: u32, obs: &[Observation]) {
+        for (est, revised) in self.estimators.iter_mut().zip(&mut self.revised) {
+            if est.fold_late(k, obs) == crate::LateFold::Folded {
+                revised.1 = if revised.0 == 0 { k } else { revised.1.min(k) };
+                revised.0 += 1;
+            }
+        }
+        // The slot log keeps the slot, with when it came, so that `replay --lag` folds it in
+        // where this run did.
+        if let Some(o) = obs.iter().find(|o| o.flags & wire::FLAG_IPC_LOST == 0) {
+            if self.traj.slots.len() < self.traj.slots.capacity() {
+                self.traj.slots.push(*o);
+                self.traj
+                    .late_after
+                    .push((self.traj.slots.len() - 1, self.last_k));
+            }
+        }
     }
 
     /// Errors against truth and the recorded trajectories of instant `k`, whose estimates

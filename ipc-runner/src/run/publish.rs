@@ -34,17 +34,32 @@ struct LatestBoard {
 impl LatestBoard {
     fn create(t: &Transport, prefix: &str, names: &[[u8; 16]]) -> Result<Self> {
         let service = wire::latest_estimates_board(&t.node, prefix, names)?;
-        let writer = service
-            .writer_builder()
-            .create()
-            .map_err(|e| anyhow!("cannot write {prefix}/{}: {e:?}", wire::LATEST_ESTIMATES))?;
+        let board = format!("{prefix}/{}", wire::LATEST_ESTIMATES);
+        // One writer per board: a second is another runner with --latest-estimates on the
+        // prefix, alive (a dead one's port was cleaned up when this node started).
+        let writer = service.writer_builder().create().map_err(|e| {
+            wire::ContractError::Refused(format!(
+                "cannot write the blackboard {board} ({e:?}): another runner with \
+                 --latest-estimates is using this --prefix; stop it or use another --prefix"
+            ))
+        })?;
         let entries = (0..names.len() as u32)
             .map(|i| {
-                writer
-                    .entry::<Estimate>(&i)
-                    .map_err(|e| anyhow!("estimate board entry {i}: {e:?}"))
+                writer.entry::<Estimate>(&i).map_err(|e| {
+                    wire::ContractError::Refused(format!(
+                        "the blackboard {board} has no entry {i} for estimator {:?} ({e:?}): {}",
+                        String::from_utf8_lossy(&names[i as usize]).trim_end_matches('\0'),
+                        wire::services::LATEST_ENTRIES_DIFFER
+                    ))
+                    .into()
+                })
             })
             .collect::<Result<Vec<_>>>()?;
+        // A board left by an earlier run holds its last estimates: a reader sees "no step
+        // yet" under this run's names until its first instant.
+        for (i, (e, n)) in entries.iter().zip(names).enumerate() {
+            e.update_with_copy(Estimate::none_yet(i as u32, *n));
+        }
         Ok(Self {
             entries,
             _writer: writer,

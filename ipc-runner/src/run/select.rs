@@ -86,6 +86,7 @@ mod tests {
             particles,
             loss_rate,
             gate: None,
+            lag: 0,
         };
         let make = estimators_with(scenario, &args, exp)?;
         Ok(make()?.iter().map(|e| e.name().to_string()).collect())

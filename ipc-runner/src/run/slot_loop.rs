@@ -87,6 +87,7 @@ pub fn run_loop(
     let limits = Limits {
         max_gap: args.max_gap,
         instant_deadline_ns: (args.instant_deadline_ms * 1e6) as u64,
+        lag: args.estimator.lag,
     };
     let mut asm = Assembler::new(&expected, limits);
     asm.set_subscribed_ns(t.subscribed_ns);
@@ -309,6 +310,12 @@ impl Loop<'_> {
             if let Some(r) = self.asm.take_first_seen() {
                 self.warn(r, slot);
             }
+            if pushed == Pushed::Late {
+                let mut obs = [Observation::dropped(0, 0, 0, 0); MAX_NODES];
+                if let Some((k, nodes)) = self.asm.take_late(&mut obs) {
+                    self.runner.on_late(k, &obs[..nodes]);
+                }
+            }
             if pushed == Pushed::Data {
                 // A period beyond the bound is not used for the data deadline.
                 if slot.period_ns <= assemble::MAX_PERIOD_NS {
@@ -453,10 +460,12 @@ impl Loop<'_> {
     fn missed(&mut self, now: u64) -> Option<Ending> {
         let args = self.args;
         let Some(t_last) = self.deadline.last_data_ns else {
-            self.say(&format!(
-                "no data from channel-sim on prefix {:?} within {} s",
-                args.prefix, args.connect_timeout
-            ));
+            // The run's only line about why it failed: said also under --quiet.
+            estpipe_process::errln!(
+                "ipc-runner: no data from channel-sim on prefix {:?} within {} s",
+                args.prefix,
+                args.connect_timeout
+            );
             return Some(Ending::PublisherLost);
         };
         // The runner itself was late (stopped, not scheduled): the slots are there.

@@ -19,6 +19,9 @@ pub struct Trajectories {
     pub timing: Vec<[u64; 3]>,
     /// Received slots (for `replay`), if requested.
     pub slots: Vec<Observation>,
+    /// The slots of `slots` (by index) that arrived late and were folded in (`--lag`), with
+    /// the newest instant handed on when each came.
+    pub late_after: Vec<(usize, u32)>,
     /// State dimension.
     pub nx: usize,
     /// Estimator names.
@@ -41,6 +44,7 @@ impl Trajectories {
             estimates: Vec::with_capacity(instants * nx * names.len()),
             timing: Vec::with_capacity(instants),
             slots: Vec::with_capacity(slots * nodes),
+            late_after: Vec::new(),
             nx,
             names,
         }
@@ -81,17 +85,17 @@ impl Trajectories {
                 head.push_str(&format!(",{n}_{j}"));
             }
         }
-        writeln!(w, "{head}")?;
+        writeln!(w, "{head}").with_context(|| format!("cannot write {path:?}"))?;
         let ne = self.names.len();
         for (i, (session, k)) in self.keys.iter().enumerate() {
-            write!(w, "{session},{k}")?;
+            write!(w, "{session},{k}").with_context(|| format!("cannot write {path:?}"))?;
             for v in &self.truth[i * self.nx..(i + 1) * self.nx] {
-                write!(w, ",{v:e}")?;
+                write!(w, ",{v:e}").with_context(|| format!("cannot write {path:?}"))?;
             }
             for v in &self.estimates[i * self.nx * ne..(i + 1) * self.nx * ne] {
-                write!(w, ",{v:e}")?;
+                write!(w, ",{v:e}").with_context(|| format!("cannot write {path:?}"))?;
             }
-            writeln!(w)?;
+            writeln!(w).with_context(|| format!("cannot write {path:?}"))?;
         }
         // Dropping a BufWriter loses its last error: a full disk must fail the write.
         w.flush()
@@ -109,10 +113,12 @@ impl Trajectories {
         let mut w = std::io::BufWriter::new(
             std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?,
         );
-        writeln!(w, "session,k,t_s,transport_us,end_to_end_us")?;
+        writeln!(w, "session,k,t_s,transport_us,end_to_end_us")
+            .with_context(|| format!("cannot write {path:?}"))?;
         for ((session, k), tr) in self.keys.iter().zip(&self.timing) {
             let (t_s, transport, e2e) = self.latency_point(tr);
-            writeln!(w, "{session},{k},{t_s:.6},{transport:.3},{e2e:.3}")?;
+            writeln!(w, "{session},{k},{t_s:.6},{transport:.3},{e2e:.3}")
+                .with_context(|| format!("cannot write {path:?}"))?;
         }
         w.flush()
             .with_context(|| format!("cannot write {path:?}"))?;
@@ -132,6 +138,6 @@ impl Trajectories {
 
     /// Writes the received slots as a slot log ([`crate::slot_log`], what `replay` reads).
     pub fn write_slots_csv(&self, path: &std::path::Path, ny: usize) -> Result<()> {
-        crate::slot_log::write_slots(path, &self.slots, ny)
+        crate::slot_log::write_slots(path, &self.slots, ny, &self.late_after)
     }
 }

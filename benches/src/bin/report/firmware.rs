@@ -1,7 +1,8 @@
 //! Part `firmware`: the Cortex-M4 figures from `.ci/firmware` (QEMU `mps2-an386` with the
 //! instruction-counting TCG plugin): the core's Kalman filter beside its Rust peers (flash,
 //! peak stack, instructions per step), every estimator's single steps (minimum, median,
-//! maximum and where the maximum is), and the differenced means over N steps.
+//! maximum and where the maximum is), the differenced means over N steps, and the sensor
+//! node in the loop (flash, RAM, instructions per instant: docs/sensor-node.md).
 
 use crate::command::say;
 use crate::format::verdict;
@@ -63,8 +64,14 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         means: read("insn_counts.csv")?,
         steps: read("step_counts.csv")?,
         sizes: read("sizes.csv")?,
+        node_sizes: read("node_sizes.csv")?,
+        node_counts: read("node_counts.csv")?,
     };
     render(md, &data)?;
+    // Late packets (issue #33): the fixed-lag binaries, if .ci/firmware counted them.
+    if let Ok(lag) = read("lag_counts.csv") {
+        crate::late::firmware(md, &lag, &data.sizes);
+    }
     // The part can be regenerated on its own (`--skip` the others): say of which commit.
     let commit = Command::new("git")
         .args(["rev-parse", "--short", "HEAD"])
@@ -86,16 +93,20 @@ struct Data {
     steps: Csv,
     /// `sizes.csv`: flash and peak stack.
     sizes: Csv,
+    /// `node_sizes.csv`: the sensor node's flash, RAM and peak stack.
+    node_sizes: Csv,
+    /// `node_counts.csv`: the sensor node's instructions per instant, by part.
+    node_counts: Csv,
 }
 
 /// A CSV file without quoting: the header and the rows by their first column.
-struct Csv {
-    header: Vec<String>,
-    rows: Vec<Vec<String>>,
+pub(crate) struct Csv {
+    pub(crate) header: Vec<String>,
+    pub(crate) rows: Vec<Vec<String>>,
 }
 
 impl Csv {
-    fn parse(text: &str) -> Self {
+    pub(crate) fn parse(text: &str) -> Self {
         let mut lines = text.lines().filter(|l| !l.is_empty());
         let split = |l: &str| l.split(',').map(str::to_string).collect::<Vec<_>>();
         Self {
@@ -114,7 +125,7 @@ impl Csv {
         row.get(c).map(String::as_str)
     }
 
-    fn num(&self, bin: &str, col: &str) -> Option<f64> {
+    pub(crate) fn num(&self, bin: &str, col: &str) -> Option<f64> {
         self.get(bin, col)?.parse().ok()
     }
 }
@@ -130,7 +141,26 @@ fn render(md: &mut String, d: &Data) -> Result<()> {
         let _ = writeln!(md, "| {} |", r.join(" | "));
     }
     md.push('\n');
+    sensor_node(md, d);
     Ok(())
+}
+
+/// The sensor node: its sizes and its instructions per instant.
+fn sensor_node(md: &mut String, d: &Data) {
+    prose::push(md, include_str!("prose/firmware_node.md"));
+    let g = |c: &str| d.node_sizes.get("sensor-node", c).unwrap_or("–");
+    let _ = writeln!(
+        md,
+        "| flash B (code + rodata + data) | RAM B (data + bss + peak stack) | of which peak stack B |\n|---:|---:|---:|\n| {} | {} | {} |\n",
+        g("flash"),
+        g("ram"),
+        g("stack_peak")
+    );
+    md.push_str("| scenario | part | instants | min | median | max | mean |\n|---|---|---:|---:|---:|---:|---:|\n");
+    for r in &d.node_counts.rows {
+        let _ = writeln!(md, "| {} |", r.join(" | "));
+    }
+    md.push('\n');
 }
 
 /// The side-by-side table and its verdicts.
@@ -243,6 +273,12 @@ mod tests {
             means: Csv::parse(&means),
             steps: Csv::parse(&steps),
             sizes: Csv::parse(&sizes),
+            node_sizes: Csv::parse(
+                "bin,text,data,bss,flash,stack_peak,ram\nsensor-node,16000,0,768,16000,1600,2368\n",
+            ),
+            node_counts: Csv::parse(
+                "scenario,part,instants,min,median,max,mean\ntobit-fusion,instant,6000,7903,8549,8891,8467.5\n",
+            ),
         }
     }
 
@@ -259,6 +295,8 @@ mod tests {
         assert!(
             md.contains("| `cce` | 100 | 3000 | 3300 | 5900 | k = 47 | dropout | 3500.5 | 420.0 |")
         );
+        assert!(md.contains("| 16000 | 2368 | 1600 |"), "{md}");
+        assert!(md.contains("| tobit-fusion | instant | 6000 | 7903 | 8549 | 8891 | 8467.5 |"));
         // Estimators first, then the side-by-side binaries.
         assert!(md.find("`cce` |").unwrap() < md.find("| `ads3x2` | 100").unwrap());
     }

@@ -55,6 +55,7 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
     }
     md.push('\n');
     prose::push(md, KF_NOTES);
+    crate::late::host(md, &res);
     Ok(())
 }
 

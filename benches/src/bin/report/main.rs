@@ -9,7 +9,7 @@
 //! - `icount` ([`icount`]): host instructions per step under valgrind/callgrind,
 //!   `(I(2N) − I(N)) / N`, each 2N run done twice to show the count is deterministic;
 //! - `firmware` ([`firmware`]): Cortex-M4 instructions per step from `.ci/firmware` (QEMU TCG
-//!   plugin);
+//!   plugin); with `icount`, what a late packet costs ([`late`]);
 //! - `pipeline` ([`pipeline`]): `ipc-runner demo` end to end (slot sent → estimates
 //!   published), one spinning and one sleeping runner, one table;
 //! - `bridge` ([`bridge`]): the bridge hop over loopback (`demo --via zenoh`) against raw
@@ -44,6 +44,7 @@ mod icount;
 mod kf_comparison;
 mod kf_forms;
 mod kf_interleaved;
+mod late;
 mod opts;
 mod pct;
 mod pipeline;

@@ -77,7 +77,7 @@ pub trait Digested<const NX: usize>: Estimator<f32, NX> {
 /// and the steps' then share the same stack instead of being laid out side by side in one
 /// frame of the driver (stack coloring does not overlap them once everything is inlined).
 #[inline(never)]
-fn construct<E>(build: impl FnOnce() -> Result<E, Error>) -> Result<E, Error> {
+pub(super) fn construct<E>(build: impl FnOnce() -> Result<E, Error>) -> Result<E, Error> {
     build()
 }
 

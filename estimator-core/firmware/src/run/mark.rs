@@ -5,7 +5,8 @@
 //! k alone and the one that ends at `(k, BEGIN)` the driver's bookkeeping before it (reading the
 //! instant, the previous step's digest). It reads k and the code from the addresses the marker
 //! loads from (QEMU 7's plugin API sees addresses of memory accesses, not registers or values).
-//! The marker changes no result: it reads a table nobody writes.
+//! The fixed-lag binaries mark each fold of a late packet the same way, with its own end code
+//! ([`FOLD`]). The marker changes no result: it reads a table nobody writes.
 
 use core::sync::atomic::{AtomicU8, Ordering};
 
@@ -36,6 +37,21 @@ pub const CENSORED: u8 = 1 << 3;
 pub const REFUSED: u8 = 1 << 6;
 /// The code of the call just before a step (the other codes mark its end).
 pub const BEGIN: u8 = 1 << 7;
+/// The end of a fold of a late packet (the fixed-lag binaries, [`super::drive_lag`]): the
+/// code is `FOLD + l` for a packet `l` instants late (1 ≤ l ≤ 31), plus [`REFUSED`] if the
+/// fold failed; the call just before a fold has the code [`BEGIN`], like a step's.
+pub const FOLD: u8 = BEGIN | 1 << 5;
+
+/// The code of the end of a fold of a packet `l` instants late ([`FOLD`]; l above 31 is
+/// marked 31).
+pub fn fold_code(l: usize, refused: bool) -> u8 {
+    let code = FOLD + l.min(31) as u8;
+    if refused {
+        code | REFUSED
+    } else {
+        code
+    }
+}
 
 /// The branch code of one step with `L ≤ 3` nodes: bit m if node m's measurement arrived,
 /// bit 3 + m if it arrived censored (`censored(m)`). The driver computes it before the step

@@ -19,6 +19,8 @@
 //! - `drive`: the stream's [`Instant`], what its node slots become for an estimator
 //!   ([`FromNodes`]), what the digest records of one ([`Digested`]) and the one driver
 //!   [`drive`];
+//! - `lag`: the driver under the core's fixed-lag layer ([`drive_lag`]), with packets made
+//!   late by a fixed pattern ([`lateness`]) and folded in when they arrive;
 //! - `vectors`: the embedded vector files, their format and parsers;
 //! - `models`: the `f32` models of seeds 001 and 004;
 //! - `drivers`: every estimator (mostly a core filter paired with its model in an
@@ -30,6 +32,7 @@
 mod digest;
 mod drive;
 mod drivers;
+mod lag;
 pub mod mark;
 mod models;
 mod summary;
@@ -41,6 +44,8 @@ pub use drivers::{
     paper_bucket, run_adf, run_cce, run_ikf, run_kf, run_kf_io, run_nn, run_tobit,
     run_tobit_silence, Adf, Cce, Fusion, Ikf, Kf, KfIo, Nn, Tobit, TobitSilence,
 };
+pub use drivers::{run_adf_lag8_counts, run_ikf_lag8_counts, AdfOn, IkfOn};
+pub use lag::{drive_lag, lateness, LateLine, LAG};
 pub use models::{
     model, occlusion, prior, Model, TobitModel, TOBIT_CHI, TOBIT_ETA0, TOBIT_LAMBDA, TOBIT_SIGMA,
 };

@@ -28,6 +28,7 @@ pub mod truncated;
 use nalgebra::SVector;
 
 use crate::catch_up::LostMeasurement;
+use crate::fixed_lag::Revise;
 use crate::packet::Packet;
 use crate::protocol::bucket_mirror::Sent;
 use crate::Real;
@@ -57,7 +58,7 @@ pub enum SilenceForm {
 }
 
 /// Every node's packet of an instant and the bucket level a delivered packet reported
-/// (wire version 5's `tokens`; `None` when no packet reported one).
+/// (wire version 6's `tokens`; `None` when no packet reported one).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriggeredPackets<T: Real, const NY: usize, const L: usize> {
     /// Node m's packet.
@@ -73,6 +74,21 @@ impl<T: Real, const NY: usize, const L: usize> LostMeasurement for TriggeredPack
             packets: [Packet::Lost; L],
             level: None,
         }
+    }
+}
+
+/// A late packet revises its node's lost packet (the rule of [`crate::fixed_lag`]) and brings
+/// the level it reported when the instant had none: every grant of an instant uses the same
+/// ξ_{t−1} (docs/wire.md, "The bucket level on a delivered packet"), so the refolded instant
+/// is the one an on-time arrival would have given.
+impl<T: Real, const NY: usize, const L: usize> Revise for TriggeredPackets<T, NY, L> {
+    #[inline]
+    fn revise(&mut self, late: &Self) -> usize {
+        let changed = self.packets.revise(&late.packets);
+        if changed > 0 && self.level.is_none() {
+            self.level = late.level;
+        }
+        changed
     }
 }
 

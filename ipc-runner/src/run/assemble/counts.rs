@@ -150,8 +150,13 @@ pub struct Counts {
     pub lost_after_end: u64,
     /// Slots already seen (a duplicate or an older slot of the node): ignored.
     pub out_of_order: u64,
-    /// Slots that arrived after their instant was handed on: skipped.
+    /// Slots that arrived after their instant was handed on, more than `--lag` instants late
+    /// (or without `--lag`): skipped.
     pub late: u64,
+    /// Slots that arrived after their instant was handed on, at most `--lag` instants late:
+    /// handed to the estimators' fixed-lag history (docs/pipeline.md, "Late packets"). Their
+    /// instant's slot was counted lost (by the deadline) when the instant was handed on.
+    pub late_folded: u64,
     /// END/ABORT markers accepted (one per node and stream).
     pub markers: u64,
     /// Slots skipped, by reason.
@@ -166,7 +171,12 @@ impl Counts {
     /// Every slot pushed, each counted once: accepted, a marker, a duplicate, late or
     /// skipped.
     pub fn slots_seen(&self) -> u64 {
-        self.received + self.markers + self.out_of_order + self.late + self.skipped.total()
+        self.received
+            + self.markers
+            + self.out_of_order
+            + self.late
+            + self.late_folded
+            + self.skipped.total()
     }
 }
 

@@ -237,6 +237,7 @@ fn hostile_fields_are_counted_and_bounded() {
     let lim = Limits {
         max_gap: 10,
         instant_deadline_ns: 0,
+        lag: 0,
     };
     let mut a = Assembler::new(&h, lim);
     let mut v = slot(2, 0, 1, 1);
@@ -290,6 +291,7 @@ fn paced_instants_wait_for_their_deadline_then_go_without_the_missing_node() {
     let lim = Limits {
         max_gap: 10,
         instant_deadline_ns: 500,
+        lag: 0,
     };
     let mut a = Assembler::new(&h, lim);
     let mut s0 = slot(1, 0, 2, 1);
