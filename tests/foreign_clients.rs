@@ -535,3 +535,163 @@ fn python_publish_slots_loses_nothing_at_full_speed() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The Python publisher forwards a delivered row's `tokens` (with `FLAG_TOKENS`) and sends a
+/// `late_after` row as lost, as replay without `--lag` steps it: on a recorded `tobit-fusion`
+/// run (whose silence-reading estimators follow the shared bucket from the reported levels),
+/// with a few rows marked late, the runner's estimates from the Python publisher equal the
+/// replay's bit for bit, and the publisher says in one line how many slots it sent as lost.
+#[test]
+fn python_publisher_forwards_bucket_levels_and_late_rows_as_replay_reads_them() {
+    let Some(py) = python() else { return };
+    let dir = scratch("py-tokens");
+    let steps = 120u32;
+    let steps_s = steps.to_string();
+    // A recorded run: its slot log has the tokens column.
+    let p = prefix("py-tokens-rec");
+    let rec = dir.join("recorded.csv");
+    let mut run = Proc::start(
+        &dir,
+        "recorder",
+        &[
+            "run",
+            "--scenario",
+            "tobit-fusion",
+            "--prefix",
+            &p,
+            "--steps",
+            &steps_s,
+            "--buffer",
+            "4096",
+            "--slots-csv",
+            rec.to_str().unwrap(),
+        ],
+    );
+    run.wait_for_stderr("waiting for channel-sim", 30);
+    let mut sim = Proc::start(
+        &dir,
+        "sim",
+        &[
+            "channel-sim",
+            "--scenario",
+            "tobit-fusion",
+            "--prefix",
+            &p,
+            "--rate",
+            "0",
+            "--steps",
+            &steps_s,
+        ],
+    );
+    assert!(run.wait(120).success(), "recorder: {}", run.err());
+    assert!(sim.wait(30).success(), "channel-sim: {}", sim.err());
+    // Rows of node 1 at k ≡ 0 (mod 11) marked as having come after the next instant.
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let mut lines = text.lines();
+    let head = lines.next().unwrap();
+    assert!(head.ends_with(",tokens"), "no tokens column: {head}");
+    let cols: Vec<&str> = head.split(',').collect();
+    let (ck, cn, ct) = (
+        cols.iter().position(|c| *c == "k").unwrap(),
+        cols.iter().position(|c| *c == "node").unwrap(),
+        cols.iter().position(|c| *c == "tokens").unwrap(),
+    );
+    let (mut late, mut levels) = (0u32, 0u32);
+    let mut log = format!("{head},late_after\n");
+    for l in lines {
+        let c: Vec<&str> = l.split(',').collect();
+        let (k, node): (u32, u32) = (c[ck].parse().unwrap(), c[cn].parse().unwrap());
+        levels += u32::from(!c[ct].is_empty());
+        let after = if node == 1 && k % 11 == 0 {
+            late += 1;
+            k + 1
+        } else {
+            0
+        };
+        log += &format!("{l},{after}\n");
+    }
+    assert!(late > 5 && levels > 20, "late {late}, levels {levels}");
+    let log_path = dir.join("log.csv");
+    std::fs::write(&log_path, log).unwrap();
+
+    let header = header_json(&dir, "tobit-fusion");
+    let pub_py = repo().join("clients/python/examples/publish_slots.py");
+    let p = prefix("py-tokens");
+    let est_csv = dir.join("run-estimates.csv");
+    let json = dir.join("run.json");
+    let mut run = Proc::start(
+        &dir,
+        "runner",
+        &[
+            "run",
+            "--scenario",
+            "tobit-fusion",
+            "--prefix",
+            &p,
+            "--steps",
+            &steps_s,
+            "--wait",
+            "block",
+            "--estimates-csv",
+            est_csv.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ],
+    );
+    run.wait_for_stderr("waiting for channel-sim", 30);
+    let mut publ = Proc::start_program(
+        &dir,
+        "publisher",
+        &py,
+        &[
+            pub_py.to_str().unwrap(),
+            "--prefix",
+            &p,
+            "--header",
+            header.to_str().unwrap(),
+            "--slots",
+            log_path.to_str().unwrap(),
+        ],
+    );
+    assert!(run.wait(120).success(), "runner: {}", run.err());
+    assert!(publ.wait(60).success(), "publisher: {}", publ.err());
+    assert!(
+        publ.err().contains(&format!(
+            "{late} late slot(s) in the log are published as lost"
+        )),
+        "{}",
+        publ.err()
+    );
+    let r = common::report(&json);
+    assert_eq!(r["counts"]["instants"], steps, "{r}");
+    let names: Vec<String> = r["estimators"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap().to_string())
+        .collect();
+    assert!(names.iter().any(|n| n == "fused-silence"), "{names:?}");
+    let replay_csv = dir.join("replay.csv");
+    let mut replay = Proc::start(
+        &dir,
+        "replay",
+        &[
+            "replay",
+            "--scenario",
+            "tobit-fusion",
+            "--input",
+            log_path.to_str().unwrap(),
+            "--output",
+            replay_csv.to_str().unwrap(),
+        ],
+    );
+    assert!(replay.wait(60).success(), "{}", replay.err());
+    let want = estimate_bits(&replay_csv, &names);
+    assert_eq!(want.len(), steps as usize * 2 * names.len());
+    assert_eq!(
+        estimate_bits(&est_csv, &names),
+        want,
+        "the runner's estimates from the Python publisher differ from the replay's"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

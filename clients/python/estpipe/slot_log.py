@@ -8,6 +8,12 @@ published with `examples/publish_slots.py` gives the runner what replay steps:
   a `(k, node)` given twice is refused naming both lines;
 - an undelivered row flagged lost (`FLAG_IPC_LOST` or `FLAG_NET_LOST`), a node missing from an instant and a whole missing
   instant are *lost* (never received: no information), not dropped by the channel;
+- `tokens` (optional) is the bucket level a delivered row reported (docs/wire.md, "The bucket
+  level on a delivered packet"): read only when delivered and not empty, else None;
+- `late_after` (optional, 0 or empty: on time) marks a slot that reached the runner after its
+  instant was handed on: replay steps it as lost at its instant and folds it in with `--lag`;
+  here it is lost at its instant and, when `late` is a list, also appended to it as
+  `(late_after, k, node, flags, y, tokens)` (a publisher cannot make the runner see it late);
 - a line is at most 64 KiB, the file at most `2 * max_instants * nodes + 1` lines, and the
   last k at most `max_instants` (every k from 1 to the last is held in memory).
 
@@ -75,10 +81,13 @@ def _lines(f, name: str, max_lines: int):
         yield ln, text.rstrip("\n").rstrip("\r")
 
 
-def read_slots(path: str, nodes: int, ny: list, max_instants: int = DEFAULT_MAX_INSTANTS) -> list:
-    """[(k, [(state, flags, y) for each node])] for every k from 1 to the last one.
+def read_slots(
+    path: str, nodes: int, ny: list, max_instants: int = DEFAULT_MAX_INSTANTS, late: list = None
+) -> list:
+    """[(k, [(state, flags, y, tokens) for each node])] for every k from 1 to the last one.
 
-    `state` is DELIVERED, DROPPED or LOST; `y` has MAX_NY entries (zeros where not delivered).
+    `state` is DELIVERED, DROPPED or LOST; `y` has MAX_NY entries (zeros where not delivered);
+    `tokens` is the reported bucket level or None. Late rows go to `late` (module docs).
     """
     if not 1 <= nodes <= MAX_NODES or len(ny) < nodes or any(not 0 <= n <= MAX_NY for n in ny):
         raise ValueError(f"{path}: header shape outside the wire limits (nodes {nodes}, ny {ny})")
@@ -110,6 +119,7 @@ def read_slots(path: str, nodes: int, ny: list, max_instants: int = DEFAULT_MAX_
             return i
 
         ck, cn, cd, cf = idx("k"), idx("node"), idx("delivered"), find("flags")
+        ct, cl = find("tokens"), find("late_after")
         cy = [idx(f"y_{j}") for j in range(max(ny[:nodes], default=0))]
         instants = []  # [(k, {node: (state, flags, y)})], increasing k
         seen = {}  # node -> line of its row in the current instant
@@ -145,8 +155,22 @@ def read_slots(path: str, nodes: int, ny: list, max_instants: int = DEFAULT_MAX_
                     flags = _parse_uint(get(cf), 32)
                 except ValueError as e:
                     raise bad("flags", f"{get(cf)!r} ({e})") from None
+            tokens = None
+            if ct is not None and delivered and get(ct):
+                try:
+                    tokens = _parse_uint(get(ct), 32)
+                except ValueError as e:
+                    raise bad("tokens", f"{get(ct)!r} ({e})") from None
             if k == 0:
                 raise bad("k", "k must be ≥ 1 (k = 0 is the prior)")
+            late_after = 0
+            if cl is not None and get(cl):
+                try:
+                    late_after = _parse_uint(get(cl), 32)
+                except ValueError as e:
+                    raise bad("late_after", f"{get(cl)!r} ({e})") from None
+            if late_after != 0 and late_after < k:
+                raise bad("late_after", f"{late_after} is before the slot's own instant k = {k}")
             if node >= nodes:
                 raise bad("node", f"node {node} but the scenario has {nodes} node(s)")
             last = instants[-1][0] if instants else 0
@@ -185,8 +209,14 @@ def read_slots(path: str, nodes: int, ny: list, max_instants: int = DEFAULT_MAX_
                 state = LOST
             else:
                 state = DROPPED
-            instants[-1][1][node] = (state, flags, y if delivered else [0.0] * MAX_NY)
-    lost = (LOST, FLAG_IPC_LOST, [0.0] * MAX_NY)
+            entry = (state, flags, y if delivered else [0.0] * MAX_NY, tokens)
+            if late_after:
+                # Lost at its instant, as replay steps it before its fold.
+                if late is not None:
+                    late.append((late_after, k, node) + entry[1:])
+                continue
+            instants[-1][1][node] = entry
+    lost = (LOST, FLAG_IPC_LOST, [0.0] * MAX_NY, None)
     out = []
     at = 0
     last = instants[-1][0] if instants else 0

@@ -57,12 +57,20 @@ def main() -> int:
         with open(args.header) as f:
             header = estpipe.StreamHeader.from_json(json.load(f))
         nodes, ny = header.nodes, list(header.ny)
-        instants = estpipe.read_slots(args.slots, nodes, ny)
+        late = []
+        instants = estpipe.read_slots(args.slots, nodes, ny, late=late)
     except (OSError, ValueError) as e:
         print(f"publish_slots.py: error: {args.header if isinstance(e, OSError) else ''}"
               f"{e}", file=sys.stderr)
         return 2
 
+    if late:
+        # The log's late slots (late_after > 0): the runner folded them into their instants
+        # with --lag; a publisher can only send a slot in its node's order, so they go out as
+        # lost, as replay steps them before its fold (`replay --lag L` folds them in).
+        print(f"publish_slots.py: {len(late)} late slot(s) in the log are published as lost "
+              f"(their lateness cannot be replayed over the wire; `ipc-runner replay --lag L` "
+              f"folds them in)", file=sys.stderr)
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
     node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
     service = estpipe.slot_service(node, args.prefix)
@@ -89,7 +97,7 @@ def main() -> int:
                 now = estpipe.monotonic_ns()
                 if due > now:
                     node.wait(iox2.Duration.from_nanos(due - now))
-            for m, (state, flags, y) in enumerate(obs):
+            for m, (state, flags, y, tokens) in enumerate(obs):
                 last_sent[m] = k
                 if state == estpipe.LOST:
                     lost += 1
@@ -107,7 +115,9 @@ def main() -> int:
                     delivered=int(delivered),
                     # Never on the wire (docs/wire.md, Constants): a delivered row's
                     # measurement is used whatever its flags, as replay uses it.
-                    flags=flags & ~(estpipe.FLAG_IPC_LOST | estpipe.FLAG_NET_LOST),
+                    flags=(flags & ~(estpipe.FLAG_IPC_LOST | estpipe.FLAG_NET_LOST | estpipe.FLAG_TOKENS))
+                    | (estpipe.FLAG_TOKENS if delivered and tokens is not None else 0),
+                    tokens=tokens if delivered and tokens is not None else 0,
                     period_ns=period_ns,
                     stream_start_ns=t0,
                 )
