@@ -151,6 +151,14 @@ fn late_slots_within_the_lag_are_folded_in_and_replay_bit_for_bit() {
         3 * u64::from(STEPS),
         "{r}"
     );
+    // Every estimator was offered each of them and folded each in: a late slot of node 2
+    // always brings what its instant was missing, within the lag.
+    for e in r["estimators"].as_array().unwrap() {
+        let l = &e["late"];
+        let n = |k: &str| l[k].as_u64().unwrap_or_else(|| panic!("{k}: {e}"));
+        assert_eq!(n("folded"), get("late_folded"), "{e}");
+        assert_eq!(n("unchanged") + n("too_old") + n("refused"), 0, "{e}");
+    }
 
     // The log replays to the live estimates, instant by instant, bit for bit.
     let (said, replayed) = replay(&dir, "replay-lag", &log, &["--lag", "16"]);

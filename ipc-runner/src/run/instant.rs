@@ -56,6 +56,8 @@ pub(super) struct Runner {
     /// Per estimator, the late slots folded in since its last estimate and the oldest instant
     /// they belonged to (the estimate message's `late_folded`, `revised_from`).
     revised: Vec<(u32, u32)>,
+    /// Per estimator, what it made of every late slot of the run (the report's `late`).
+    late: Vec<super::report::LateCount>,
 }
 
 impl Runner {
@@ -104,6 +106,7 @@ impl Runner {
             slot: SlotTimes::default(),
             last_k: 0,
             revised: vec![(0, 0); n_est],
+            late: vec![Default::default(); n_est],
         })
     }
 
@@ -180,8 +183,11 @@ impl Runner {
     /// estimator folds it into its history (docs/pipeline.md, "Late packets"); the next
     /// estimates carry the revision. `obs` is the instant's observations, the other nodes lost.
     pub(super) fn on_late(&mut self, k: u32, obs: &[Observation]) {
-        for (est, revised) in self.estimators.iter_mut().zip(&mut self.revised) {
-            if est.fold_late(k, obs) == crate::LateFold::Folded {
+        let each = self.estimators.iter_mut().zip(&mut self.revised);
+        for ((est, revised), count) in each.zip(&mut self.late) {
+            let r = est.fold_late(k, obs);
+            count.add(r);
+            if r == crate::LateFold::Folded {
                 revised.1 = if revised.0 == 0 { k } else { revised.1.min(k) };
                 revised.0 += 1;
             }
@@ -227,6 +233,7 @@ impl Runner {
                 rejected: self.rejected[e],
                 gate: crate::estimators::gate_counts(&**est)
                     .map(|(tested, rejected)| super::report::GateCount { tested, rejected }),
+                late: Some(self.late[e]).filter(|c| *c != Default::default()),
             })
             .collect()
     }

@@ -34,6 +34,35 @@ pub struct EstimatorReport {
     /// not written for an ungated estimator).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gate: Option<GateCount>,
+    /// What the estimator made of the late slots it was offered (`--lag`; docs/pipeline.md,
+    /// "Late packets"; not written when none came).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub late: Option<LateCount>,
+}
+
+/// What one estimator made of the late slots of a run ([`crate::LateFold`], one count each).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct LateCount {
+    /// Folded in: its estimates since are those of the slot on time.
+    pub folded: u64,
+    /// Nothing new (the instant's slot of that node was already known).
+    pub unchanged: u64,
+    /// Older than its history (or it keeps none): lost for it.
+    pub too_old: u64,
+    /// It refused the re-step and kept its estimate.
+    pub refused: u64,
+}
+
+impl LateCount {
+    /// Counts one fold's outcome.
+    pub fn add(&mut self, r: crate::LateFold) {
+        match r {
+            crate::LateFold::Folded => self.folded += 1,
+            crate::LateFold::Unchanged => self.unchanged += 1,
+            crate::LateFold::TooOld => self.too_old += 1,
+            crate::LateFold::Refused => self.refused += 1,
+        }
+    }
 }
 
 /// What an estimator's innovation gate did in a run.
