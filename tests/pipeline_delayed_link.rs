@@ -273,19 +273,23 @@ fn over_a_reordering_link_an_overtaken_slot_is_lost_not_late() {
     );
     assert_eq!(Relay::get(&c.dropped), 0);
     assert!(overtaken > 0, "the jitter reordered nothing");
-    // zenoh dropped the overtaken frames: what the bridge saw missing is what the runner
-    // counts as lost on the network, and every instant is accounted for.
+    // zenoh dropped the overtaken frames before the bridge saw them: the bridge refused no
+    // slot as out of order (`late`), it saw gaps, and every slot is forwarded or lost.
     let lost = e["lost_on_network"].as_u64().unwrap();
     assert!(lost > 0, "{e}");
-    assert_eq!(count(r, "lost_on_network"), lost, "{r}");
     assert_eq!(e["refused"], serde_json::json!({}), "{e}");
-    assert_eq!(
-        e["slots"].as_u64().unwrap() + lost,
-        NODES * u64::from(STEPS),
-        "{e}"
-    );
-    assert_eq!(count(r, "late"), 0, "{r}");
+    assert_eq!(e["slots"].as_u64().unwrap() + lost, NODES * u64::from(STEPS), "{e}");
+    // The bridge writes a lost slot when the node's next slot reveals the gap, which may be
+    // after the instant's deadline: then the runner counts it late (folded when within the
+    // lag: a loss folded in is still a loss). Every slot is accounted for.
     assert_eq!(count(r, "instants"), u64::from(STEPS), "{r}");
+    let (late, folded) = (count(r, "late"), count(r, "late_folded"));
+    assert_eq!(count(r, "lost_deadline"), late + folded, "{r}");
+    assert_eq!(
+        count(r, "received") + folded + late + count(r, "lost_on_network"),
+        NODES * u64::from(STEPS),
+        "{r}"
+    );
     replays_bit_for_bit(&d);
     let _ = std::fs::remove_dir_all(&d.dir);
 }
