@@ -1,5 +1,5 @@
 //! Issue #33: the bridge over a UDP link with delay and jitter, `--lag` on (docs/bridge.md,
-//! "A delaying link"; docs/pipeline.md, "Late packets"). This kernel has no netem, so the
+//! "A delaying link, tested"; docs/pipeline.md, "Late packets"). This kernel has no netem, so the
 //! delay is a relay in user space on loopback (`delay_relay.rs`): every datagram from the
 //! sensor side to the estimator side is held 40 ms ± 20 ms (uniform, fixed seed). Seed 004's
 //! three nodes, one publisher at 50 Hz, `run --instant-deadline-ms 5 --lag 8` (160 ms).
@@ -278,7 +278,11 @@ fn over_a_reordering_link_an_overtaken_slot_is_lost_not_late() {
     let lost = e["lost_on_network"].as_u64().unwrap();
     assert!(lost > 0, "{e}");
     assert_eq!(e["refused"], serde_json::json!({}), "{e}");
-    assert_eq!(e["slots"].as_u64().unwrap() + lost, NODES * u64::from(STEPS), "{e}");
+    assert_eq!(
+        e["slots"].as_u64().unwrap() + lost,
+        NODES * u64::from(STEPS),
+        "{e}"
+    );
     // The bridge writes a lost slot when the node's next slot reveals the gap, which may be
     // after the instant's deadline: then the runner counts it late (folded when within the
     // lag: a loss folded in is still a loss). Every slot is accounted for.
