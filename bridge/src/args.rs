@@ -168,7 +168,6 @@ impl BridgeArgs {
                 Side::Estimator => connect.push(DEFAULT_ENDPOINT.into()),
             }
         }
-        refuse_unbuilt_security(&c)?;
         if !listen.is_empty() {
             set(&mut c, "listen/endpoints", &serde_json::to_string(&listen)?)?;
         }
@@ -179,50 +178,9 @@ impl BridgeArgs {
                 &serde_json::to_string(&connect)?,
             )?;
         }
+        crate::security::check(&c, crate::security::Built::THIS)?;
         Ok(c)
     }
-}
-
-/// A security section of the zenoh configuration that this build would ignore: zenoh
-/// accepts `transport/auth/usrpwd` without its `auth_usrpwd` feature and `transport/link/tls`
-/// without its TLS transport, and then runs unauthenticated, or in clear text, without a word
-/// (issue #39). Refused in one line that says which feature the section needs.
-fn refuse_unbuilt_security(c: &zenoh::Config) -> Result<()> {
-    let set_at = |key: &str| {
-        c.get_json(key)
-            .is_ok_and(|v| !matches!(v.trim(), "null" | "{}" | "[]" | "\"\""))
-    };
-    let usrpwd = [
-        "transport/auth/usrpwd/user",
-        "transport/auth/usrpwd/dictionary_file",
-    ]
-    .iter()
-    .any(|k| set_at(k));
-    if usrpwd && !cfg!(feature = "auth") {
-        bail!(
-            "--zenoh-config sets transport/auth/usrpwd, but this build has no zenoh user/password \
-             authentication and would run unauthenticated: build with `--features auth` \
-             (docs/security.md, \"The zenoh link\")"
-        );
-    }
-    let tls = [
-        "transport/link/tls/root_ca_certificate",
-        "transport/link/tls/listen_private_key",
-        "transport/link/tls/listen_certificate",
-        "transport/link/tls/connect_private_key",
-        "transport/link/tls/connect_certificate",
-        "transport/link/tls/enable_mtls",
-    ]
-    .iter()
-    .any(|k| set_at(k));
-    if tls && !cfg!(feature = "tls") {
-        bail!(
-            "--zenoh-config sets transport/link/tls, but this build has no zenoh TLS transport \
-             and would ignore it: build with `--features tls` (docs/security.md, \"The zenoh \
-             link\")"
-        );
-    }
-    Ok(())
 }
 
 /// What zenoh only finds when the session opens (an error that reads like a failure of the

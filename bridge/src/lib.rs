@@ -15,6 +15,7 @@
 //! | [`estimator`] | the estimator side: zenoh → checked → shared memory (slots, truth), estimates back |
 //! | [`sequence`] | per-node sequence tracking: what the network lost, as lost slots |
 //! | [`report`] | counts by reason and the bridge's latency histograms |
+//! | `security` | the checks of a `--zenoh-config`'s TLS, user/password and endpoints (docs/security.md) |
 //!
 //! The message encoding and its checks are the wire crate's (`estpipe_wire::net`): the bridge
 //! never writes into shared memory a message that those checks refused. Its lines on stderr,
@@ -23,6 +24,7 @@
 pub mod args;
 pub mod estimator;
 pub mod report;
+mod security;
 pub mod sensor;
 pub mod sequence;
 mod session;
