@@ -184,6 +184,18 @@ const BINS: &[(&str, HostRun, usize, usize)] = &[
         32 * 1024,
         8 * 1024,
     ),
+    (
+        "floor3x2",
+        || peers::run_floor3x2(&stream(), usize::MAX),
+        32 * 1024,
+        8 * 1024,
+    ),
+    (
+        "floor4x2",
+        || peers::run_floor4x2(&stream(), usize::MAX),
+        32 * 1024,
+        8 * 1024,
+    ),
 ];
 
 fn stream() -> Stream<'static> {

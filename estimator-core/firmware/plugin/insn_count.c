@@ -26,6 +26,10 @@
  * as `mark_insns`); the caller's argument set-up and call instruction are. A marker call that
  * does not read each of the three regions once is counted in `mark_errors`.
  *
+ * With `pcs=FILE` it also counts executions per instruction address (below 1 MiB, the
+ * board's code flash) and writes one line `ADDR COUNT` per executed address: a per-function
+ * profile once the addresses are mapped to the ELF's symbols (`.ci/firmware-profile`).
+ *
  * Built against QEMU's stable plugin C API (plugin API version 1, QEMU 7.x). Debian's QEMU has
  * plugin support built in but ships neither plugins nor qemu-plugin.h, so the handful of
  * declarations used here are written out below from the API's documentation; the functions
@@ -173,6 +177,11 @@ static void on_mark_load(unsigned int vcpu, qemu_plugin_meminfo_t info, uint64_t
     }
 }
 
+/* Per-address counts (pcs=): one counter per halfword below PCS_LIMIT. */
+#define PCS_LIMIT (1u << 20)
+static uint64_t *pc_counts;
+static char pcs_path[4096];
+
 static void on_translate(qemu_plugin_id_t id, struct qemu_plugin_tb *tb)
 {
     (void)id;
@@ -180,6 +189,10 @@ static void on_translate(qemu_plugin_id_t id, struct qemu_plugin_tb *tb)
     for (size_t i = 0; i < n; i++) {
         struct qemu_plugin_insn *insn = qemu_plugin_tb_get_insn(tb, i);
         uint64_t pc = qemu_plugin_insn_vaddr(insn);
+        if (pc_counts && pc < PCS_LIMIT) {
+            qemu_plugin_register_vcpu_insn_exec_inline(insn, QEMU_PLUGIN_INLINE_ADD_U64,
+                                                       &pc_counts[pc >> 1], 1);
+        }
         if (marking && pc >= mark_lo && pc < mark_hi) {
             qemu_plugin_register_vcpu_insn_exec_inline(insn, QEMU_PLUGIN_INLINE_ADD_U64,
                                                        &in_mark, 1);
@@ -221,6 +234,16 @@ static void write_count(qemu_plugin_id_t id, void *userdata)
     if (f != stderr) {
         fclose(f);
     }
+    FILE *p = pc_counts ? fopen(pcs_path, "w") : NULL;
+    if (p) {
+        for (uint64_t i = 0; i < PCS_LIMIT / 2; i++) {
+            if (pc_counts[i]) {
+                fprintf(p, "%llx %llu\n", (unsigned long long)(i << 1),
+                        (unsigned long long)pc_counts[i]);
+            }
+        }
+        fclose(p);
+    }
 }
 
 /* "ADDR:SIZE" (each decimal or 0x-hex) into [lo, hi); bit 0 of ADDR (a Thumb function
@@ -258,6 +281,12 @@ EXPORT int qemu_plugin_install(qemu_plugin_id_t id, const qemu_info_t *info, int
             have_marks = true;
         } else if (strncmp(argv[i], "steps=", 6) == 0) {
             steps_path = argv[i] + 6;
+        } else if (strncmp(argv[i], "pcs=", 4) == 0) {
+            snprintf(pcs_path, sizeof pcs_path, "%s", argv[i] + 4);
+            pc_counts = calloc(PCS_LIMIT / 2, sizeof *pc_counts);
+            if (!pc_counts) {
+                return -1;
+            }
         } else {
             fprintf(stderr, "insn_count: bad argument %s\n", argv[i]);
             return -1;

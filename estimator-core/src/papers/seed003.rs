@@ -6,7 +6,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::filter::nn::bound::NnBoundConfig;
 use crate::filter::nn::estimator::NnTbcpEstimator;
-use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap, Tanh};
+use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap, SystemMatrices, Tanh};
 use crate::{Real, Result};
 
 /// The illustrative example of seed 003, section IV (3 states, 1 noise, 2 measurements).
@@ -50,35 +50,70 @@ impl Seed003Example {
 
 impl<T: Real> CoupledNoiseSystem<T, 3, 1, 2> for Seed003Example {
     fn a(&self, k: usize) -> SMatrix<T, 3, 3> {
-        let (s, c) = (T::lit(k as f64).sin(), T::lit(k as f64).cos());
-        SMatrix::<T, 3, 3>::new(
-            T::lit(1.5) * c,
-            T::lit(0.01),
-            T::lit(0.02),
-            T::lit(0.02),
-            T::lit(-1.7) * s,
-            T::lit(0.3),
-            T::lit(0.01),
-            T::lit(0.03),
-            T::lit(1.9) * c,
-        )
+        seed003_a(sin_k(k), cos_k(k))
     }
     fn b(&self, k: usize) -> SMatrix<T, 3, 1> {
-        SMatrix::<T, 3, 1>::new(T::one(), T::lit(k as f64).cos(), T::one())
+        seed003_b(cos_k(k))
     }
     fn c(&self, k: usize) -> SMatrix<T, 2, 3> {
-        SMatrix::<T, 2, 3>::new(
-            T::lit(0.9),
-            T::lit(0.25) * T::lit(k as f64).cos(),
-            T::one(),
-            T::lit(0.9),
-            T::lit(0.25),
-            T::one(),
-        )
+        seed003_c(cos_k(k))
     }
     fn d(&self, k: usize) -> SMatrix<T, 2, 1> {
-        SMatrix::<T, 2, 1>::new(T::lit(0.95), T::lit(0.65) * T::lit(k as f64).sin())
+        seed003_d(sin_k(k))
     }
+    /// `sin k` and `cos k` once for the four (on a single-precision FPU each is a software
+    /// double-precision kernel); the same values, so the same matrices bit for bit.
+    fn matrices(&self, k: usize) -> SystemMatrices<T, 3, 1, 2> {
+        let (s, c) = (sin_k(k), cos_k(k));
+        (seed003_a(s, c), seed003_b(c), seed003_c(c), seed003_d(s))
+    }
+}
+
+/// `sin k` of section IV's matrices.
+fn sin_k<T: Real>(k: usize) -> T {
+    T::lit(k as f64).sin()
+}
+
+/// `cos k` of section IV's matrices.
+fn cos_k<T: Real>(k: usize) -> T {
+    T::lit(k as f64).cos()
+}
+
+/// `A_k` from `sin k`, `cos k`.
+fn seed003_a<T: Real>(s: T, c: T) -> SMatrix<T, 3, 3> {
+    SMatrix::<T, 3, 3>::new(
+        T::lit(1.5) * c,
+        T::lit(0.01),
+        T::lit(0.02),
+        T::lit(0.02),
+        T::lit(-1.7) * s,
+        T::lit(0.3),
+        T::lit(0.01),
+        T::lit(0.03),
+        T::lit(1.9) * c,
+    )
+}
+
+/// `B_k` from `cos k`.
+fn seed003_b<T: Real>(c: T) -> SMatrix<T, 3, 1> {
+    SMatrix::<T, 3, 1>::new(T::one(), c, T::one())
+}
+
+/// `C_k` from `cos k`.
+fn seed003_c<T: Real>(c: T) -> SMatrix<T, 2, 3> {
+    SMatrix::<T, 2, 3>::new(
+        T::lit(0.9),
+        T::lit(0.25) * c,
+        T::one(),
+        T::lit(0.9),
+        T::lit(0.25),
+        T::one(),
+    )
+}
+
+/// `D_k` from `sin k`.
+fn seed003_d<T: Real>(s: T) -> SMatrix<T, 2, 1> {
+    SMatrix::<T, 2, 1>::new(T::lit(0.95), T::lit(0.65) * s)
 }
 
 /// `f(x) = 8 [sin x₁ cos x₃, sin x₂, sin x₂ cos x₃]ᵀ` of section IV.

@@ -68,6 +68,10 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         node_counts: read("node_counts.csv")?,
     };
     render(md, &data)?;
+    // Issue #37: the speed profile and the floors, if .ci/firmware measured them.
+    if let Ok(speed) = read("speed_step_counts.csv") {
+        crate::firmware_speed::render(md, &data.steps, &data.sizes, &speed);
+    }
     // Late packets (issue #33): the fixed-lag binaries, if .ci/firmware counted them.
     if let Ok(lag) = read("lag_counts.csv") {
         crate::late::firmware(md, &lag, &data.sizes);

@@ -38,6 +38,7 @@ mod demo;
 mod eval_baseline;
 mod eval_throughput;
 mod firmware;
+mod firmware_speed;
 mod format;
 mod header;
 mod icount;

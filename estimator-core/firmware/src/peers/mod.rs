@@ -18,10 +18,12 @@
 #![forbid(unsafe_code)]
 
 mod ads;
+mod floor;
 mod mk;
 mod tk;
 
 pub use ads::Ads;
+pub use floor::{ops, Floor, Ops};
 pub use mk::{mk3x2, mk4x2, Mk};
 pub use tk::Tk;
 
@@ -320,4 +322,18 @@ pub fn run_mk3x2(stream: &Stream<'_>, steps: usize) -> Summary {
 /// `minikalman` on the 4x2 problem.
 pub fn run_mk4x2(stream: &Stream<'_>, steps: usize) -> Summary {
     drive_kf("mk4x2", stream, steps, || Some(mk4x2(&problem_4x2().ok()?)))
+}
+
+/// The floor (straight-line, nothing validated) on the 3x2 problem.
+pub fn run_floor3x2(stream: &Stream<'_>, steps: usize) -> Summary {
+    drive_kf("floor3x2", stream, steps, || {
+        Some(Floor::new(&problem_3x2().ok()?))
+    })
+}
+
+/// The floor on the 4x2 problem.
+pub fn run_floor4x2(stream: &Stream<'_>, steps: usize) -> Summary {
+    drive_kf("floor4x2", stream, steps, || {
+        Some(Floor::new(&problem_4x2().ok()?))
+    })
 }

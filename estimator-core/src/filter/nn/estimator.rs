@@ -166,11 +166,12 @@ impl<
         }
         let k = self.k;
         let (x, p) = (*self.est.state(), *self.est.covariance());
+        let (a, b, c, d) = sys.matrices(k);
         let s = StepMatrices {
-            a: sys.a(k),
-            b: sys.b(k),
-            c: sys.c(k),
-            d: sys.d(k),
+            a,
+            b,
+            c,
+            d,
             c_next: sys.c(k + 1),
             d_next: sys.d(k + 1),
             gamma: self.y.is_some(),

@@ -18,4 +18,4 @@ pub mod system;
 pub use assumptions::{check_before_run, BucketParams, PreRunVerdict, RunMonitor, Violation};
 pub use bound::{GainSolver, NnBoundConfig};
 pub use estimator::NnTbcpEstimator;
-pub use system::{Activation, CoupledNoiseSystem, DifferentiableMap, Tanh};
+pub use system::{Activation, CoupledNoiseSystem, DifferentiableMap, SystemMatrices, Tanh};

@@ -27,7 +27,21 @@ pub trait CoupledNoiseSystem<T: Real, const NX: usize, const NW: usize, const NY
     fn c(&self, k: usize) -> SMatrix<T, NY, NX>;
     /// `D_k`.
     fn d(&self, k: usize) -> SMatrix<T, NY, NW>;
+    /// `(A_k, B_k, C_k, D_k)` together, each as its own method gives it: a system whose four
+    /// matrices share work (seed 003's `sin k` and `cos k`) overrides this to do it once.
+    #[inline]
+    fn matrices(&self, k: usize) -> SystemMatrices<T, NX, NW, NY> {
+        (self.a(k), self.b(k), self.c(k), self.d(k))
+    }
 }
+
+/// `(A_k, B_k, C_k, D_k)` of [`CoupledNoiseSystem::matrices`].
+pub type SystemMatrices<T, const NX: usize, const NW: usize, const NY: usize> = (
+    SMatrix<T, NX, NX>,
+    SMatrix<T, NX, NW>,
+    SMatrix<T, NY, NX>,
+    SMatrix<T, NY, NW>,
+);
 
 /// A borrowed system is the system (so that an [`OnModel`](crate::OnModel) can borrow it).
 impl<T, const NX: usize, const NW: usize, const NY: usize, S> CoupledNoiseSystem<T, NX, NW, NY>
@@ -51,6 +65,10 @@ where
     #[inline]
     fn d(&self, k: usize) -> SMatrix<T, NY, NW> {
         (**self).d(k)
+    }
+    #[inline]
+    fn matrices(&self, k: usize) -> SystemMatrices<T, NX, NW, NY> {
+        (**self).matrices(k)
     }
 }
 

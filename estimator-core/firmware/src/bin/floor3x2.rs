@@ -1,0 +1,11 @@
+//! The floor of a Kalman step (`estimator_firmware::peers::Floor`: straight-line, nothing
+//! validated) on the 3x2 problem, over the embedded occlusion stream's measurements.
+#![no_std]
+#![no_main]
+
+use estimator_firmware::{peers, run};
+
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    estimator_firmware::main_with(run::OCCLUSION, peers::run_floor3x2)
+}
