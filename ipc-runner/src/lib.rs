@@ -12,6 +12,7 @@ pub mod estimators;
 pub mod eval;
 pub mod latency;
 pub mod limits;
+pub mod mcap_file;
 pub mod plot;
 pub mod replay;
 pub mod run;
