@@ -22,6 +22,7 @@ pub mod source;
 pub mod stream_header;
 pub mod tail;
 pub mod transport;
+pub mod view;
 
 // The paths before the plots moved under `plot/`, kept until the benches' report uses the new
 // ones.
