@@ -5,12 +5,17 @@
 # and the ratio of the medians of the p50s.
 #
 #   benches/view_overhead.sh [ROUNDS] [STEPS] [RATE]     # defaults 7 5000 1000
+#   IPC_RUNNER=target/release/pipeline-node benches/view_overhead.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export IOX2_LOG_LEVEL=Error
 rounds=${1:-7} steps=${2:-5000} rate=${3:-1000}
-cargo build --release -p ipc-runner --features view --quiet
-bin=target/release/ipc-runner
+# IPC_RUNNER: an executable with the view already built (the tests' target/release/pipeline-node).
+bin=${IPC_RUNNER:-}
+if [ -z "$bin" ]; then
+    cargo build --release -p ipc-runner --features view --quiet
+    bin=target/release/ipc-runner
+fi
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 

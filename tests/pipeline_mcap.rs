@@ -25,10 +25,8 @@ fn read_mcap(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
         let text = std::str::from_utf8(&m.data).unwrap();
         for key in ["x", "y", "p", "sigma"] {
             if let Some(a) = exact_array(text, key) {
-                v[format!("{key}_exact")] = serde_json::json!(a
-                    .iter()
-                    .map(|x| x.map(f64::to_bits))
-                    .collect::<Vec<_>>());
+                v[format!("{key}_exact")] =
+                    serde_json::json!(a.iter().map(|x| x.map(f64::to_bits)).collect::<Vec<_>>());
             }
         }
         out.entry(m.channel.topic.clone()).or_default().push(v);
@@ -126,7 +124,10 @@ fn check_estimates(
                     row[k_col]
                 );
                 let (s, p) = (exact(m, "sigma", j), exact(m, "p", j * nx + j));
-                assert!(s.is_nan() && p.is_nan() || s == p.sqrt(), "{name}: σ {s} P {p}");
+                assert!(
+                    s.is_nan() && p.is_nan() || s == p.sqrt(),
+                    "{name}: σ {s} P {p}"
+                );
             }
             assert_eq!(m["p"].as_array().unwrap().len(), nx * nx);
         }
@@ -148,7 +149,12 @@ fn check_slots(msgs: &[serde_json::Value], log: &Path, instants: usize, nodes: u
         let y = m["y"].as_array().unwrap();
         for (j, v) in y.iter().enumerate().take(ny) {
             assert!(!f(v).is_nan(), "k {} y[{j}]", r[0]);
-            assert_eq!(exact(m, "y", j).to_bits(), r[4 + j].to_bits(), "k {} y[{j}]", r[0]);
+            assert_eq!(
+                exact(m, "y", j).to_bits(),
+                r[4 + j].to_bits(),
+                "k {} y[{j}]",
+                r[0]
+            );
         }
     }
     // Not delivered: dropped by the channel, or lost (never in the slot log).
@@ -199,7 +205,11 @@ fn demo_and_replay_mcap_equal_their_csv() {
     check_estimates(&mcap, &head, &rows, 1, 2 + nx, nx);
     let truth_rows: Vec<&Vec<f64>> = rows.iter().filter(|r| !r[2].is_nan()).collect();
     let truth = &mcap["/truth"];
-    assert_eq!(truth.len(), truth_rows.len(), "truth messages vs CSV rows with truth");
+    assert_eq!(
+        truth.len(),
+        truth_rows.len(),
+        "truth messages vs CSV rows with truth"
+    );
     for (m, r) in truth.iter().zip(&truth_rows) {
         assert_eq!(f(&m["k"]), r[1]);
         for j in 0..nx {

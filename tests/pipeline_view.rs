@@ -33,7 +33,10 @@ fn browser() -> Option<(PathBuf, PathBuf)> {
     } else if !pw.exists() {
         "playwright-core (npm ci in tests/browser)".to_string()
     } else {
-        return Some((PathBuf::from(chromium), repo().join("tests/browser/view_check.mjs")));
+        return Some((
+            PathBuf::from(chromium),
+            repo().join("tests/browser/view_check.mjs"),
+        ));
     };
     assert!(
         std::env::var("REQUIRE_BROWSER").as_deref() != Ok("1"),
@@ -47,7 +50,10 @@ fn browser() -> Option<(PathBuf, PathBuf)> {
 fn view_addr(demo: &Proc) -> String {
     demo.wait_for_stderr("view: http://", 60);
     let err = demo.err();
-    let line = err.lines().find(|l| l.starts_with("view: http://")).unwrap();
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("view: http://"))
+        .unwrap();
     line.trim_start_matches("view: http://")
         .trim_end_matches('/')
         .to_string()
@@ -148,7 +154,11 @@ fn hostile_clients_do_not_stop_the_view_or_the_run() {
     let get = |path: &str| -> String {
         let mut s = TcpStream::connect(&addr).unwrap();
         s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-        write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").unwrap();
+        write!(
+            s,
+            "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
         let mut r = String::new();
         let _ = s.read_to_string(&mut r);
         r

@@ -294,10 +294,10 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     }
     if let (Some(p), Some(cov)) = (&args.mcap, &cov) {
         let names: Vec<String> = estimators.iter().map(|e| e.name().to_string()).collect();
-        let scenario = args.estimator_spec.as_ref().map_or_else(
-            || spec_name(args),
-            |p| p.display().to_string(),
-        );
+        let scenario = args
+            .estimator_spec
+            .as_ref()
+            .map_or_else(|| spec_name(args), |p| p.display().to_string());
         write_mcap(p, &scenario, nx, &names, instants, &est, cov)?;
         estpipe_process::outln!("MCAP written to {p:?}");
     }
@@ -347,7 +347,10 @@ fn write_mcap(
             truth: None,
             obs,
             xhat: est.get(i * nx * ne..(i + 1) * nx * ne).unwrap_or(&[]),
-            cov: cov.p.get(i * nx * nx * ne..(i + 1) * nx * nx * ne).unwrap_or(&[]),
+            cov: cov
+                .p
+                .get(i * nx * nx * ne..(i + 1) * nx * nx * ne)
+                .unwrap_or(&[]),
             cov_kind: cov.kind.get(i * ne..(i + 1) * ne).unwrap_or(&[]),
         })?;
     }

@@ -90,7 +90,8 @@ fn mcap_err(path: &Path) -> impl Fn(mcap::McapError) -> anyhow::Error + '_ {
 impl McapWriter {
     /// Creates `path` for a run of `scenario` with `nx` states and the estimators `names`.
     pub fn create(path: &Path, scenario: &str, nx: usize, names: &[String]) -> Result<Self> {
-        let file = std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?;
+        let file =
+            std::fs::File::create(path).with_context(|| format!("cannot create {path:?}"))?;
         let err = mcap_err(path);
         let mut out = mcap::WriteOptions::new()
             .compression(None)
@@ -213,7 +214,12 @@ impl McapWriter {
             self.names[e] = name;
             self.sigma = sigma;
             encoded?;
-            self.put(self.estimates[e], self.counts.estimates[e], t.published, t.sent)?;
+            self.put(
+                self.estimates[e],
+                self.counts.estimates[e],
+                t.published,
+                t.sent,
+            )?;
             self.counts.estimates[e] += 1;
         }
         Ok(())

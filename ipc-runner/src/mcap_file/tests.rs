@@ -80,12 +80,25 @@ fn written_messages_read_back() {
             .push(v);
     }
     let topics: Vec<&str> = per_topic.keys().map(String::as_str).collect();
-    assert_eq!(topics, ["/estimates/kf", "/estimates/nn", "/slots", "/truth"]);
+    assert_eq!(
+        topics,
+        ["/estimates/kf", "/estimates/nn", "/slots", "/truth"]
+    );
     let slots = &per_topic["/slots"];
-    let status: Vec<&str> = slots.iter().map(|v| v["status"].as_str().unwrap()).collect();
+    let status: Vec<&str> = slots
+        .iter()
+        .map(|v| v["status"].as_str().unwrap())
+        .collect();
     assert_eq!(
         status,
-        ["delivered", "dropped", "dropped", "dropped", "delivered", "lost"]
+        [
+            "delivered",
+            "dropped",
+            "dropped",
+            "dropped",
+            "delivered",
+            "lost"
+        ]
     );
     assert_eq!(slots[4]["y"], serde_json::json!([3.5, -0.0]));
     assert_eq!(per_topic["/truth"][1]["x"], serde_json::json!([2.0, 4.0]));
@@ -105,7 +118,9 @@ fn written_messages_read_back() {
 /// A path that cannot be created is one error naming it, not a panic.
 #[test]
 fn uncreatable_path_is_an_error() {
-    let e = McapWriter::create(Path::new("/nonexistent-dir/x.mcap"), "linear", 1, &[])
-        .unwrap_err();
-    assert!(format!("{e:#}").contains("/nonexistent-dir/x.mcap"), "{e:#}");
+    let e = McapWriter::create(Path::new("/nonexistent-dir/x.mcap"), "linear", 1, &[]).unwrap_err();
+    assert!(
+        format!("{e:#}").contains("/nonexistent-dir/x.mcap"),
+        "{e:#}"
+    );
 }

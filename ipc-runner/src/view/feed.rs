@@ -234,7 +234,9 @@ pub fn run(prefix: &str, events: Receiver<ViewEvent>, hub: Arc<Hub>, max_points_
     let node = match NodeBuilder::new().create::<ipc::Service>() {
         Ok(n) => n,
         Err(e) => {
-            estpipe_process::errln!("view: cannot create an iceoryx2 node ({e}); the view shows no estimates");
+            estpipe_process::errln!(
+                "view: cannot create an iceoryx2 node ({e}); the view shows no estimates"
+            );
             return;
         }
     };

@@ -67,7 +67,13 @@ impl ViewTap {
 
     /// Instant `k`'s node statuses and truth; never blocks.
     #[inline]
-    pub fn instant(&self, session: u32, k: u32, obs: &[Observation], truth: Option<&[f64; MAX_NX]>) {
+    pub fn instant(
+        &self,
+        session: u32,
+        k: u32,
+        obs: &[Observation],
+        truth: Option<&[f64; MAX_NX]>,
+    ) {
         let Some(tx) = &self.0 else { return };
         let mut status = [DELIVERED; MAX_NODES];
         for (s, o) in status.iter_mut().zip(obs) {
