@@ -50,6 +50,8 @@ pub struct ViewArgs {
     pub view_points_per_s: u32,
 }
 
+// Derivable without the `view` feature (no fields), not with it.
+#[allow(clippy::derivable_impls)]
 impl Default for ViewArgs {
     fn default() -> Self {
         Self {
