@@ -65,6 +65,12 @@ pub struct DemoArgs {
     /// Directory for the plot, CSV and JSON outputs.
     #[arg(long, default_value = "demo-out")]
     pub out: PathBuf,
+    /// The live view (docs/view.md; with the `view` feature).
+    #[command(flatten)]
+    pub view: crate::view::ViewArgs,
+    /// Also write the run as an MCAP file (docs/mcap.md).
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
     /// Plot file name inside --out (`.svg`, or `.png` for a bitmap).
     #[arg(long, default_value = "trajectories.svg")]
     pub plot: PathBuf,
@@ -142,6 +148,9 @@ impl DemoArgs {
         for f in OUT_FILES.iter().map(Path::new).chain([self.plot.as_path()]) {
             crate::limits::check_output("--out", &self.out.join(f))?;
         }
+        if let Some(m) = &self.mcap {
+            crate::limits::check_output("--mcap", m)?;
+        }
         self.check_memory(nx, 0, 0, particles)
     }
 
@@ -157,6 +166,7 @@ impl DemoArgs {
         let mut r = RunArgs::new("", "");
         r.steps = self.steps.unwrap_or(DEFAULT_STEPS);
         r.slots_csv = Some(self.out.join("slots.csv"));
+        r.mcap = self.mcap.clone();
         r.max_memory = self.max_memory;
         Ok(r.check_memory(nx, nodes, n_est, particles)?)
     }
@@ -403,6 +413,9 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.slots_csv = Some(args.out.join("slots.csv"));
     rargs.latency_csv = Some(args.out.join("latency.csv"));
     rargs.json = Some(args.out.join("report.json"));
+    rargs.mcap = args.mcap.clone();
+    let view = crate::view::View::start(&args.view, &prefix)?;
+    rargs.view_tap = view.tap();
 
     if let Some(n) = &nodes {
         estpipe_process::errln!(
@@ -549,6 +562,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         plot.file_name().and_then(|f| f.to_str()).unwrap_or(""),
         args.out
     );
+    view.end();
     Ok(run::exit_code(&report))
 }
 

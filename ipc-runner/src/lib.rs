@@ -12,6 +12,7 @@ pub mod estimators;
 pub mod eval;
 pub mod latency;
 pub mod limits;
+pub mod mcap_file;
 pub mod plot;
 pub mod replay;
 pub mod run;
@@ -21,6 +22,7 @@ pub mod source;
 pub mod stream_header;
 pub mod tail;
 pub mod transport;
+pub mod view;
 
 // The paths before the plots moved under `plot/`, kept until the benches' report uses the new
 // ones.

@@ -42,6 +42,10 @@ pub struct ReplayArgs {
     /// Write `k,<est>_0..` rows here (default: print the last estimates only).
     #[arg(long)]
     pub output: Option<PathBuf>,
+    /// Also write the replay as an MCAP file (docs/mcap.md): the slots and the estimates with
+    /// their covariance; the log has no clock, so instant k is at k ms.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
     /// Memory the replay may hold, in MiB: every instant from k = 1 to the log's last k (gaps
     /// filled as lost) and its estimates. A log whose k goes beyond is refused at that row,
     /// with the numbers.
@@ -55,6 +59,9 @@ pub struct ReplayArgs {
 /// returns per-instant estimates (`nx` per estimator, as published at each instant: before
 /// the slots that came after it) and the rejected counts.
 ///
+/// With `cov`, also every estimator's covariance (`nx · nx` row-major) and its wire kind per
+/// instant (for `--mcap`).
+///
 /// Stops after the instant during which SIGINT/SIGTERM/SIGHUP arrived
 /// (`estpipe_process::signal`, when installed): the estimates cover the instants stepped,
 /// `len / (nx · estimators)` of them.
@@ -63,7 +70,9 @@ pub fn run_estimators(
     instants: &[LoggedInstant],
     late: &[(u32, Observation)],
     nx: usize,
+    mut cov: Option<&mut Covariances>,
 ) -> (Vec<f64>, Vec<u64>) {
+    let mut p = [0.0; MAX_NX * MAX_NX];
     let mut out = Vec::with_capacity(instants.len() * nx * estimators.len());
     let mut rejected = vec![0; estimators.len()];
     let mut x = [0.0; MAX_NX];
@@ -81,6 +90,11 @@ pub fn run_estimators(
             }
             est.estimate(&mut x[..nx]);
             out.extend_from_slice(&x[..nx]);
+            if let Some(c) = cov.as_deref_mut() {
+                let kind = est.covariance(&mut p[..nx * nx]);
+                c.p.extend_from_slice(&p[..nx * nx]);
+                c.kind.push(kind.wire());
+            }
         }
         // The live run folded each late slot in when it came, after the instant `after`.
         while let Some((_, o)) = next.next_if(|(after, _)| *after <= *k) {
@@ -98,6 +112,15 @@ pub fn run_estimators(
     (out, rejected)
 }
 
+/// Per instant and estimator, the covariance (`nx · nx` row-major) and its wire kind.
+#[derive(Debug, Default)]
+pub struct Covariances {
+    /// The matrices.
+    pub p: Vec<f64>,
+    /// The wire's `cov_kind` of each.
+    pub kind: Vec<u32>,
+}
+
 /// Exit code of a replay SIGINT/SIGTERM/SIGHUP stopped (as `run`'s).
 pub const EXIT_INTERRUPTED: i32 = 130;
 
@@ -108,13 +131,17 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     // SIGINT/SIGTERM/SIGHUP set a flag from here on: a replay stops between rows or instants
     // and writes whole rows of what it computed (issue #39: it was killed mid-row).
     estpipe_process::signal::install();
-    if let Some(p) = &args.output {
+    let outputs = given(&[
+        ("--output", args.output.as_deref()),
+        ("--mcap", args.mcap.as_deref()),
+    ]);
+    if !outputs.is_empty() {
         let inputs = given(&[
             ("--input", Some(args.input.as_path())),
             ("--config", args.config.as_deref()),
             ("--estimator-spec", args.estimator_spec.as_deref()),
         ]);
-        check_outputs(&[("--output", p)], &inputs)?;
+        check_outputs(&outputs, &inputs)?;
     }
     let source = std::sync::Arc::new(Source::resolve(
         &args.scenario,
@@ -145,7 +172,11 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     let n_est = factory(1)?()?.len() as u64;
     // The instants' vector is held while it grows (the old and the new block at once: at
     // most 1.5 times its final size, `slot_log::read_slots_within`), then the estimates.
-    let per_instant = size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
+    let mut per_instant =
+        size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
+    if args.mcap.is_some() {
+        per_instant = per_instant.saturating_add(product(&[n_est, 8 * (nx * nx) as u64 + 4]));
+    }
     // The particles must leave room for at least one instant, or the log's first row would
     // be refused as "beyond the row limit" without a word about the particles.
     budget.check(
@@ -166,7 +197,8 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     let instants = &log.instants;
     let make = factory(u32::try_from(instants.len()).unwrap_or(u32::MAX))?;
     let mut estimators = make()?;
-    let (est, rejected) = run_estimators(&mut estimators, instants, &log.late, nx);
+    let mut cov = args.mcap.as_ref().map(|_| Covariances::default());
+    let (est, rejected) = run_estimators(&mut estimators, instants, &log.late, nx, cov.as_mut());
     let stepped = if estimators.is_empty() || nx == 0 {
         instants.len()
     } else {
@@ -260,6 +292,15 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         w.flush().with_context(|| format!("cannot write {p:?}"))?;
         estpipe_process::outln!("estimates written to {p:?}");
     }
+    if let (Some(p), Some(cov)) = (&args.mcap, &cov) {
+        let names: Vec<String> = estimators.iter().map(|e| e.name().to_string()).collect();
+        let scenario = args
+            .estimator_spec
+            .as_ref()
+            .map_or_else(|| spec_name(args), |p| p.display().to_string());
+        write_mcap(p, &scenario, nx, &names, instants, &est, cov)?;
+        estpipe_process::outln!("MCAP written to {p:?}");
+    }
     if !interrupted && estpipe_process::signal::termination_requested() {
         // The signal came after the last instant was stepped: nothing was left out, but the
         // user asked to stop and a script must see it (exit 130, as when stepping stopped).
@@ -272,4 +313,47 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         return Ok(EXIT_INTERRUPTED);
     }
     Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
+}
+
+/// The scenario's name for the MCAP metadata: the preset, or the TOML file.
+fn spec_name(args: &ReplayArgs) -> String {
+    args.config
+        .as_ref()
+        .map_or_else(|| args.scenario.clone(), |p| p.display().to_string())
+}
+
+/// Writes the replayed instants as an MCAP file ([`crate::mcap_file`]); instant k at k ms.
+fn write_mcap(
+    path: &std::path::Path,
+    scenario: &str,
+    nx: usize,
+    names: &[String],
+    instants: &[LoggedInstant],
+    est: &[f64],
+    cov: &Covariances,
+) -> Result<()> {
+    let ne = names.len();
+    let mut w = crate::mcap_file::McapWriter::create(path, scenario, nx, names)?;
+    for (i, (k, obs)) in instants.iter().enumerate() {
+        let t = u64::from(*k) * 1_000_000;
+        w.instant(&crate::mcap_file::InstantRecord {
+            session: 1,
+            k: *k,
+            times: crate::mcap_file::Times {
+                sent: t,
+                received: t,
+                published: t,
+            },
+            truth: None,
+            obs,
+            xhat: est.get(i * nx * ne..(i + 1) * nx * ne).unwrap_or(&[]),
+            cov: cov
+                .p
+                .get(i * nx * nx * ne..(i + 1) * nx * nx * ne)
+                .unwrap_or(&[]),
+            cov_kind: cov.kind.get(i * ne..(i + 1) * ne).unwrap_or(&[]),
+        })?;
+    }
+    w.finish()?;
+    Ok(())
 }

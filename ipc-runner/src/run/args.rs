@@ -126,6 +126,10 @@ pub struct RunArgs {
     /// Write the run report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Write the run as an MCAP file at the end: the slots, the truth and every estimate with
+    /// its covariance, for Foxglove and the `mcap` readers (docs/mcap.md).
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
     /// Do not publish estimates on `<prefix>/estimates` (iceoryx2 0.10 allocates a small
     /// reference count per loaned sample; without publishing the loop allocates nothing).
     #[arg(long)]
@@ -143,6 +147,13 @@ pub struct RunArgs {
     /// Suppress progress messages.
     #[arg(long)]
     pub quiet: bool,
+    /// The live view (docs/view.md; with the `view` feature).
+    #[command(flatten)]
+    pub view: crate::view::ViewArgs,
+    /// Where the loop tells the live view what the estimates service does not carry (set
+    /// when a view runs).
+    #[arg(skip)]
+    pub view_tap: crate::view::ViewTap,
     /// Memory the run may preallocate, in MiB: the recording of `--steps` instants (truth,
     /// estimates, timing, slots) and the particles. Flags that need more are refused before
     /// the loop starts, with the numbers.
@@ -185,11 +196,14 @@ impl RunArgs {
             slots_csv: None,
             latency_csv: None,
             json: None,
+            mcap: None,
             no_publish_estimates: false,
             latest_estimates: false,
             #[cfg(feature = "test-hooks")]
             debug_slow_us: None,
             quiet: false,
+            view: crate::view::ViewArgs::default(),
+            view_tap: crate::view::ViewTap::default(),
             max_memory: crate::limits::DEFAULT_MAX_MEMORY_MIB,
         }
     }
@@ -216,6 +230,7 @@ impl RunArgs {
             ("--slots-csv", self.slots_csv.as_deref()),
             ("--latency-csv", self.latency_csv.as_deref()),
             ("--json", self.json.as_deref()),
+            ("--mcap", self.mcap.as_deref()),
         ]);
         let inputs = given(&[("--config", self.config.as_deref())]);
         check_outputs(&outputs, &inputs)
@@ -239,7 +254,16 @@ impl RunArgs {
         } else {
             0
         };
-        let recording = product(&[u64::from(self.steps), per_instant]).saturating_add(slots);
+        // `--mcap`: every node's observation, each estimator's nx × nx covariance and kind.
+        let mcap = if self.mcap.is_some() {
+            let per = nodes * observation_bytes() + n_est * (8 * nx * nx + 4);
+            product(&[u64::from(self.steps), per])
+        } else {
+            0
+        };
+        let recording = product(&[u64::from(self.steps), per_instant])
+            .saturating_add(slots)
+            .saturating_add(mcap);
         let pf = product(&[
             particles as u64,
             crate::eval::pf_bytes_per_particle(nx as usize),

@@ -58,6 +58,8 @@ pub(super) struct Runner {
     revised: Vec<(u32, u32)>,
     /// Per estimator, what it made of every late slot of the run (the report's `late`).
     late: Vec<super::report::LateCount>,
+    /// The live view's tap (docs/view.md).
+    tap: crate::view::ViewTap,
 }
 
 impl Runner {
@@ -86,6 +88,7 @@ impl Runner {
                 0
             },
             usize::from(nodes),
+            args.mcap.is_some(),
         );
         let out = Publisher::new(t, args, &names)?;
         Ok(Self {
@@ -107,6 +110,7 @@ impl Runner {
             last_k: 0,
             revised: vec![(0, 0); n_est],
             late: vec![Default::default(); n_est],
+            tap: args.view_tap.clone(),
         })
     }
 
@@ -175,7 +179,7 @@ impl Runner {
                 self.traj.slots.push(*o);
             }
         }
-        self.evaluate(t, k, done_ns);
+        self.evaluate(t, k, done_ns, obs);
         self.out.loan_ahead(t);
     }
 
@@ -195,6 +199,7 @@ impl Runner {
         // The slot log keeps the slot, with when it came, so that `replay --lag` folds it in
         // where this run did.
         if let Some(o) = obs.iter().find(|o| o.flags & wire::FLAG_IPC_LOST == 0) {
+            self.tap.late(k, o.node);
             if self.traj.slots.len() < self.traj.slots.capacity() {
                 self.traj.slots.push(*o);
                 self.traj
@@ -206,9 +211,26 @@ impl Runner {
 
     /// Errors against truth and the recorded trajectories of instant `k`, whose estimates
     /// were published at `done_ns`.
-    fn evaluate(&mut self, t: &Transport, k: u32, done_ns: u64) {
+    fn evaluate(&mut self, t: &Transport, k: u32, done_ns: u64, obs: &[Observation]) {
         let truth = self.scores.truth(t, k, self.slot.stream_id);
         if self.traj.keys.len() < self.record_cap {
+            if self.traj.full {
+                // `--mcap`: the covariance again, off the latency path (the loop packed it
+                // for the wire only).
+                let nx = self.nx;
+                // Exactly `nodes` per instant (the assembler hands every node on).
+                for n in 0..self.traj.nodes {
+                    let o = obs.get(n).copied().unwrap_or_else(|| {
+                        Observation::dropped(k, n as u8, 0, wire::FLAG_IPC_LOST)
+                    });
+                    self.traj.obs.push(o);
+                }
+                for est in &self.estimators {
+                    let kind = est.covariance(&mut self.p_full[..nx * nx]);
+                    self.traj.cov.extend_from_slice(&self.p_full[..nx * nx]);
+                    self.traj.cov_kind.push(kind.wire());
+                }
+            }
             self.traj.record(
                 (self.session, k),
                 [self.slot.send_ns, self.slot.recv_ns, done_ns],
@@ -219,6 +241,7 @@ impl Runner {
         if let Some(x) = &truth {
             self.scores.score(x, &self.xhat, self.nx);
         }
+        self.tap.instant(self.session, k, obs, truth.as_ref());
     }
 
     /// Per-estimator results so far.

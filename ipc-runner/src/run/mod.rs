@@ -95,6 +95,11 @@ pub fn main(args: &RunArgs) -> Result<i32> {
     .map_err(|e| limits::BadInput(format!("{e:#}")))?;
     let n_est = make()?.len();
     args.check_memory(spec.nx(), spec.nodes(), n_est, particles)?;
-    let (report, traj) = run_loop(args, &spec, &make, Hooks::default())?;
-    conclude(args, &report, &traj, spec.ny())
+    let view = crate::view::View::start(&args.view, &args.prefix)?;
+    let mut args = args.clone();
+    args.view_tap = view.tap();
+    let (report, traj) = run_loop(&args, &spec, &make, Hooks::default())?;
+    let code = conclude(&args, &report, &traj, spec.ny());
+    view.end();
+    code
 }

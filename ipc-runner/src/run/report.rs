@@ -277,6 +277,9 @@ pub fn finish(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize
     if let Some(p) = &args.latency_csv {
         note(traj.write_latency_csv(p));
     }
+    if let Some(p) = &args.mcap {
+        note(traj.write_mcap(p, &report.scenario));
+    }
     if let Some(p) = &args.json {
         note(
             serde_json::to_string_pretty(report)

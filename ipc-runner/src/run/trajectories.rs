@@ -22,6 +22,17 @@ pub struct Trajectories {
     /// The slots of `slots` (by index) that arrived late and were folded in (`--lag`), with
     /// the newest instant handed on when each came.
     pub late_after: Vec<(usize, u32)>,
+    /// With `--mcap`: every node's observation of each recorded instant (`nodes` each).
+    pub obs: Vec<Observation>,
+    /// With `--mcap`: per recorded instant and estimator, the covariance (or bound), `nx · nx`
+    /// row-major.
+    pub cov: Vec<f64>,
+    /// With `--mcap`: per recorded instant and estimator, the wire's `cov_kind`.
+    pub cov_kind: Vec<u32>,
+    /// Whether `obs`, `cov` and `cov_kind` are recorded (`--mcap`).
+    pub full: bool,
+    /// Sensor nodes (observations per instant in `obs`).
+    pub nodes: usize,
     /// State dimension.
     pub nx: usize,
     /// Estimator names.
@@ -37,8 +48,15 @@ impl Trajectories {
         names: Vec<String>,
         slots: usize,
         nodes: usize,
+        full: bool,
     ) -> Self {
+        let full_cap = if full { instants } else { 0 };
         Self {
+            obs: Vec::with_capacity(full_cap * nodes),
+            cov: Vec::with_capacity(full_cap * names.len() * nx * nx),
+            cov_kind: Vec::with_capacity(full_cap * names.len()),
+            full,
+            nodes,
             keys: Vec::with_capacity(instants),
             truth: Vec::with_capacity(instants * nx),
             estimates: Vec::with_capacity(instants * nx * names.len()),
@@ -134,6 +152,35 @@ impl Trajectories {
             tr[1].saturating_sub(tr[0]) as f64 * 1e-3,
             tr[2].saturating_sub(tr[0]) as f64 * 1e-3,
         )
+    }
+
+    /// Writes the recorded instants as an MCAP file ([`crate::mcap_file`]; needs `full`).
+    pub fn write_mcap(&self, path: &std::path::Path, scenario: &str) -> Result<()> {
+        let (nx, ne) = (self.nx, self.names.len());
+        let nodes = self.nodes;
+        let mut w = crate::mcap_file::McapWriter::create(path, scenario, nx, &self.names)?;
+        for (i, ((session, k), tr)) in self.keys.iter().zip(&self.timing).enumerate() {
+            let truth = &self.truth[i * nx..(i + 1) * nx];
+            w.instant(&crate::mcap_file::InstantRecord {
+                session: *session,
+                k: *k,
+                times: crate::mcap_file::Times {
+                    sent: tr[0],
+                    received: tr[1],
+                    published: tr[2],
+                },
+                truth: truth.iter().all(|v| !v.is_nan()).then_some(truth),
+                obs: self.obs.get(i * nodes..(i + 1) * nodes).unwrap_or(&[]),
+                xhat: &self.estimates[i * nx * ne..(i + 1) * nx * ne],
+                cov: self
+                    .cov
+                    .get(i * nx * nx * ne..(i + 1) * nx * nx * ne)
+                    .unwrap_or(&[]),
+                cov_kind: self.cov_kind.get(i * ne..(i + 1) * ne).unwrap_or(&[]),
+            })?;
+        }
+        w.finish()?;
+        Ok(())
     }
 
     /// Writes the received slots as a slot log ([`crate::slot_log`], what `replay` reads).
