@@ -96,7 +96,8 @@ fn tls(
 }
 
 /// The sensor side's access control: only `estimator` (certificate and user name) may
-/// subscribe `<key>/slots` and publish `<key>/estimates`; `monitor` may only subscribe
+/// subscribe `<key>/slots` and publish `<key>/estimates` (and `<key>/acks`, the END markers'
+/// acknowledgements); `monitor` may only subscribe
 /// `<key>/estimates`; everything else is denied. `enabled: false` is the control.
 fn access_control(key: &str, enabled: bool) -> serde_json::Value {
     let rule = |id: &str, flow: &str, messages: &[&str], keys: &[&str]| {
@@ -113,11 +114,11 @@ fn access_control(key: &str, enabled: bool) -> serde_json::Value {
         "default_permission": "deny",
         "rules": [
             rule("estimator-subscribes-slots", "ingress", &["declare_subscriber"], &["slots"]),
-            rule("estimator-publishes-estimates", "ingress", &["put"], &["estimates"]),
+            rule("estimator-publishes-estimates", "ingress", &["put"], &["estimates", "acks"]),
             rule("estimator-watches-sensor", "ingress",
                  &["declare_liveliness_subscriber", "liveliness_query"], &["alive/sensor"]),
             rule("to-estimator", "egress", &["put"], &["slots"]),
-            rule("to-estimator-interest", "egress", &["declare_subscriber"], &["estimates"]),
+            rule("to-estimator-interest", "egress", &["declare_subscriber"], &["estimates", "acks"]),
             rule("to-estimator-alive", "egress", &["liveliness_token", "reply"], &["alive/sensor"]),
             rule("monitor-subscribes-estimates", "ingress", &["declare_subscriber"], &["estimates"]),
             rule("to-monitor", "egress", &["put"], &["estimates"]),

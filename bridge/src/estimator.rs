@@ -112,6 +112,13 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .express(true)
         .wait()
         .map_err(|e| anyhow!("zenoh publisher {key}/estimates: {e}"))?;
+    // Each marker taken (or seen again) is echoed here: the sensor side repeats it until then.
+    let z_acks = session
+        .declare_publisher(format!("{key}/acks"))
+        .congestion_control(CongestionControl::Drop)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow!("zenoh publisher {key}/acks: {e}"))?;
     let z_alive = session
         .liveliness()
         .declare_subscriber(format!("{key}/alive/sensor"))
@@ -190,14 +197,24 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         if let Some(sample) = first {
             busy = true;
             far.heard_now();
-            if fwd.message(&sample.payload().to_bytes(), &truth_pub)? {
-                ended_at.get_or_insert_with(Instant::now);
-            }
-            for _ in 1..BURST {
-                let Ok(Some(sample)) = z_slots.try_recv() else {
+            let mut next = Some(sample);
+            for i in 0..BURST {
+                // Taken only when it is forwarded in this pass: a sample taken and left
+                // would be lost.
+                if i > 0 {
+                    next = z_slots.try_recv().ok().flatten();
+                }
+                let Some(sample) = next.take() else {
                     break;
                 };
-                if fwd.message(&sample.payload().to_bytes(), &truth_pub)? {
+                let bytes = sample.payload().to_bytes();
+                let took = fwd.message(&bytes, &truth_pub)?;
+                if took != Took::Other {
+                    // Best effort: a lost echo only means one more repeat from the far side.
+                    let _ = z_acks.put(&bytes[..]).wait();
+                    fwd.report.acks += 1;
+                }
+                if took == Took::Marker {
                     ended_at.get_or_insert_with(Instant::now);
                 }
             }
@@ -297,6 +314,17 @@ impl FarSide {
     }
 }
 
+/// What one message on `<key>/slots` was, for the acknowledgement of markers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Took {
+    /// A data slot, a truth sample, or a refused message.
+    Other,
+    /// A node's END/ABORT, forwarded: its stream is over.
+    Marker,
+    /// A copy of a marker already taken.
+    RepeatedMarker,
+}
+
 /// Writes checked slots into shared memory.
 struct Forward<'a> {
     publisher: &'a iceoryx2::port::publisher::Publisher<ipc::Service, Slot, StreamHeader>,
@@ -311,13 +339,12 @@ struct Forward<'a> {
 
 impl Forward<'_> {
     /// One message of `<key>/slots`: a truth sample or a slot (one key, so that the truth of
-    /// an instant arrives before its slots, as from the publisher itself); `Ok(true)` when it
-    /// was the stream's END/ABORT.
+    /// an instant arrives before its slots, as from the publisher itself).
     fn message(
         &mut self,
         bytes: &[u8],
         truth_pub: &iceoryx2::port::publisher::Publisher<ipc::Service, Truth, ()>,
-    ) -> Result<bool> {
+    ) -> Result<Took> {
         if bytes.get(2) == Some(&(net::Kind::Truth as u8)) {
             match net::decode_truth(bytes) {
                 Ok(t) => {
@@ -330,25 +357,25 @@ impl Forward<'_> {
                 }
                 Err(e) => self.report.refuse(e.reason()),
             }
-            return Ok(false);
+            return Ok(Took::Other);
         }
         self.arrive(bytes)
     }
 
-    /// One slot message; `Ok(true)` when it was the stream's END/ABORT.
-    fn arrive(&mut self, bytes: &[u8]) -> Result<bool> {
+    /// One slot message.
+    fn arrive(&mut self, bytes: &[u8]) -> Result<Took> {
         let at = wire::monotonic_ns();
         let (h, s) = match net::decode_slot(bytes) {
             Ok(m) => m,
             Err(e) => {
                 self.report.refuse(e.reason());
-                return Ok(false);
+                return Ok(Took::Other);
             }
         };
         match self.header {
             Some((stream, ref known)) if stream == s.stream_id && *known != h => {
                 self.report.refuse("header_changed");
-                return Ok(false);
+                return Ok(Took::Other);
             }
             _ => self.header = Some((s.stream_id, h)),
         }
@@ -357,11 +384,17 @@ impl Forward<'_> {
                 // The sensor side sends every marker more than once (a lost END would hang
                 // the runner); the copies after the first are expected, not refused.
                 self.report.markers_repeated += 1;
-                return Ok(false);
+                return Ok(Took::RepeatedMarker);
+            }
+            Arrival::Late if s.kind != SLOT_DATA => {
+                // A marker of an instant this node's stream already passed: nothing to
+                // forward, but echoed, so the far side stops repeating it.
+                self.report.refuse("late");
+                return Ok(Took::RepeatedMarker);
             }
             Arrival::Late => {
                 self.report.refuse("late");
-                return Ok(false);
+                return Ok(Took::Other);
             }
             Arrival::NewStream { lost } => {
                 for k in 1..=lost {
@@ -387,10 +420,10 @@ impl Forward<'_> {
         self.own.record(wire::monotonic_ns().saturating_sub(at));
         if s.kind == SLOT_DATA {
             self.report.slots += 1;
-            Ok(false)
+            Ok(Took::Other)
         } else {
             self.report.markers += 1;
-            Ok(true)
+            Ok(Took::Marker)
         }
     }
 

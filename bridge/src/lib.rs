@@ -13,6 +13,7 @@
 //! | [`args`] | the command line and the zenoh configuration it makes |
 //! | [`sensor`] | the sensor side: shared memory → zenoh (slots, truth), zenoh → shared memory (estimates) |
 //! | [`estimator`] | the estimator side: zenoh → checked → shared memory (slots, truth), estimates back |
+//! | [`markers`] | the sensor side's END/ABORT markers, repeated until acknowledged |
 //! | [`sequence`] | per-node sequence tracking: what the network lost, as lost slots |
 //! | [`report`] | counts by reason and the bridge's latency histograms |
 //! | `security` | the checks of a `--zenoh-config`'s TLS, user/password and endpoints (docs/security.md) |
@@ -23,6 +24,7 @@
 
 pub mod args;
 pub mod estimator;
+pub mod markers;
 pub mod report;
 mod security;
 pub mod sensor;

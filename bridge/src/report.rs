@@ -57,9 +57,19 @@ pub struct BridgeReport {
     pub slots: u64,
     /// END/ABORT markers forwarded.
     pub markers: u64,
-    /// Estimator side: copies of a marker already forwarded (the sensor side sends each
-    /// marker several times), dropped as expected.
+    /// Estimator side: copies of a marker already forwarded (the sensor side repeats each
+    /// marker until it is acknowledged), dropped as expected.
     pub markers_repeated: u64,
+    /// Estimator side: markers echoed on `<key>/acks` (every copy that arrived).
+    pub acks: u64,
+    /// Sensor side: END/ABORT messages put on the network, first puts and repeats.
+    pub marker_puts: u64,
+    /// Sensor side: markers the estimator side acknowledged.
+    pub markers_acked: u64,
+    /// Sensor side: markers given up on unacknowledged (repeated for
+    /// [`crate::markers::RESEND_FOR`] without an echo on `<key>/acks`, or replaced by a newer
+    /// marker of the same node).
+    pub markers_unacked: u64,
     /// Truth samples forwarded.
     pub truth: u64,
     /// Estimates forwarded.

@@ -5,6 +5,7 @@
 //! rules), and a stream started before the runner exists would reach it mid-way.
 
 use crate::args::BridgeArgs;
+use crate::markers::{Ack, Markers};
 use crate::report::BridgeReport;
 use crate::session::{close_within, CloseOnStop, CLOSE_WAIT};
 use crate::stop::Stop;
@@ -18,10 +19,6 @@ use zenoh::Wait;
 
 /// Slots forwarded per pass before the estimates and the signal are looked at again.
 const BURST: usize = 256;
-
-/// Copies of each END/ABORT marker put on the network: all of them lost on a link losing a
-/// fraction p of its datagrams has probability p³.
-pub(crate) const MARKER_COPIES: usize = 3;
 
 /// After the stream ended (`--once`), estimates are forwarded until none came for this long.
 pub(crate) const LINGER: Duration = Duration::from_millis(500);
@@ -70,6 +67,11 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         .with(FifoChannel::new(args.queue))
         .wait()
         .map_err(|e| anyhow!("zenoh subscriber {key}/estimates: {e}"))?;
+    let z_acks = session
+        .declare_subscriber(format!("{key}/acks"))
+        .with(FifoChannel::new(args.queue))
+        .wait()
+        .map_err(|e| anyhow!("zenoh subscriber {key}/acks: {e}"))?;
 
     if !args.quiet {
         estpipe_process::errln!(
@@ -122,6 +124,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
     let mut ended_at: Option<Instant> = None;
     let mut last_estimate = Instant::now();
     let mut sent = 0u64;
+    let mut markers = Markers::default();
     loop {
         if stop.requested() {
             report.ending = "interrupted".into();
@@ -153,27 +156,31 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             {
                 msg[3] ^= 0x80;
             }
-            // A marker is sent MARKER_COPIES times: over UDP a lost END would leave the far
-            // side's runner waiting for an instant that never comes. Copies after the first
-            // that arrive are recognised as repeats there (same node, same k).
-            let copies = if s.kind == SLOT_DATA {
-                1
-            } else {
-                MARKER_COPIES
-            };
-            let mut put_all = true;
-            for _ in 0..copies {
-                put_all = put_all && put(&z_slots, &msg, &stop, "slot")?;
-            }
-            if !put_all {
+            if !put(&z_slots, &msg, &stop, "slot")? {
                 break;
             }
             if s.kind == SLOT_DATA {
                 report.slots += 1;
             } else {
+                // Repeated until acknowledged: over UDP a lost END would leave the far side's
+                // runner waiting for instants that never come (crate::markers).
                 report.markers += 1;
+                report.marker_puts += 1;
+                markers.put(&s, &msg, Instant::now());
                 ended_at.get_or_insert_with(Instant::now);
             }
+        }
+        while let Ok(Some(sample)) = z_acks.try_recv() {
+            match markers.ack(&sample.payload().to_bytes()) {
+                Ok(Ack::Taken | Ack::Stale) => {}
+                Err(reason) => report.refuse(reason),
+            }
+        }
+        if let Some(msg) = markers.due(Instant::now()) {
+            if !put(&z_slots, &msg, &stop, "marker")? {
+                break;
+            }
+            report.marker_puts += 1;
         }
         while let Ok(Some(sample)) = z_est.try_recv() {
             busy = true;
@@ -191,6 +198,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             }
         }
         if args.once
+            && markers.settled()
             && ended_at.is_some_and(|t| t.elapsed() > LINGER && last_estimate.elapsed() > LINGER)
         {
             report.ending = "the stream ended".into();
@@ -198,10 +206,12 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
         }
         if !busy {
             // A wake-up per instant from the publisher; the timeout bounds the delay of
-            // estimates and of the signal check.
+            // estimates, of the markers' re-sends and of the signal check.
             let _ = listener.timed_wait(|_| {}, Duration::from_micros(500));
         }
     }
+    report.markers_acked = markers.acked;
+    report.markers_unacked = markers.unacked;
     drop(close_on_stop);
     close_within(session, CLOSE_WAIT);
     Ok(report)
