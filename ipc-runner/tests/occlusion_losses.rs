@@ -17,7 +17,7 @@
 //! right tail). 3000 runs, seed 19, T = 100: the `ikf − cce` gap is the tightest claim (its
 //! spread comes from `ikf`'s runs that predict open-loop through an unstable A); at 3000 runs
 //! it clears 3 s.e. with a margin (docs/occlusion.md gives the numbers, and the same claims at
-//! 5000 runs with seed 0). The count was chosen before the margin was known to be comfortable,
+//! 200 000 runs with seed 0). The count was chosen before the margin was known to be comfortable,
 //! not tuned to a passing seed.
 
 use channel_sim::scenario::preset;

@@ -23,6 +23,7 @@ pub mod nn;
 pub mod occlusion;
 mod particles_rng;
 pub mod pf;
+pub mod role;
 pub mod silence_kf;
 mod slots;
 mod snapshot;

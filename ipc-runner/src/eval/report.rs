@@ -36,6 +36,7 @@ use serde::ser::{SerializeMap, Serializer};
 use serde::Serialize;
 
 use super::RunOutput;
+use crate::estimators::role::{figure, Role};
 use crate::estimators::EvalOptions;
 
 /// Everything an evaluation produced.
@@ -584,15 +585,23 @@ impl EvalResult {
             .fold(12, usize::max);
         let _ = writeln!(
             s,
-            "{:<w$} {:>12} {:>10} {:>14} {:>9}",
-            "estimator", "avg_mse", "± s.e.", "median_run_avg", "diverged"
+            "{:<w$} {:<9} {:>12} {:>12} {:>14} {:>9}",
+            "estimator", "role", "avg_mse", "± s.e.", "median_run_avg", "diverged"
         );
         for (name, r) in &self.estimators {
             let _ = writeln!(
                 s,
-                "{:<w$} {:>12.6} {:>10.6} {:>14.6} {:>9}",
-                name, r.avg_mse, r.avg_mse_se, r.median_run_avg, r.diverged_runs
+                "{:<w$} {:<9} {} {} {} {:>9}",
+                name,
+                Role::of(name),
+                figure(r.avg_mse, 12),
+                figure(r.avg_mse_se, 12),
+                figure(r.median_run_avg, 14),
+                r.diverged_runs
             );
+        }
+        if !self.estimators.is_empty() {
+            s.push_str(crate::estimators::role::MSE_NOTE);
         }
         // Consistency of an estimator's own covariance (diagnostics `inside_95`, `trace_p`).
         for (name, r) in &self.estimators {

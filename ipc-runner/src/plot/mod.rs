@@ -88,11 +88,17 @@ fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
     if standard.len() < 4 {
         ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
     } else if standard.len() > 14 {
-        ticks(&[1.0])
+        // Every n-th decade, so that a diverged estimator's 200 decades do not overprint.
+        let decades = ticks(&[1.0]);
+        let step = decades.len().div_ceil(LOG_TICKS_MAX).max(1);
+        decades.into_iter().step_by(step).collect()
     } else {
         standard
     }
 }
+
+/// Most ticks on a log axis.
+const LOG_TICKS_MAX: usize = 12;
 
 /// A log-axis tick: plain decimals in the readable range, scientific outside it.
 fn tick(v: f64) -> String {
@@ -126,8 +132,49 @@ where
     Ok(())
 }
 
-/// Most estimators a state panel names in its own legend.
-const STATE_LEGEND_MAX: usize = 6;
+/// Width of the legend column beside a chart: legends never cover data.
+const LEGEND_WIDTH: u32 = 300;
+
+/// One legend line: label, colour, line width.
+pub(crate) type LegendEntry = (String, RGBColor, u32);
+
+/// A legend drawn in its own `area` beside the chart (entries top to bottom).
+pub(crate) fn side_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    entries: &[LegendEntry],
+    size: u32,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let line = size as i32 + 6;
+    for (i, (label, c, w)) in entries.iter().enumerate() {
+        let y = 20 + i as i32 * line;
+        area.draw(&PathElement::new(
+            vec![(6, y), (34, y)],
+            c.stroke_width((*w).max(2)),
+        ))?;
+        area.draw(&Text::new(
+            label.clone(),
+            (42, y - size as i32 / 2 - 1),
+            (FONT, size),
+        ))?;
+    }
+    Ok(())
+}
+
+/// An average MSE for a legend: short, whatever its size.
+fn legend_figure(v: f64) -> String {
+    if v.is_nan() {
+        "NaN".into()
+    } else if v.is_infinite() {
+        "diverged".into()
+    } else if v.abs() >= 1e5 || (v != 0.0 && v.abs() < 1e-3) {
+        format!("{v:.2e}")
+    } else {
+        format!("{v:.4}")
+    }
+}
 
 /// Line colour `j`: the colour-blind-safe Okabe–Ito palette, then darker variants, so that up
 /// to 12 lines are told apart.
@@ -159,12 +206,16 @@ where
 {
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(MSE_HEIGHT);
-    draw_mse(result, &top)?;
+    let (chart, legend) = top.split_horizontally(WIDTH - LEGEND_WIDTH);
+    let entries = draw_mse(result, &chart)?;
+    side_legend(&legend, &entries, 15)?;
     let nx = result.trajectory.nx;
     if nx > 0 {
         let panels = bottom.split_evenly((nx, 1));
         for (i, panel) in panels.iter().enumerate() {
-            draw_state(result, panel, i)?;
+            let (chart, legend) = panel.split_horizontally(WIDTH - LEGEND_WIDTH);
+            let entries = draw_state(result, &chart, i)?;
+            side_legend(&legend, &entries, 14)?;
         }
     }
     Ok(())
@@ -173,7 +224,7 @@ where
 fn draw_mse<DB: DrawingBackend>(
     result: &EvalResult,
     area: &DrawingArea<DB, Shift>,
-) -> anyhow::Result<()>
+) -> anyhow::Result<Vec<LegendEntry>>
 where
     DB::ErrorType: 'static,
 {
@@ -216,27 +267,26 @@ where
         .x_label_formatter(&|v| format!("{v:.0}"))
         .y_label_formatter(&|v| tick(*v))
         .draw()?;
+    let mut entries = Vec::new();
     for (j, (name, r)) in result.estimators.iter().enumerate() {
         let c = color(j);
-        let label = format!("{name} (avg {:.4})", r.avg_mse);
-        chart
-            .draw_series(LineSeries::new(
-                (1..=t)
-                    .filter(|&k| r.mse[k].is_finite() && r.mse[k] > 0.0)
-                    .map(|k| (k as f64, r.mse[k])),
-                c.stroke_width(2),
-            ))?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
+        chart.draw_series(LineSeries::new(
+            (1..=t)
+                .filter(|&k| r.mse[k].is_finite() && r.mse[k] > 0.0)
+                .map(|k| (k as f64, r.mse[k])),
+            c.stroke_width(2),
+        ))?;
+        entries.push((format!("{name} (avg {})", legend_figure(r.avg_mse)), c, 2));
     }
-    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 16)
+    entries.push(("lower is better".into(), WHITE, 0));
+    Ok(entries)
 }
 
 fn draw_state<DB: DrawingBackend>(
     result: &EvalResult,
     area: &DrawingArea<DB, Shift>,
     i: usize,
-) -> anyhow::Result<()>
+) -> anyhow::Result<Vec<LegendEntry>>
 where
     DB::ErrorType: 'static,
 {
@@ -250,12 +300,25 @@ where
     };
     let truth = series(&tr.truth);
     let estimates: Vec<Vec<(f64, f64)>> = tr.estimates.iter().map(|e| series(e)).collect();
-    let (lo, hi) = truth
+    let span = |pts: &[(f64, f64)]| {
+        pts.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.1), hi.max(p.1))
+            })
+    };
+    // The axis fits the truth and every estimate that stays near it; one that leaves (a
+    // diverging EKF) is drawn clamped to the edge and named so, not allowed to flatten the rest.
+    let (t_lo, t_hi) = span(&truth);
+    let reach = 3.0 * (t_hi - t_lo).max(1e-9);
+    let near = |pts: &[(f64, f64)]| {
+        let (lo, hi) = span(pts);
+        !t_lo.is_finite() || (lo >= t_lo - reach && hi <= t_hi + reach)
+    };
+    let (lo, hi) = estimates
         .iter()
-        .chain(estimates.iter().flatten())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(p.1), hi.max(p.1))
-        });
+        .filter(|e| near(e))
+        .map(|e| span(e))
+        .fold((t_lo, t_hi), |(l, h), (a, b)| (l.min(a), h.max(b)));
     let (lo, hi) = if lo.is_finite() && hi > lo {
         let pad = 0.08 * (hi - lo);
         (lo - pad, hi + pad)
@@ -264,14 +327,7 @@ where
     };
     let mut chart = ChartBuilder::on(area)
         .caption(
-            if tr.names.len() <= STATE_LEGEND_MAX {
-                format!("run 0: state x{} — truth and estimates", i + 1)
-            } else {
-                format!(
-                    "run 0: state x{} — truth (black) and estimates (colours as above)",
-                    i + 1
-                )
-            },
+            format!("run 0: state x{} — truth and estimates", i + 1),
             (FONT, 18),
         )
         .margin(12)
@@ -286,20 +342,42 @@ where
         .label_style((FONT, 14))
         .axis_desc_style((FONT, 16))
         .draw()?;
-    chart
-        .draw_series(LineSeries::new(truth, BLACK.stroke_width(2)))?
-        .label("truth")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(3)));
-    // Many estimators: their legend would cover the panel; the MSE panel's names the colours.
-    let labelled = tr.names.len() <= STATE_LEGEND_MAX;
+    chart.draw_series(LineSeries::new(truth, BLACK.stroke_width(2)))?;
+    let mut entries = vec![("truth".to_owned(), BLACK, 2)];
     for (j, (points, name)) in estimates.into_iter().zip(&tr.names).enumerate() {
         let c = color(j);
-        let series = chart.draw_series(LineSeries::new(points, c.stroke_width(1)))?;
-        if labelled {
-            series.label(*name).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3))
-            });
+        let label = if near(&points) {
+            (*name).to_owned()
+        } else {
+            format!("{name} (off scale, clamped)")
+        };
+        let clamped = points.into_iter().map(|(k, v)| (k, v.clamp(lo, hi)));
+        chart.draw_series(LineSeries::new(clamped, c.stroke_width(1)))?;
+        entries.push((label, c, 1));
+    }
+    Ok(entries)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_log_axis_over_two_hundred_decades_has_a_dozen_ticks() {
+        let t = log_ticks(1e-3, 1e200);
+        assert!(t.len() <= LOG_TICKS_MAX && t.len() >= 6, "{t:?}");
+        assert!(t.windows(2).all(|w| w[1] > w[0]));
+        // The readable ranges keep their 1-2-5 ticks.
+        assert_eq!(log_ticks(0.9, 11.0), vec![1.0, 2.0, 5.0, 10.0]);
+    }
+
+    #[test]
+    fn legend_figures_are_short_whatever_the_mse() {
+        assert_eq!(legend_figure(3.04361), "3.0436");
+        assert_eq!(legend_figure(1.5407e200), "1.54e200");
+        assert_eq!(legend_figure(f64::INFINITY), "diverged");
+        for v in [0.0, 1e-300, 99_999.0, 1e5, -1e300, f64::NAN] {
+            assert!(legend_figure(v).len() <= 10, "{v}: {}", legend_figure(v));
         }
     }
-    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 14)
 }

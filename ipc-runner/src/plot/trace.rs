@@ -147,15 +147,18 @@ where
         .axis_desc_style((FONT, 16))
         .draw()?;
     type Field = fn(&Bin) -> f64;
-    // The runner's own share first, so the end-to-end lines are drawn over it.
-    let series: [(usize, &str, Field); 3] = [
-        (2, "received → estimates published, max per bin", |r| {
-            r.max_after_receipt
-        }),
-        (0, "end to end, max per bin", |r| r.max),
-        (1, "end to end, median per bin", |r| r.median),
+    // The maximum last and wider: where a bin's max is its median, the max stays visible.
+    let series: [(usize, &str, Field, u32); 3] = [
+        (1, "end to end, median per bin", |r| r.median, 1),
+        (
+            2,
+            "received → estimates published, max per bin",
+            |r| r.max_after_receipt,
+            1,
+        ),
+        (0, "end to end, max per bin", |r| r.max, 2),
     ];
-    for (j, label, f) in series {
+    for (j, label, f, width) in series {
         let c = color(j);
         let pts: Vec<(f64, f64)> = b
             .iter()
@@ -163,9 +166,21 @@ where
             .filter(|p| positive(p.1))
             .collect();
         chart
-            .draw_series(LineSeries::new(pts, c.stroke_width(1)))?
+            .draw_series(LineSeries::new(pts, c.stroke_width(width)))?
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
+    }
+    // The run's largest latency, marked and named: a single spike is one bin wide.
+    if let Some(top) = b
+        .iter()
+        .filter(|r| positive(r.max))
+        .max_by(|a, b| a.max.total_cmp(&b.max))
+    {
+        let c = color(0);
+        chart
+            .draw_series([Circle::new((top.t, top.max), 5, c.stroke_width(2))])?
+            .label(format!("end to end max of the run ({:.1} µs)", top.max))
+            .legend(move |(x, y)| Circle::new((x + 12, y), 5, c.stroke_width(2)));
     }
     if positive(p99) {
         let c = BLACK.mix(0.6);
@@ -221,9 +236,17 @@ mod tests {
         let pts: Vec<Point> = (0..100).map(|i| (i as f64 * 1e-4, 0.5, 1.0)).collect();
         plot_trace("test trace", &pts, &svg).unwrap();
         let text = std::fs::read_to_string(&svg).unwrap();
-        for want in ["test trace", "max per bin", "p99 of the run"] {
+        for want in [
+            "test trace",
+            "max per bin",
+            "p99 of the run",
+            "max of the run",
+        ] {
             assert!(text.contains(want), "{want} missing");
         }
+        // Series are drawn (and listed) in order: the max over the median, not under it.
+        let at = |w: &str| text.find(w).unwrap();
+        assert!(at("median per bin") < at("end to end, max per bin"));
         assert!(plot_trace("x", &[], &svg).is_err());
         assert!(plot_trace("x", &pts, &dir.join("trace.txt")).is_err());
         std::fs::remove_dir_all(&dir).unwrap();

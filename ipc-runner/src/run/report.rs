@@ -8,6 +8,7 @@
 //! ([`super::RunArgs::check_outputs`]). A run that fails before its first instant has
 //! computed nothing and writes nothing.
 
+use crate::estimators::role::{figure, Role, MSE_NOTE};
 use crate::latency::LatencySummary;
 use anyhow::{Context, Result};
 use serde::Serialize;
@@ -227,14 +228,21 @@ impl RunReport {
             .map(|e| e.name.chars().count())
             .fold(16, usize::max);
         s.push_str(&format!(
-            "{:<w$} {:>13} {:>10} {:>10}\n",
-            "estimator", "MSE vs truth", "instants", "rejected"
+            "{:<w$} {:<9} {:>13} {:>10} {:>10}\n",
+            "estimator", "role", "MSE vs truth", "instants", "rejected"
         ));
         for e in &self.estimators {
             s.push_str(&format!(
-                "{:<w$} {:>13.6} {:>10} {:>10}\n",
-                e.name, e.mse, e.mse_instants, e.rejected
+                "{:<w$} {:<9} {} {:>10} {:>10}\n",
+                e.name,
+                Role::of(&e.name),
+                figure(e.mse, 13),
+                e.mse_instants,
+                e.rejected
             ));
+        }
+        if !self.estimators.is_empty() {
+            s.push_str(MSE_NOTE);
         }
         for e in &self.estimators {
             if let Some(g) = e.gate {
