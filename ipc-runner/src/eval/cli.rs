@@ -22,8 +22,8 @@ pub struct EvalArgs {
     /// Number of Monte-Carlo runs.
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u64).range(1..))]
     pub runs: u64,
-    /// Instants per run, the horizon T (k = 1..=T); the name every subcommand uses
-    /// (`--horizon` is accepted too, the name of earlier versions).
+    /// Instants per run, the horizon T (k = 1..=T), as `--steps` of every subcommand (the
+    /// flag's former name is accepted too).
     #[arg(long = "steps", alias = "horizon", value_name = "T",
           default_value_t = estpipe_wire::DEFAULT_STEPS,
           value_parser = clap::value_parser!(u32).range(1..))]
