@@ -398,7 +398,7 @@ fn a_runner_without_a_publisher_sleeps_while_it_waits() {
         ticks / hz
     };
     let before = cpu_s();
-    std::thread::sleep(std::time::Duration::from_secs(3));
+    std::thread::sleep(Duration::from_secs(3));
     let used = cpu_s() - before;
     assert!(
         used < 0.6,
