@@ -43,6 +43,8 @@ mod elf;
 mod peers_agree;
 #[path = "firmware_qemu/qemu.rs"]
 mod qemu;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use elf::flash_sizes;
 use qemu::{build_firmware, missing_tools, require_qemu, run_qemu};
@@ -621,11 +623,9 @@ const TOL_NN: f64 = 1e-2;
 fn firmware_on_qemu_is_bit_exact_with_host() {
     if let Some(why) = missing_tools() {
         assert!(!require_qemu(), "REQUIRE_QEMU=1 but {why}");
-        // Straight to the stderr handle: libtest captures eprintln! of passing tests.
-        use std::io::Write;
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED firmware_on_qemu_is_bit_exact_with_host: {why} (set REQUIRE_QEMU=1 to fail)"
+        skip_log::skipped(
+            "firmware_on_qemu_is_bit_exact_with_host",
+            &format!("{why} (set REQUIRE_QEMU=1 to fail)"),
         );
         return;
     }
@@ -849,10 +849,9 @@ fn host_fixed_lag_f32_is_bit_identical_on_the_recorded_streams() {
 fn fixed_lag_firmware_gives_the_on_time_results() {
     if let Some(why) = missing_tools() {
         assert!(!require_qemu(), "REQUIRE_QEMU=1 but {why}");
-        use std::io::Write;
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED fixed_lag_firmware_gives_the_on_time_results: {why} (set REQUIRE_QEMU=1 to fail)"
+        skip_log::skipped(
+            "fixed_lag_firmware_gives_the_on_time_results",
+            &format!("{why} (set REQUIRE_QEMU=1 to fail)"),
         );
         return;
     }

@@ -8,6 +8,8 @@
 
 #[path = "pipeline_common.rs"]
 mod common;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use common::{prefix, scratch, Proc};
 use std::collections::BTreeMap;
@@ -25,9 +27,17 @@ fn python() -> Option<PathBuf> {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ok {
-        eprintln!(
-            "skipped: `{py} -c \"import iceoryx2\"` fails (pip install -r \
-             clients/python/requirements.txt, or point ESTPIPE_PYTHON at such an interpreter)"
+        // Named explicitly (as .ci/run does), the interpreter is required: a failure.
+        assert!(
+            std::env::var_os("ESTPIPE_PYTHON").is_none(),
+            "ESTPIPE_PYTHON={py} cannot import iceoryx2"
+        );
+        skip_log::skipped(
+            &skip_log::current_test("python"),
+            &format!(
+                "`{py} -c \"import iceoryx2\"` fails (pip install -r \
+                 clients/python/requirements.txt, or point ESTPIPE_PYTHON at such an interpreter)"
+            ),
         );
         return None;
     }

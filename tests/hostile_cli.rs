@@ -113,7 +113,7 @@ fn outputs_are_checked_before_any_work() {
     );
     assert_refused(&d, &["--plot /nonexistent/p.svg"]);
     // Was: the whole stream ran, then exit 1 without the summary. No publisher here: the
-    // refusal comes before the 30 s connect timeout would.
+    // refusal comes before the runner waits for one (by default for ever).
     for flag in ["--json", "--estimates-csv", "--slots-csv", "--latency-csv"] {
         let p = prefix("hostile-run-out");
         let d = node(
@@ -154,6 +154,25 @@ fn outputs_are_checked_before_any_work() {
         10,
     );
     assert_refused(&d, &["--out /proc/x"]);
+    // `demo --plot` is a file, as `eval --plot`: checked as one.
+    let p = prefix("hostile-demo-plot");
+    let d = node(
+        &dir,
+        "demo-plot",
+        &[
+            "demo",
+            "--scenario",
+            "linear",
+            "--prefix",
+            &p,
+            "--out",
+            dir.join("demo-out").to_str().unwrap(),
+            "--plot",
+            "/nonexistent/p.svg",
+        ],
+        10,
+    );
+    assert_refused(&d, &["--plot /nonexistent/p.svg"]);
     // The check creates a missing file and removes it: a later refusal leaves nothing.
     let json = dir.join("never.json");
     let d = node(
@@ -163,14 +182,14 @@ fn outputs_are_checked_before_any_work() {
             "eval",
             "--scenario",
             "linear",
-            "--horizon",
+            "--steps",
             "4294967295",
             "--json",
             json.to_str().unwrap(),
         ],
         30,
     );
-    assert_refused(&d, &["--horizon 4294967295"]);
+    assert_refused(&d, &["--steps 4294967295"]);
     assert!(!json.exists(), "the output check left {json:?} behind");
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -182,13 +201,13 @@ fn memory_is_checked_against_a_stated_budget() {
     let d = node(
         &dir,
         "horizon",
-        &["eval", "--scenario", "occlusion", "--horizon", "4294967295"],
+        &["eval", "--scenario", "occlusion", "--steps", "4294967295"],
         30,
     );
     assert_refused(
         &d,
         &[
-            "--horizon 4294967295",
+            "--steps 4294967295",
             "the budget is 2.000 GiB",
             "--max-memory MIB raises it",
         ],
@@ -208,7 +227,7 @@ fn memory_is_checked_against_a_stated_budget() {
         "linear",
         "--runs",
         "20",
-        "--horizon",
+        "--steps",
         "10",
         "--quiet",
     ];
@@ -454,7 +473,7 @@ fn eval_keeps_its_runs_on(what: &str, sig: libc::c_int) {
             "1000",
             "--runs",
             "400",
-            "--horizon",
+            "--steps",
             "40",
             "--threads",
             "1",
@@ -792,7 +811,7 @@ fn eval_whose_reader_is_gone_still_writes_its_files() {
             "occlusion",
             "--runs",
             "40",
-            "--horizon",
+            "--steps",
             "30",
             "--threads",
             "1",

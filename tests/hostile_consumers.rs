@@ -361,6 +361,51 @@ fn quiet_still_says_why_a_run_without_publisher_failed() {
         "{:?}",
         run.err()
     );
+    // Issue #38: the error line was followed by a whole summary of NaN.
+    assert!(run.out().is_empty(), "a summary of nothing: {}", run.out());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue #38: a spinning runner with no publisher busy-waited (3.2 s of CPU in 5 s) until its
+/// connect timeout. It must sleep while no stream is there: over 3 s of waiting it may use
+/// well under a core. The bound, 0.6 s of CPU in 3 s, is far above what 1 ms sleeps cost
+/// (a few ms per second) and far below a spinning core's share even on the loaded 2-core
+/// machine (two other busy processes leave it ⅔ of a core: 2 s).
+#[test]
+fn a_runner_without_a_publisher_sleeps_while_it_waits() {
+    let dir = scratch("idle-wait");
+    let p = prefix("idle-wait");
+    let json = dir.join("r.json");
+    let mut run = Proc::start(
+        &dir,
+        "runner",
+        &run_args(
+            &p,
+            "10",
+            &json,
+            &["--wait", "spin", "--connect-timeout", "5"],
+        ),
+    );
+    run.wait_for_stderr("waiting for channel-sim", 30);
+    let cpu_s = || -> f64 {
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", run.pid())).unwrap();
+        let f: Vec<&str> = stat[stat.rfind(')').unwrap() + 2..].split(' ').collect();
+        // utime and stime (fields 14 and 15) in clock ticks.
+        let ticks: f64 = f[11].parse::<f64>().unwrap() + f[12].parse::<f64>().unwrap();
+        // SAFETY: sysconf has no preconditions.
+        #[allow(unsafe_code)]
+        let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+        ticks / hz
+    };
+    let before = cpu_s();
+    std::thread::sleep(Duration::from_secs(3));
+    let used = cpu_s() - before;
+    assert!(
+        used < 0.6,
+        "the waiting runner used {used:.2} s of CPU in 3 s"
+    );
+    assert_eq!(run.wait(30).code(), Some(3), "{}", run.err());
+    eprintln!("waiting runner: {used:.3} s of CPU in 3 s");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -70,7 +70,7 @@ fn no_budget_exceeds_the_machine() {
             "occlusion",
             "--runs",
             "2",
-            "--horizon",
+            "--steps",
             "5",
             "--quiet",
             "--particles",
@@ -91,7 +91,7 @@ fn no_budget_exceeds_the_machine() {
             "linear",
             "--runs",
             "2",
-            "--horizon",
+            "--steps",
             "4294967295",
             "--quiet",
             "--max-memory",
@@ -100,7 +100,7 @@ fn no_budget_exceeds_the_machine() {
         &[],
         None,
     );
-    assert_one_line(&d, 2, &["--horizon 4294967295", "this machine has"]);
+    assert_one_line(&d, 2, &["--steps 4294967295", "this machine has"]);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -113,7 +113,7 @@ fn rayon_num_threads_is_checked_like_the_flag() {
         "linear",
         "--runs",
         "4",
-        "--horizon",
+        "--steps",
         "5",
         "--quiet",
     ];
@@ -193,7 +193,7 @@ fn no_output_replaces_an_input_or_another_output() {
             "linear",
             "--runs",
             "2",
-            "--horizon",
+            "--steps",
             "5",
             "--quiet",
             "--json",
@@ -345,7 +345,7 @@ fn an_unknown_iceoryx2_log_level_is_one_warning_line() {
         "linear",
         "--runs",
         "2",
-        "--horizon",
+        "--steps",
         "3",
         "--quiet",
     ];

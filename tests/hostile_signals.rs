@@ -8,6 +8,8 @@
 
 #[path = "pipeline_common.rs"]
 mod common;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use common::{node_exe, prefix, report, scratch, Proc};
 use std::path::Path;
@@ -336,11 +338,14 @@ fn sigint_sigterm_and_sighup_stop_run_in_every_wait_mode_also_mid_catch_up() {
 
 fn demo(dir: &Path, name: &str, extra: &[&str]) -> Proc {
     let out = dir.join(name);
+    let p = prefix(name);
     let mut args = vec![
         "demo",
         "--scenario",
         S,
         "--quiet",
+        "--prefix",
+        &p,
         "--out",
         out.to_str().unwrap(),
     ];
@@ -494,7 +499,10 @@ const NOBODY: u32 = 65534;
 #[test]
 fn another_user_gets_one_line_and_runs_with_its_own_iceoryx2_root() {
     if my_uid() != 0 {
-        eprintln!("skipped: needs root to start processes as another user");
+        skip_log::skipped(
+            "another_user_gets_one_line_and_runs_with_its_own_iceoryx2_root",
+            "needs root to start processes as another user",
+        );
         return;
     }
     // The default iceoryx2 root, created by (and belonging to) root.
@@ -505,14 +513,17 @@ fn another_user_gets_one_line_and_runs_with_its_own_iceoryx2_root() {
     let mut probe = match as_nobody(&dir, "probe", &["stream-header", "--scenario", S]) {
         Ok(pr) => pr,
         Err(e) => {
-            eprintln!("skipped: cannot start the test binary as nobody ({e})");
+            skip_log::skipped(
+                "another_user_gets_one_line_and_runs_with_its_own_iceoryx2_root",
+                &format!("cannot start the test binary as nobody ({e})"),
+            );
             return;
         }
     };
     if !probe.wait(30).success() {
-        eprintln!(
-            "skipped: the test binary does not run as nobody: {}",
-            probe.err()
+        skip_log::skipped(
+            "another_user_gets_one_line_and_runs_with_its_own_iceoryx2_root",
+            &format!("the test binary does not run as nobody: {}", probe.err()),
         );
         return;
     }

@@ -280,6 +280,8 @@ pub fn loop_setup(scenario: &str, prefix: &str, steps: u32) -> LoopSetup {
     args.quiet = true;
     args.steps = steps;
     args.buffer = 4096;
+    // A test whose publisher never comes ends (`run` alone waits for ever by default).
+    args.connect_timeout = 30.0;
     LoopSetup {
         args,
         nx,

@@ -15,6 +15,8 @@
 mod common;
 #[path = "netns_common.rs"]
 mod netns;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use common::{report, scratch, Proc};
 use netns::{BridgeArgs, Netns, ADDR_A};
@@ -35,12 +37,18 @@ fn sigint_ends_every_process_promptly_on_a_blackholed_link() {
     let ns = match Netns::pair('c') {
         Ok(n) => n,
         Err(why) => {
-            eprintln!("skipped: no network namespaces here ({why})");
+            skip_log::skipped(
+                &skip_log::current_test("congested_link"),
+                &format!("no network namespaces here ({why})"),
+            );
             return;
         }
     };
     if let Err(why) = ns.exec(&ns.b, &["nft", "add", "table", "inet", "estp"]) {
-        eprintln!("skipped: no nftables here ({why})");
+        skip_log::skipped(
+            &skip_log::current_test("congested_link"),
+            &format!("no nftables here ({why})"),
+        );
         return;
     }
     let dir = scratch("congested-link");

@@ -23,6 +23,8 @@ mod bridge_common;
 mod common;
 #[path = "netns_common.rs"]
 mod netns;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use bridge_common::assert_ok;
 
@@ -183,7 +185,10 @@ fn a_lossy_link_is_seen_as_losses_and_costs_only_their_information() {
     let link = match Link::new() {
         Ok(l) => l,
         Err(why) => {
-            eprintln!("skipped: no lossy link between network namespaces here ({why})");
+            skip_log::skipped(
+                &skip_log::current_test("lossy_link"),
+                &format!("no lossy link between network namespaces here ({why})"),
+            );
             return;
         }
     };

@@ -6,6 +6,8 @@
 //! one line.
 
 mod pipeline_common;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use pipeline_common as common;
 use pipeline_common::{csv, scratch, Proc};
@@ -72,9 +74,17 @@ fn python_counts(path: &Path) -> Option<BTreeMap<String, usize>> {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ok {
-        eprintln!(
-            "skipped the Python reader: `{py} -c \"import mcap.reader\"` fails (pip install -r \
-             clients/python/requirements.txt, or point ESTPIPE_PYTHON at such an interpreter)"
+        assert!(
+            std::env::var_os("ESTPIPE_PYTHON").is_none(),
+            "ESTPIPE_PYTHON={py} cannot import mcap.reader"
+        );
+        skip_log::skipped(
+            &skip_log::current_test("python_reader"),
+            &format!(
+                "(the Python MCAP reader part) `{py} -c \"import mcap.reader\"` fails (pip \
+                 install -r clients/python/requirements.txt, or point ESTPIPE_PYTHON at such an \
+                 interpreter)"
+            ),
         );
         return None;
     }

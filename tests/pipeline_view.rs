@@ -6,6 +6,8 @@
 //! it after installing them). The hostile-client test needs no browser.
 
 mod pipeline_common;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use pipeline_common as common;
 use pipeline_common::{csv, scratch, Proc};
@@ -42,7 +44,10 @@ fn browser() -> Option<(PathBuf, PathBuf)> {
         std::env::var("REQUIRE_BROWSER").as_deref() != Ok("1"),
         "REQUIRE_BROWSER=1 but {missing} is missing"
     );
-    eprintln!("skipped: the browser test needs {missing}");
+    skip_log::skipped(
+        &skip_log::current_test("browser"),
+        &format!("the browser test needs {missing} (REQUIRE_BROWSER=1 makes it fail)"),
+    );
     None
 }
 

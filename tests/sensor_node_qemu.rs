@@ -24,6 +24,8 @@ mod common;
 #[path = "firmware_qemu/qemu.rs"]
 #[allow(dead_code)] // run_qemu: the estimator binaries' runner, not used here
 mod qemu;
+#[path = "skip_log.rs"]
+mod skip_log;
 
 use common::{prefix, scratch, Proc};
 use std::io::{Read, Write};
@@ -36,10 +38,9 @@ use std::time::{Duration, Instant};
 fn firmware() -> Option<PathBuf> {
     if let Some(why) = qemu::missing_tools() {
         assert!(!qemu::require_qemu(), "REQUIRE_QEMU=1 but {why}");
-        // Straight to the stderr handle: libtest captures eprintln! of passing tests.
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED sensor_node_qemu: {why} (set REQUIRE_QEMU=1 to fail)"
+        skip_log::skipped(
+            &skip_log::current_test("sensor_node_qemu"),
+            &format!("{why} (set REQUIRE_QEMU=1 to fail)"),
         );
         return None;
     }
@@ -509,6 +510,8 @@ fn demo_with_sensor_nodes_runs_the_whole_loop() {
             "qemu",
             "--node-firmware",
             elf.to_str().unwrap(),
+            "--prefix",
+            &prefix("sndemo"),
             "--out",
             out.to_str().unwrap(),
         ],
@@ -653,6 +656,8 @@ fn bad_sensor_node_flags_get_one_line_without_qemu() {
             "qemu",
             "--node-firmware",
             "/nonexistent/sensor-node",
+            "--prefix",
+            &prefix("snrefused"),
             "--out",
             out.to_str().unwrap(),
         ],

@@ -57,11 +57,11 @@ pub struct PublisherArgs {
     /// Run index within the seed (runs are independent streams).
     #[arg(long, default_value_t = 0)]
     pub run: u64,
-    /// Number of sampling instants to publish (default: 100, as `ipc-runner eval --horizon`).
-    #[arg(long)]
+    /// Number of sampling instants to publish (default: 100, as `ipc-runner eval --steps`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub steps: Option<u32>,
     /// Sampling rate in Hz; 0 publishes as fast as possible.
-    #[arg(long, default_value_t = 1000.0, value_parser = estpipe_process::flags::rate_hz)]
+    #[arg(long, default_value_t = wire::DEFAULT_RATE_HZ, value_parser = estpipe_process::flags::rate_hz)]
     pub rate: f64,
     /// What a full subscriber queue does: `block` waits (nothing is lost), `discard` drops the
     /// slot (the runner counts the gap); `auto` blocks at `--rate 0` and discards when paced.

@@ -39,8 +39,8 @@ enum Command {
     /// Print the stream header a publisher of this scenario must write into every slot
     /// (JSON; see docs/wire.md).
     StreamHeader(crate::stream_header::StreamHeaderArgs),
-    /// The channel-sim publisher built into this executable (what `demo` starts).
-    #[command(hide = true)]
+    /// Simulate a scenario's plant, sensors and channel and publish its slots and truth on
+    /// `--prefix` (the publisher `demo` starts; the same as the `channel-sim` binary).
     ChannelSim(channel_sim::publisher::PublisherArgs),
 }
 

@@ -31,6 +31,9 @@ use std::time::{Duration, Instant};
 pub const DEFAULT_SCENARIO: &str = "occlusion";
 /// Used when [`DEFAULT_SCENARIO`] is not in the preset registry of this build.
 pub const FALLBACK_SCENARIO: &str = "linear";
+/// Where the demo writes by default: under `out/`, the one output directory the repository
+/// ignores (README, "Two commands").
+pub const DEFAULT_OUT: &str = "out/demo";
 
 /// Options of `ipc-runner demo`.
 #[derive(Clone, Debug, clap::Args)]
@@ -41,14 +44,14 @@ pub struct DemoArgs {
     /// Scenario TOML file (instead of a preset).
     #[arg(long, conflicts_with = "scenario")]
     pub config: Option<PathBuf>,
-    /// Number of sampling instants (default: 100, as `eval --horizon`).
-    #[arg(long)]
+    /// Number of sampling instants (default: 100, as `eval` and `channel-sim`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub steps: Option<u32>,
-    /// Sampling rate in Hz (0 = as fast as possible). The default leaves room for the
-    /// occlusion scenario's particle filter when it is asked for (`--particles`, ≈ 19 ms per
-    /// step on the loaded 2-core build machine); faster rates queue slots behind it, which
-    /// the latency table then shows.
-    #[arg(long, default_value_t = 20.0, value_parser = estpipe_process::flags::rate_hz)]
+    /// Sampling rate in Hz (0 = as fast as possible; the default is channel-sim's). An
+    /// estimator slower than the period (the particle filter of `--particles`) queues slots
+    /// behind it, which the latency table then shows.
+    #[arg(long, default_value_t = estpipe_wire::DEFAULT_RATE_HZ,
+          value_parser = estpipe_process::flags::rate_hz)]
     pub rate: f64,
     /// Experiment seed (same meaning and default as `eval --seed`).
     #[arg(long, default_value_t = 0)]
@@ -62,8 +65,8 @@ pub struct DemoArgs {
     /// How the loop waits for slots.
     #[arg(long, value_enum, default_value_t = WaitMode::Spin)]
     pub wait: WaitMode,
-    /// Directory for the plot, CSV and JSON outputs.
-    #[arg(long, default_value = "demo-out")]
+    /// Directory for the CSV and JSON outputs and the latency plots (created if missing).
+    #[arg(long, default_value = DEFAULT_OUT)]
     pub out: PathBuf,
     /// The live view (docs/view.md; with the `view` feature).
     #[command(flatten)]
@@ -71,12 +74,14 @@ pub struct DemoArgs {
     /// Also write the run as an MCAP file (docs/mcap.md).
     #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
-    /// Plot file name inside --out (`.svg`, or `.png` for a bitmap).
-    #[arg(long, default_value = "trajectories.svg")]
-    pub plot: PathBuf,
-    /// Service-name prefix (default: unique per demo process).
-    #[arg(long)]
-    pub prefix: Option<String>,
+    /// Write the plot of true vs estimated trajectories here (`.svg`, or `.png` for a
+    /// bitmap), as `eval --plot`; default: `trajectories.svg` in `--out`.
+    #[arg(long, value_name = "FILE.svg|FILE.png")]
+    pub plot: Option<PathBuf>,
+    /// Service-name prefix (the default of every subcommand; refused when another process
+    /// uses it: give another one to run demos side by side).
+    #[arg(long, default_value = estpipe_wire::DEFAULT_PREFIX)]
+    pub prefix: String,
     /// `shm`: publisher and runner share one prefix. `zenoh`: the publisher on
     /// `<prefix>-sensor`, the runner on `<prefix>`, joined only by two `ipc-runner bridge`
     /// processes over zenoh on loopback (docs/bridge.md; in builds with `--features
@@ -143,15 +148,31 @@ impl DemoArgs {
     /// `particles` particles fit the memory budget (they are allocated when the estimators
     /// are built).
     pub fn check_outputs(&self, nx: usize, particles: usize) -> Result<()> {
-        crate::plot::check_extension(&self.plot).map_err(crate::limits::BadInput)?;
+        let plot = self.plot_path();
+        crate::plot::check_extension(&plot).map_err(crate::limits::BadInput)?;
         crate::limits::check_output_dir("--out", &self.out)?;
-        for f in OUT_FILES.iter().map(Path::new).chain([self.plot.as_path()]) {
+        for f in OUT_FILES.iter().map(Path::new) {
             crate::limits::check_output("--out", &self.out.join(f))?;
         }
+        crate::limits::check_output(
+            if self.plot.is_some() {
+                "--plot"
+            } else {
+                "--out"
+            },
+            &plot,
+        )?;
         if let Some(m) = &self.mcap {
             crate::limits::check_output("--mcap", m)?;
         }
         self.check_memory(nx, 0, 0, particles)
+    }
+
+    /// The trajectory plot: `--plot`, else `trajectories.svg` in `--out`.
+    pub fn plot_path(&self) -> PathBuf {
+        self.plot
+            .clone()
+            .unwrap_or_else(|| self.out.join("trajectories.svg"))
     }
 
     /// What the runner preallocates for `steps` instants of `n_est` estimators and `nodes`
@@ -284,6 +305,26 @@ fn bridge_summary(out: &Path) -> String {
     )
 }
 
+/// Refuses `prefix` when its slot service exists once dead processes' leftovers are cleaned
+/// up: another demo, a `run` or a publisher uses it, and sharing it would mix two streams
+/// (one prefix is one pipeline: docs/wire.md, Services and QoS).
+fn refuse_busy_prefix(prefix: &str) -> Result<()> {
+    use iceoryx2::prelude::*;
+    let node = estpipe_process::node::create("ipc-runner")?;
+    let _ = node.try_cleanup_dead_nodes();
+    let name = estpipe_wire::service_name(prefix, estpipe_wire::SLOTS)?;
+    let busy = ipc::Service::does_exist(&name, node.config(), MessagingPattern::PublishSubscribe)
+        .map_err(|e| anyhow!("cannot look up the service {name} ({e:?})"))?;
+    if busy {
+        return Err(crate::limits::BadInput(format!(
+            "prefix {prefix:?} is in use ({name} exists: another demo, a `run` or a publisher \
+             on it); give the demo its own with --prefix NAME"
+        ))
+        .into());
+    }
+    Ok(())
+}
+
 /// The publisher command: `--channel-sim PATH`, else this executable + `channel-sim`.
 fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
     if let Some(p) = explicit {
@@ -346,10 +387,8 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     )
     .map_err(|e| crate::limits::BadInput(format!("{e:#}")))?;
     args.check_memory(spec.nx(), spec.nodes(), make()?.len(), particles)?;
-    let prefix = args
-        .prefix
-        .clone()
-        .unwrap_or_else(|| format!("estpipe-demo-{}", std::process::id()));
+    let prefix = args.prefix.clone();
+    refuse_busy_prefix(&prefix)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {:?}", args.out))?;
 
@@ -514,7 +553,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         }
     }
     run::finish(&rargs, &report, &traj, spec.ny())?;
-    let plot = args.out.join(&args.plot);
+    let plot = args.plot_path();
     if let Err(e) = plot_trajectories(&traj, &plot, scenario.name()) {
         estpipe_process::errln!("demo: no plot ({e:#})");
     }
@@ -557,10 +596,10 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         estpipe_process::outln!("{}", bridge_summary(&args.out));
     }
     estpipe_process::outln!(
-        "wrote {} (true vs estimated), latency.svg (percentiles), latency-trace.svg (over \
-         time), estimates.csv, latency.csv, slots.csv (replayable), report.json in {:?}",
-        plot.file_name().and_then(|f| f.to_str()).unwrap_or(""),
-        args.out
+        "wrote {} (true vs estimated); latency.svg (percentiles), latency-trace.svg (over \
+         time), estimates.csv, latency.csv, slots.csv (replayable), report.json in {}",
+        plot.display(),
+        args.out.display()
     );
     view.end();
     Ok(run::exit_code(&report))

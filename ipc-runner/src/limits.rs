@@ -503,8 +503,8 @@ mod tests {
     fn budget_names_the_numbers_and_the_flag() {
         let b = Budget::mib(1);
         b.check("x", 1 << 20).unwrap();
-        let e = b.check("--horizon 5", (1 << 20) + 1).unwrap_err().0;
-        assert!(e.contains("--horizon 5") && e.contains("1.0 MiB") && e.contains("--max-memory"));
+        let e = b.check("--steps 5", (1 << 20) + 1).unwrap_err().0;
+        assert!(e.contains("--steps 5") && e.contains("1.0 MiB") && e.contains("--max-memory"));
         assert_eq!(product(&[u64::MAX, 2]), u64::MAX);
     }
 
@@ -515,7 +515,7 @@ mod tests {
         let huge = Budget::mib(u64::MAX);
         let machine = machine_memory().expect("/proc/meminfo on Linux");
         assert_eq!((huge.bytes, huge.clamped), (machine, true));
-        let e = huge.check("--horizon 9", machine + 1).unwrap_err().0;
+        let e = huge.check("--steps 9", machine + 1).unwrap_err().0;
         assert!(e.contains("this machine has"), "{e}");
         // A product that saturated stands for more than any machine: refused even by a
         // budget of u64::MAX bytes.

@@ -44,7 +44,9 @@ fn bad_flags_are_one_line_errors_with_code_2() {
         &ipc_runner(&["eval", "--scenario", "linear", "--runs", "x"]),
         "--runs",
     );
-    assert_usage_error(&ipc_runner(&["eval"]), "--scenario");
+    // An empty evaluation is refused, by either name of the horizon.
+    assert_usage_error(&ipc_runner(&["eval", "--steps", "0"]), "--steps");
+    assert_usage_error(&ipc_runner(&["eval", "--horizon", "0"]), "--steps");
     assert_usage_error(
         &ipc_runner(&["eval", "--scenario", "linear", "--plot", "out.jpg"]),
         ".svg or .png",
@@ -83,7 +85,7 @@ fn estimators_flag_selects_in_registry_order_and_pf_by_name() {
         "occlusion",
         "--runs",
         "4",
-        "--horizon",
+        "--steps",
         "5",
         "--quiet",
         "--estimators",
@@ -151,7 +153,7 @@ fn writes_json_csv_and_plots() {
             "linear",
             "--runs",
             "20",
-            "--horizon",
+            "--steps",
             "25",
             "--seed",
             "4",
@@ -178,4 +180,37 @@ fn writes_json_csv_and_plots() {
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Without `--scenario`, `eval` runs the default preset of every subcommand (occlusion), and
+/// `--horizon`, the former name of `--steps`, still sets the horizon.
+#[test]
+fn eval_defaults_to_occlusion_and_takes_horizon_for_steps() {
+    let dir = temp_dir("defaults");
+    let json = |name: &str| dir.join(name);
+    for (name, flag) in [("steps.json", "--steps"), ("horizon.json", "--horizon")] {
+        let out = ipc_runner(&[
+            "eval",
+            "--runs",
+            "2",
+            flag,
+            "7",
+            "--quiet",
+            "--json",
+            json(name).to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let read = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(json(name)).unwrap()).unwrap()
+    };
+    let (a, b) = (read("steps.json"), read("horizon.json"));
+    assert_eq!(a["scenario"], "occlusion", "{a}");
+    assert_eq!(a["horizon"], 7, "{a}");
+    assert_eq!(a, b, "--horizon and --steps differ");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -50,7 +50,7 @@ fn the_occlusion_preset_as_toml_gives_the_presets_numbers() {
     let common = [
         "--runs",
         "40",
-        "--horizon",
+        "--steps",
         "100",
         "--seed",
         "11",
@@ -122,7 +122,7 @@ fn a_user_model_with_regions_runs_the_occlusion_estimators() {
             file.to_str().unwrap(),
             "--runs",
             "400",
-            "--horizon",
+            "--steps",
             "100",
             "--seed",
             "5",

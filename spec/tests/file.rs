@@ -9,6 +9,9 @@ use std::time::{Duration, Instant};
 use estpipe_spec::file::{load, parse, MAX_FILE_BYTES};
 use estpipe_spec::SpecError;
 
+#[path = "../../tests/skip_log.rs"]
+mod skip_log;
+
 const LINEAR: &str = include_str!("../../specs/linear.toml");
 const OCCLUSION: &str = include_str!("../../specs/occlusion.toml");
 /// The origin every case is parsed under: errors must name it.
@@ -437,7 +440,10 @@ fn a_fifo_is_refused_without_waiting_for_a_writer() {
     let fifo = dir.join("spec.toml");
     let made = std::process::Command::new("mkfifo").arg(&fifo).status();
     if !made.is_ok_and(|s| s.success()) {
-        eprintln!("skipped: no mkfifo to make a FIFO with");
+        skip_log::skipped(
+            "a_fifo_is_refused_without_waiting_for_a_writer",
+            "no mkfifo to make a FIFO with",
+        );
         return;
     }
     // On a thread, so that a regression hangs the thread, not the test.

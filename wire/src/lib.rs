@@ -51,8 +51,8 @@ pub use header::StreamHeader;
 pub use observation::Observation;
 pub use services::{
     estimate_service, latest_estimates_board, ready_event_service, service_name, slot_service,
-    truth_service, DEFAULT_PREFIX, DEFAULT_STEPS, ESTIMATES, ESTIMATE_HISTORY, LATEST_ESTIMATES,
-    MAX_SUBSCRIBER_BUFFER, READY_EVENT, SLOTS, SLOTS_READY, TRUTH,
+    truth_service, DEFAULT_PREFIX, DEFAULT_RATE_HZ, DEFAULT_STEPS, ESTIMATES, ESTIMATE_HISTORY,
+    LATEST_ESTIMATES, MAX_SUBSCRIBER_BUFFER, READY_EVENT, SLOTS, SLOTS_READY, TRUTH,
 };
 pub use slot::{
     Slot, SlotFault, FLAGS_LOST, FLAG_CENSORED, FLAG_IPC_LOST, FLAG_NET_LOST, FLAG_OCCLUDED,

@@ -29,6 +29,10 @@ pub const DEFAULT_PREFIX: &str = "estpipe";
 /// runner's `--steps`).
 pub const DEFAULT_STEPS: u32 = 100;
 
+/// Sampling rate in Hz a publisher paces its instants at unless told otherwise
+/// (`channel-sim --rate`, `ipc-runner demo --rate`): one default for every command.
+pub const DEFAULT_RATE_HZ: f64 = 1000.0;
+
 /// Service name (under the prefix) of the slots.
 pub const SLOTS: &str = "slots";
 /// Service name (under the prefix) of the "an instant was published" event.

@@ -7,6 +7,9 @@ use estpipe_wire::layout::{layouts, TypeLayout};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[path = "../../tests/skip_log.rs"]
+mod skip_log;
+
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
@@ -106,7 +109,10 @@ fn docs_wire_md_tables_match_the_rust_layouts() {
 #[test]
 fn the_c_header_has_the_rust_layouts_at_compile_and_run_time() {
     if Command::new("cc").arg("--version").output().is_err() {
-        eprintln!("skipped: no `cc` on PATH to compile clients/c/check_layout.c");
+        skip_log::skipped(
+            "the_c_header_has_the_rust_layouts_at_compile_and_run_time",
+            "no `cc` on PATH to compile clients/c/check_layout.c",
+        );
         return;
     }
     let dir = repo().join("clients/c");
@@ -168,7 +174,17 @@ fn the_python_structures_have_the_rust_layouts() {
         .args(["-c", "import iceoryx2"])
         .output();
     if !probe.is_ok_and(|o| o.status.success()) {
-        eprintln!("skipped: `{python} -c \"import iceoryx2\"` fails (pip install -r clients/python/requirements.txt, or set ESTPIPE_PYTHON)");
+        assert!(
+            std::env::var_os("ESTPIPE_PYTHON").is_none(),
+            "ESTPIPE_PYTHON={python} cannot import iceoryx2"
+        );
+        skip_log::skipped(
+            "the_python_structures_have_the_rust_layouts",
+            &format!(
+                "`{python} -c \"import iceoryx2\"` fails (pip install -r \
+                 clients/python/requirements.txt, or set ESTPIPE_PYTHON)"
+            ),
+        );
         return;
     }
     let out = Command::new(&python)

@@ -23,7 +23,9 @@ def parse_args():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--prefix", default=estpipe.DEFAULT_PREFIX)
     p.add_argument("--idle-exit", type=float, default=0.0,
-                   help="exit after this many seconds without an estimate (0 = never)")
+                   help="once estimates came, exit after this many seconds without a new one "
+                        "(0 = never); before the first one it waits for ever, since the "
+                        "runner and its publisher may be started minutes later")
     p.add_argument("--latency", action="store_true", help="print latency percentiles only")
     p.add_argument("--csv", action="store_true",
                    help="print k,estimator,status,x_0..,p_0.. rows (exact float repr)")
@@ -43,12 +45,15 @@ def main() -> int:
     print("ready", file=sys.stderr, flush=True)
 
     latencies = []
-    last = estpipe.monotonic_ns()
+    # The idle timer starts at the first estimate: a subscriber started before its runner
+    # has a publisher must not give up before anything was published.
+    last = None
     try:
         while True:
             sample = subscriber.receive()
             if sample is None:
-                if args.idle_exit and (estpipe.monotonic_ns() - last) / 1e9 > args.idle_exit:
+                if (args.idle_exit and last is not None
+                        and (estpipe.monotonic_ns() - last) / 1e9 > args.idle_exit):
                     break
                 # Short waits: a sleeping subscriber adds its wake-up to the latency.
                 node.wait(iox2.Duration.from_micros(50))
@@ -67,7 +72,7 @@ def main() -> int:
                                + [repr(v) for v in values]))
             else:
                 print(f"k {est.k:5} {est.estimator_name():8} x̂ {est.xhat()}  P {est.covariance()}")
-    except iox2.NodeWaitFailure:
+    except (iox2.NodeWaitFailure, KeyboardInterrupt):
         pass
     if args.latency and latencies:
         latencies.sort()

@@ -1,7 +1,7 @@
 """Sensor publisher example: publishes the slots of a slot log (docs/replay.md) to ipc-runner.
 
-    ipc-runner stream-header --scenario linear > header.json
-    python3 publish_slots.py --prefix mine --header header.json --slots slots.csv --rate 1000
+    ipc-runner stream-header --scenario linear > out/header.json
+    python3 publish_slots.py --prefix mine --header out/header.json --slots slots.csv --rate 1000
 
 The log is read as `ipc-runner replay` reads it (estpipe.read_slots, rule for rule), so the
 runner's estimates equal replay's: a delivered row goes out with its measurement, a row with
@@ -35,23 +35,35 @@ def parse_args():
     p.add_argument("--header", required=True, help="JSON from `ipc-runner stream-header`")
     p.add_argument("--slots", required=True, help="slot log CSV (docs/replay.md)")
     p.add_argument("--rate", type=float, default=0.0, help="instants per second; 0 = at once")
-    p.add_argument("--connect-timeout", type=float, default=30.0)
+    p.add_argument("--connect-timeout", type=float, default=30.0,
+                   help="seconds to wait for a runner on <prefix>/slots (0 = for ever); "
+                        "as channel-sim's, the runner being the side started first")
     return p.parse_args()
 
 
-def wait_for_subscriber(node, service, timeout):
-    """Slots sent before a subscriber exists are lost: wait for the runner."""
+def wait_for_subscriber(node, service, prefix, timeout):
+    """Slots sent before a subscriber exists are lost: wait for the runner. False when none
+    came within `timeout` seconds (0: waits for ever)."""
+    if service.dynamic_config.number_of_subscribers > 0:
+        return True
+    print(f"publish_slots.py: waiting for a runner on {prefix}/slots"
+          + (f" (up to {timeout:g} s)" if timeout > 0 else ""), file=sys.stderr, flush=True)
     start = estpipe.monotonic_ns()
     while service.dynamic_config.number_of_subscribers == 0:
-        if (estpipe.monotonic_ns() - start) / 1e9 > timeout:
-            raise TimeoutError("no runner subscribed within the connect timeout")
-        node.wait(iox2.Duration.from_millis(2))
+        if timeout > 0 and (estpipe.monotonic_ns() - start) / 1e9 > timeout:
+            return False
+        node.wait(iox2.Duration.from_millis(20))
+    return True
 
 
 def main() -> int:
     args = parse_args()
     if not (args.rate >= 0 and args.rate <= 1e6):
         print(f"publish_slots.py: error: --rate {args.rate} is not in [0, 1e6]", file=sys.stderr)
+        return 2
+    if not (args.connect_timeout >= 0 and args.connect_timeout < 1e9):
+        print(f"publish_slots.py: error: --connect-timeout {args.connect_timeout} is not a "
+              f"number of seconds >= 0 (0 = for ever)", file=sys.stderr)
         return 2
     try:
         with open(args.header) as f:
@@ -72,17 +84,33 @@ def main() -> int:
               f"(their lateness cannot be replayed over the wire; `ipc-runner replay --lag L` "
               f"folds them in)", file=sys.stderr)
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
-    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
-    service = estpipe.slot_service(node, args.prefix)
-    publisher = (
-        service.publisher_builder()
-        .backpressure_strategy(iox2.BackpressureStrategy.RetryUntilDelivered)
-        .create()
-    )
-    notifier = estpipe.ready_event_service(node, args.prefix).notifier_builder().create()
+    try:
+        node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+        service = estpipe.slot_service(node, args.prefix)
+        publisher = (
+            service.publisher_builder()
+            .backpressure_strategy(iox2.BackpressureStrategy.RetryUntilDelivered)
+            .create()
+        )
+        notifier = estpipe.ready_event_service(node, args.prefix).notifier_builder().create()
+    except Exception as e:  # iceoryx2 raises one exception type per builder and cause
+        print(f"publish_slots.py: error: cannot publish on {args.prefix}/slots "
+              f"({type(e).__name__}: {e}): the service exists with another QoS, or --prefix "
+              f"is not a valid service name (docs/wire.md, Services and QoS)",
+              file=sys.stderr)
+        return 1
     ready = iox2.EventId.new(estpipe.READY_EVENT)
 
-    wait_for_subscriber(node, service, args.connect_timeout)
+    try:
+        connected = wait_for_subscriber(node, service, args.prefix, args.connect_timeout)
+    except (iox2.NodeWaitFailure, KeyboardInterrupt):
+        print("publish_slots.py: stopped while waiting for a runner", file=sys.stderr)
+        return 130
+    if not connected:
+        print(f"publish_slots.py: error: no runner on {args.prefix}/slots within "
+              f"{args.connect_timeout:g} s: start `ipc-runner run --prefix {args.prefix} ...` "
+              f"first, or give --connect-timeout 0 to wait for ever", file=sys.stderr)
+        return 3
     stream_id = (os.getpid() << 32) ^ estpipe.monotonic_ns()
     period_ns = round(1e9 / args.rate) if args.rate > 0 else 0
     t0 = estpipe.monotonic_ns()

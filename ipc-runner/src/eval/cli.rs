@@ -12,8 +12,9 @@ use crate::limits::{check_outputs, given, Budget};
 /// Arguments of `ipc-runner eval`.
 #[derive(Debug, clap::Args)]
 pub struct EvalArgs {
-    /// Preset scenario name (e.g. `linear`, `occlusion`, `nn-token-bucket`, `tobit-fusion`).
-    #[arg(long, required_unless_present = "config", conflicts_with = "config")]
+    /// Preset scenario name (e.g. `linear`, `occlusion`, `nn-token-bucket`, `tobit-fusion`;
+    /// default: occlusion, as every other subcommand).
+    #[arg(long, conflicts_with = "config")]
     pub scenario: Option<String>,
     /// Scenario TOML file (see channel-sim/scenarios/example.toml).
     #[arg(long, value_name = "FILE")]
@@ -21,8 +22,11 @@ pub struct EvalArgs {
     /// Number of Monte-Carlo runs.
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u64).range(1..))]
     pub runs: u64,
-    /// Horizon T (instants k = 1..=T).
-    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..))]
+    /// Instants per run, the horizon T (k = 1..=T), as `--steps` of every subcommand (the
+    /// flag's former name is accepted too).
+    #[arg(long = "steps", alias = "horizon", value_name = "T",
+          default_value_t = estpipe_wire::DEFAULT_STEPS,
+          value_parser = clap::value_parser!(u32).range(1..))]
     pub horizon: u32,
     /// Experiment seed (same seed → identical results).
     #[arg(long, default_value_t = 0)]
@@ -149,9 +153,6 @@ impl CommandError {
 /// done, the summary, JSON and CSV are written whatever ends the evaluation (a signal: exit
 /// code 130; a failed run: 1), with the ending in both.
 pub fn run(args: EvalArgs) -> Result<(), CommandError> {
-    if args.scenario.is_none() && args.config.is_none() {
-        return Err(CommandError::usage("give --scenario NAME or --config FILE"));
-    }
     if let Some(plot) = &args.plot {
         crate::plot::check_extension(plot).map_err(CommandError::usage)?;
     }
@@ -162,9 +163,11 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     ]);
     let inputs = given(&[("--config", args.config.as_deref())]);
     check_outputs(&outputs, &inputs).map_err(CommandError::usage)?;
-    // clap lets through one of the two, never both.
+    // clap lets through one of the two, never both; neither is the default preset.
     let scenario = scenario::resolve(
-        args.scenario.as_deref().unwrap_or_default(),
+        args.scenario
+            .as_deref()
+            .unwrap_or(crate::demo::DEFAULT_SCENARIO),
         args.config.as_deref(),
     )
     .map_err(CommandError::usage)?;

@@ -176,7 +176,7 @@ pub fn evaluate_with(
     control: &Control<'_>,
 ) -> anyhow::Result<EvalResult> {
     anyhow::ensure!(options.runs >= 1, "--runs must be at least 1");
-    anyhow::ensure!(options.horizon >= 1, "--horizon must be at least 1");
+    anyhow::ensure!(options.horizon >= 1, "--steps must be at least 1");
     // Not rayon's global pool, which panics when RAYON_NUM_THREADS asks for more threads
     // than can start: the count is ours, and the pool built below is given it.
     let threads = config
@@ -213,7 +213,7 @@ pub fn evaluate_with(
     let minimum = held.saturating_add(product(&[2, threads as u64, per_run]));
     control.budget.check(
         &format!(
-            "--runs {} --horizon {} ({} estimators × {} states, {threads} thread(s))",
+            "--runs {} --steps {} ({} estimators × {} states, {threads} thread(s))",
             options.runs,
             options.horizon,
             names.len(),

@@ -496,7 +496,7 @@ fn the_memory_budget_refuses_or_shrinks_chunks_never_changes_results() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.starts_with("--runs 300 --horizon 100000 (") && e.contains("budget is 1.0 MiB"),
+        e.starts_with("--runs 300 --steps 100000 (") && e.contains("budget is 1.0 MiB"),
         "{e}"
     );
     // 300 runs of T = 300 in 1 MiB: chunks of a few dozen runs instead of 256.

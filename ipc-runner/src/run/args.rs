@@ -80,8 +80,10 @@ pub struct RunArgs {
     /// 0 = for ever. Blocking streams (`--rate 0`) never lose a slot by this deadline.
     #[arg(long, default_value_t = super::assemble::DEFAULT_INSTANT_DEADLINE_MS)]
     pub instant_deadline_ms: f64,
-    /// Seconds to wait for the first slot (and for a restarted publisher); 0 = forever.
-    #[arg(long, default_value_t = 30.0, value_parser = estpipe_process::flags::seconds)]
+    /// Seconds to wait for the first slot (and for a restarted publisher); 0 = for ever, the
+    /// default: the runner is started first and waits, asleep, for whoever publishes (a
+    /// person may take minutes to start it). Publishers wait 30 s for a runner.
+    #[arg(long, default_value_t = 0.0, value_parser = estpipe_process::flags::seconds)]
     pub connect_timeout: f64,
     /// A publisher whose iceoryx2 node is alive but that sent nothing past the deadline is
     /// *stalled* (waited for, reported); it counts as lost after this many seconds of silence
@@ -111,7 +113,8 @@ pub struct RunArgs {
     /// Instants channel-sim publishes: the horizon the estimators are built for, and the
     /// size of the preallocated trajectory recording (later instants are processed but not
     /// recorded).
-    #[arg(long, default_value_t = wire::DEFAULT_STEPS)]
+    #[arg(long, default_value_t = wire::DEFAULT_STEPS,
+          value_parser = clap::value_parser!(u32).range(1..))]
     pub steps: u32,
     /// Write estimates and truth per instant to this CSV file at the end.
     #[arg(long)]
@@ -181,7 +184,7 @@ impl RunArgs {
             prefix: prefix.to_string(),
             wait: WaitMode::Spin,
             deadline_ms: 100.0,
-            connect_timeout: 30.0,
+            connect_timeout: 0.0,
             stall_limit: 10.0,
             max_gap: super::assemble::DEFAULT_MAX_GAP,
             instant_deadline_ms: super::assemble::DEFAULT_INSTANT_DEADLINE_MS,

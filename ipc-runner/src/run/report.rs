@@ -223,6 +223,11 @@ impl RunReport {
                 st.count, st.longest_ms, st.total_ms
             ));
         }
+        if c.instants == 0 {
+            // Nothing was estimated: no table of NaN (the line above and the error say why).
+            s.push_str("no instant processed: no estimates, no latency\n");
+            return s;
+        }
         // The name column fits the longest name (`fused-predict+gate`), 16 at least.
         let w = (self.estimators.iter())
             .map(|e| e.name.chars().count())
@@ -232,13 +237,26 @@ impl RunReport {
             "estimator", "role", "MSE vs truth", "instants", "rejected"
         ));
         for e in &self.estimators {
+            // An MSE over no instant is not a number worth printing.
+            let mse = if e.mse_instants > 0 {
+                figure(e.mse, 13)
+            } else {
+                format!("{:>13}", "-")
+            };
             s.push_str(&format!(
-                "{:<w$} {:<9} {} {:>10} {:>10}\n",
+                "{:<w$} {:<9} {mse} {:>10} {:>10}\n",
                 e.name,
                 Role::of(&e.name),
-                figure(e.mse, 13),
                 e.mse_instants,
                 e.rejected
+            ));
+        }
+        if self.estimators.iter().all(|e| e.mse_instants == 0) && !self.estimators.is_empty() {
+            s.push_str(&format!(
+                "no truth: MSE not computed ({} of {} instants had no truth message: only \
+                 channel-sim publishes <prefix>/truth, a publisher of your own need not; \
+                 docs/wire.md)\n",
+                self.truth_missing, c.instants
             ));
         }
         if !self.estimators.is_empty() {
@@ -306,7 +324,11 @@ pub fn finish(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize
 /// cannot be written loses nothing the summary shows). Returns the exit code
 /// ([`exit_code`]), or the error of a run that failed or of a file that was not written.
 pub fn conclude(args: &RunArgs, report: &RunReport, traj: &Trajectories, ny: usize) -> Result<i32> {
-    estpipe_process::outln!("{}", report.summary());
+    // A run that never got a slot ended with its one-line reason on stderr; a summary of
+    // zeros after it would only bury that line.
+    if !(report.counts.received == 0 && report.ending == Ending::PublisherLost) {
+        estpipe_process::outln!("{}", report.summary());
+    }
     let written = finish(args, report, traj, ny);
     if report.ending == Ending::Failed {
         let e = report.error.as_deref().unwrap_or("the loop failed");

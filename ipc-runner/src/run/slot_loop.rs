@@ -113,9 +113,17 @@ pub fn run_loop(
     // signal takes its default action (the process ends without a report, as nothing ran).
     estpipe_process::signal::install();
     lp.say(&format!(
-        "waiting for channel-sim on prefix {:?} ({} wait)",
+        "waiting for channel-sim (or any publisher) on prefix {:?} ({} wait; {})",
         args.prefix,
-        args.wait.as_str()
+        args.wait.as_str(),
+        if args.connect_timeout > 0.0 {
+            format!(
+                "giving up after --connect-timeout {} s",
+                args.connect_timeout
+            )
+        } else {
+            "no timeout: Ctrl-C stops, --connect-timeout S gives up after S s".to_string()
+        }
     ));
     let waitset = wait::waitset(args.wait, &t)?;
     let mut waiter = Waiter::new(&t, waitset.as_ref())?;
@@ -164,7 +172,10 @@ pub fn run_loop(
             }
         }
         let due = lp.asm.next_expiry().map_or(due, |t| t.min(due));
-        match waiter.wait(due.saturating_sub(now).min(max_wait_ns)) {
+        // No stream yet (or a lost one awaited): spinning would burn a core for as long as
+        // the publisher takes to come, so every wait mode sleeps then.
+        let idle = lp.deadline.idle_since(now);
+        match waiter.wait(due.saturating_sub(now).min(max_wait_ns), idle) {
             Ok(Woke::Ready) => {}
             Ok(Woke::Signal) => break Ending::Interrupted,
             Err(e) => {
@@ -582,6 +593,9 @@ impl Loop<'_> {
     }
 }
 
+/// How long a wait for a stream's first slot spins before it sleeps.
+const IDLE_AFTER_NS: u64 = 100_000_000;
+
 /// When the next slot is due.
 struct Deadline {
     deadline_ns: u64,
@@ -616,6 +630,14 @@ impl Deadline {
         self.recheck_ns
             .take()
             .map(|_| recv_ns.saturating_sub(last.unwrap_or(recv_ns)))
+    }
+
+    /// Whether the loop has waited for a stream's first slot longer than [`IDLE_AFTER_NS`]
+    /// at `now` (the first moments of a wait still spin: a publisher that is already there
+    /// gets the spin loop's latency from its first slot on).
+    #[inline]
+    fn idle_since(&self, now: u64) -> bool {
+        self.last_data_ns.is_none() && now.saturating_sub(self.waiting_since) > IDLE_AFTER_NS
     }
 
     fn due(&self) -> u64 {

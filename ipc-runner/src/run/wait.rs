@@ -93,10 +93,12 @@ impl<'a> Waiter<'a> {
         }
     }
 
-    /// Waits until slots may be there, a signal arrived, or about `timeout_ns` passed.
+    /// Waits until slots may be there, a signal arrived, or about `timeout_ns` passed;
+    /// `idle` (no stream yet): spinning sleeps [`IDLE_SLEEP`] per poll instead.
     #[inline]
-    pub(super) fn wait(&mut self, timeout_ns: u64) -> Result<Woke> {
+    pub(super) fn wait(&mut self, timeout_ns: u64, idle: bool) -> Result<Woke> {
         match self {
+            Self::Spin(s) if idle => Ok(s.sleep(timeout_ns)),
             Self::Spin(_) => {
                 // One PAUSE per poll: a longer back-off (32 were here) delays a slot that lands
                 // just after a poll by all of it. Signals are checked in `now`.
@@ -135,6 +137,20 @@ impl Spin {
             }
         }
         Some(self.clock)
+    }
+}
+
+/// How long a spinning loop with no stream sleeps between polls: the delay its first slot
+/// may wait, against a core kept busy for as long as no publisher comes.
+pub(super) const IDLE_SLEEP: Duration = Duration::from_millis(1);
+
+impl Spin {
+    /// Sleeps up to [`IDLE_SLEEP`] (at most `timeout_ns`), then reads the clock and the stop
+    /// flag, as every sleeping mode does after a wake-up.
+    fn sleep(&mut self, timeout_ns: u64) -> Woke {
+        std::thread::sleep(IDLE_SLEEP.min(Duration::from_nanos(timeout_ns.max(1000))));
+        self.clock = wire::monotonic_ns();
+        woke()
     }
 }
 

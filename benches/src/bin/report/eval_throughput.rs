@@ -29,12 +29,7 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
             cmd.arg("300")
                 .arg(&bin)
                 .args(["eval", "--scenario", sc, "--quiet", "--seed", "1"])
-                .args([
-                    "--runs",
-                    &runs.to_string(),
-                    "--horizon",
-                    &horizon.to_string(),
-                ])
+                .args(["--runs", &runs.to_string(), "--steps", &horizon.to_string()])
                 .arg("--json")
                 .arg(&json)
                 .stdout(Stdio::null())

@@ -4,7 +4,7 @@
 //! sin x₂ cos x₃]ᵀ`, one scalar `w_k ~ N(0, 0.1)` in state and measurement), deterministic
 //! `x₀ = [3.1, −2.65, 4]ᵀ`, estimators' prior `x̂₀ = 0`, `P₀ = 10 I`, one sensor behind a token
 //! bucket with `a = 2`, `b = 3`, `S = 10`, `z₀ = 6`. The paper's horizon is T = 300
-//! (`ipc-runner eval --scenario nn-token-bucket --horizon 300`).
+//! (`ipc-runner eval --scenario nn-token-bucket --steps 300`).
 //!
 //! The paper's timing: the sensor measures from k = 0 and the bucket takes its first decision
 //! at k = 0 (μ₀ = min{6 + 2, 10} − 3 = 5 ≥ 0: y₀ is sent). The stream's slots start at k = 1, so
