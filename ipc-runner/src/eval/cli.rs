@@ -123,9 +123,9 @@ pub fn address_reserve(threads: usize) -> u64 {
 }
 
 /// [`address_reserve`]'s fixed part, MiB.
-const ADDRESS_RESERVE_MIB: u64 = 16;
+const ADDRESS_RESERVE_MIB: u64 = 6;
 /// [`address_reserve`]'s part per worker thread, MiB.
-const ADDRESS_PER_THREAD_MIB: u64 = 4;
+const ADDRESS_PER_THREAD_MIB: u64 = 3;
 
 /// A probability in `[0, 1)` (a loss rate).
 pub fn loss_probability(s: &str) -> Result<f64, String> {

@@ -310,7 +310,7 @@ impl RunArgs {
 /// assembler's window of pending instants, the publisher's slot segment and the services'
 /// shared state it maps, its threads and the writers of its outputs (docs/security.md,
 /// "Limits of the machine", has the measurements behind this figure).
-const RUN_ADDRESS_RESERVE: u64 = 24 << 20;
+const RUN_ADDRESS_RESERVE: u64 = 12 << 20;
 
 fn observation_bytes() -> u64 {
     size_of::<wire::Observation>() as u64
