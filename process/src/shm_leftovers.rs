@@ -99,7 +99,7 @@ fn shm_free() -> Option<u64> {
         let mut st: libc::statvfs = std::mem::zeroed();
         (libc::statvfs(path.as_ptr(), &mut st) == 0).then_some(st)
     }?;
-    Some(u64::from(st.f_bavail).saturating_mul(u64::from(st.f_frsize)))
+    Some(st.f_bavail.saturating_mul(st.f_frsize))
 }
 
 /// The one line for a publisher of `service` that could not be created (`since`: just
