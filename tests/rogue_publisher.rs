@@ -129,8 +129,12 @@ fn main() {
         .default_event_id(wire::READY_EVENT)
         .create()
         .expect("notifier");
-    // Before a subscriber can exist: the runner then sees every truth message.
-    let truth_pub = truth.publisher_builder().create().expect("truth publisher");
+    // Before a subscriber can exist: the runner then sees every truth message. Only a
+    // simulation publishes the truth (the service takes one publisher: channel-sim's, when
+    // a script joins its stream).
+    let truth_pub = a
+        .simulate
+        .then(|| truth.publisher_builder().create().expect("truth publisher"));
     let timeout = Duration::from_secs_f64(a.timeout);
     let t0 = Instant::now();
     while slots.dynamic_config().number_of_subscribers() == 0 {
@@ -149,6 +153,7 @@ fn main() {
         let nx = scenario.nx();
         let sid = 77;
         let x0 = sim.initial_truth();
+        let truth_pub = truth_pub.as_ref().expect("created for --simulate");
         let send_truth = |t: Truth| {
             let n = truth_pub
                 .loan_uninit()

@@ -47,7 +47,7 @@ pub fn main(args: &BridgeArgs) -> anyhow::Result<i32> {
     }
     if let Some(p) = &args.report {
         let json = serde_json::to_string_pretty(&report)?;
-        std::fs::write(p, json + "\n")
+        estpipe_process::whole_file::write(p, &(json + "\n"))
             .map_err(|e| anyhow::anyhow!("--report {}: {e}", p.display()))?;
     }
     Ok(if report.ending == estimator::FAR_SIDE_LOST {

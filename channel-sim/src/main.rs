@@ -16,6 +16,8 @@ struct Cli {
 }
 
 fn main() {
+    // Before any thread: under `ulimit -v` every thread allocates from one heap.
+    estpipe_process::address_space::share_one_heap();
     estpipe_process::console::set_iceoryx2_log_level("channel-sim");
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,

@@ -494,26 +494,34 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         Mode::Discard
     };
     gate.set_mode(data_mode);
+    // What a failed creation left in /dev/shm is removed (estpipe_process::shm_leftovers).
+    let since = std::time::SystemTime::now() - Duration::from_secs(1);
     let publisher = slots
         .publisher_builder()
         .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
         .set_backpressure_handler(gate.handler())
         .create()
         .map_err(|e| {
-            anyhow::anyhow!(
-                "cannot publish on {}/slots ({e:?}): are {} publishers already running with \
-                 this --prefix?",
-                args.prefix,
-                wire::MAX_NODES
-            )
+            anyhow::anyhow!(estpipe_process::shm_leftovers::publisher_error(
+                e,
+                node.config(),
+                since,
+                &format!("{}/slots", args.prefix),
+                &format!(
+                    "are {} publishers already running with this --prefix?",
+                    wire::MAX_NODES
+                ),
+            ))
         })?;
     let truth_pub = if with_truth {
         Some(truth.publisher_builder().create().map_err(|e| {
-            anyhow::anyhow!(
-                "cannot publish on {}/truth ({e:?}): is another publisher of node 0 running \
-                 with this --prefix?",
-                args.prefix
-            )
+            anyhow::anyhow!(estpipe_process::shm_leftovers::publisher_error(
+                e,
+                node.config(),
+                since,
+                &format!("{}/truth", args.prefix),
+                "is another publisher of node 0 running with this --prefix?",
+            ))
         })?)
     } else {
         None

@@ -60,6 +60,8 @@ fn pipeline(r: anyhow::Result<i32>) -> Result<(), CommandError> {
 /// Parses the command line, runs the subcommand and exits; `name` prefixes the one-line
 /// error messages.
 pub fn main(name: &str) -> ! {
+    // Before any thread: under `ulimit -v` every thread allocates from one heap.
+    estpipe_process::address_space::share_one_heap();
     estpipe_process::console::set_iceoryx2_log_level(name);
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,

@@ -41,6 +41,9 @@ pub struct Budget {
     pub bytes: u64,
     /// Whether `--max-memory` asked for more than the machine has (the message says so).
     pub clamped: bool,
+    /// The address-space limit (`ulimit -v`, bytes) when it is what bounds the budget
+    /// ([`Budget::within_address_space`]).
+    pub address_limit: Option<u64>,
 }
 
 impl Budget {
@@ -51,12 +54,45 @@ impl Budget {
             Some(m) if m < asked => Self {
                 bytes: m,
                 clamped: true,
+                address_limit: None,
             },
             _ => Self {
                 bytes: asked,
                 clamped: false,
+                address_limit: None,
             },
         }
+    }
+
+    /// The budget within what the address-space limit (`ulimit -v`) leaves this process once
+    /// `reserve` bytes are set aside for what the budget does not count (thread stacks, the
+    /// estimators' own scratch): beyond it an allocation fails, and Rust aborts the process
+    /// where it could have refused the flags. No limit: the budget unchanged. A limit that
+    /// leaves no more than `reserve` is refused in one line naming it (`what`: the command).
+    pub fn within_address_space(self, reserve: u64, what: &str) -> Result<Self, BadInput> {
+        use estpipe_process::address_space as space;
+        let Some((limit, left)) = space::headroom() else {
+            return Ok(self);
+        };
+        if left <= reserve {
+            return Err(BadInput(format!(
+                "{what}: {} leaves {} beside the {} the program has mapped, and it needs at \
+                 least {}; raise the limit",
+                space::describe(limit),
+                human_bytes(left),
+                human_bytes(limit - left),
+                human_bytes(reserve),
+            )));
+        }
+        Ok(if left - reserve < self.bytes {
+            Self {
+                bytes: left - reserve,
+                clamped: true,
+                address_limit: Some(limit),
+            }
+        } else {
+            self
+        })
     }
 
     /// Refuses `need` bytes beyond the budget: `Err` names what was asked (`what`), the
@@ -72,7 +108,12 @@ impl Budget {
             format!("about {}", human_bytes(need))
         };
         let budget = human_bytes(self.bytes);
-        Err(BadInput(if self.clamped {
+        Err(BadInput(if let Some(limit) = self.address_limit {
+            format!(
+                "{what} needs {need} of memory; {} leaves {budget} for it (raise the limit)",
+                estpipe_process::address_space::describe(limit)
+            )
+        } else if self.clamped {
             format!(
                 "{what} needs {need} of memory; this machine has {budget} (memory and swap, \
                  or the container's limit)"
@@ -522,6 +563,7 @@ mod tests {
         let all = Budget {
             bytes: u64::MAX,
             clamped: false,
+            address_limit: None,
         };
         let e = all.check("--particles 18446744073709551615", product(&[u64::MAX, 2]));
         assert!(e.unwrap_err().0.contains("more than 16 EiB"));

@@ -56,12 +56,21 @@ impl Transport {
             .buffer_size(wire::MAX_SUBSCRIBER_BUFFER)
             .create()
             .map_err(|e| anyhow!("cannot subscribe to {prefix}/truth: {e:?}"))?;
+        // What a failed creation left in /dev/shm is removed (estpipe_process::shm_leftovers).
+        let since = std::time::SystemTime::now() - std::time::Duration::from_secs(1);
         let estimate_pub = estimates
             .publisher_builder()
             .max_loaned_samples(PRELOANED_ESTIMATES + 1)
-            .create().map_err(|e| {
-            anyhow!("cannot publish on {prefix}/estimates ({e:?}): is another runner using this --prefix?")
-        })?;
+            .create()
+            .map_err(|e| {
+                anyhow!(estpipe_process::shm_leftovers::publisher_error(
+                    e,
+                    node.config(),
+                    since,
+                    &format!("{prefix}/estimates"),
+                    "is another runner using this --prefix?",
+                ))
+            })?;
         let listener = if with_listener {
             let ready = wire::ready_event_service(&node, prefix)?;
             Some(

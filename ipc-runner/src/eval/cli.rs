@@ -117,6 +117,20 @@ pub fn default_threads(env: Option<&std::ffi::OsStr>) -> Result<usize, String> {
     }
 }
 
+/// Address space `eval` on `threads` workers needs beyond its budget, under a limit: every
+/// worker's stack (2 MiB, Rust's default) and the scratch of the run it computes, and the
+/// pool, the progress and the writers of the results (docs/security.md, "Limits of the
+/// machine", has the measurements behind these figures).
+pub fn address_reserve(threads: usize) -> u64 {
+    const MIB: u64 = 1 << 20;
+    ADDRESS_RESERVE_MIB * MIB + (threads as u64).saturating_mul(ADDRESS_PER_THREAD_MIB * MIB)
+}
+
+/// [`address_reserve`]'s fixed part, MiB.
+const ADDRESS_RESERVE_MIB: u64 = 6;
+/// [`address_reserve`]'s part per worker thread, MiB.
+const ADDRESS_PER_THREAD_MIB: u64 = 3;
+
 /// A probability in `[0, 1)` (a loss rate).
 pub fn loss_probability(s: &str) -> Result<f64, String> {
     estpipe_process::flags::probability_below_one(s)
@@ -171,12 +185,14 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         args.config.as_deref(),
     )
     .map_err(CommandError::usage)?;
-    let budget = Budget::mib(args.max_memory);
     let threads = match args.threads {
         Some(t) => t as usize,
         None => default_threads(std::env::var_os("RAYON_NUM_THREADS").as_deref())
             .map_err(CommandError::usage)?,
     };
+    let budget = Budget::mib(args.max_memory)
+        .within_address_space(address_reserve(threads), "eval")
+        .map_err(CommandError::usage)?;
     let particles = args.estimator.particle_count();
     // Before any estimator is built (the selection below builds them): a particle filter
     // allocates its particles at once.
@@ -314,6 +330,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     }
 }
 
+/// Whole or not at all: a full disk must not leave a 0-byte or half-written `--json`.
 fn write(path: &Path, text: &str) -> Result<(), String> {
-    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
+    estpipe_process::whole_file::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
 }

@@ -278,34 +278,42 @@ impl RunArgs {
         } else {
             wire::services::QOS_LIMIT.segment_bytes(size_of::<wire::Estimate>(), ESTIMATE_LOANS)
         };
-        Budget::mib(self.max_memory).check(
-            &(format!(
-                "--steps {} ({}{nx} states{}{})",
-                self.steps,
-                if n_est > 0 {
-                    format!("{n_est} estimators × ")
+        Budget::mib(self.max_memory)
+            .within_address_space(RUN_ADDRESS_RESERVE, "run")?
+            .check(
+                &(format!(
+                    "--steps {} ({}{nx} states{}{})",
+                    self.steps,
+                    if n_est > 0 {
+                        format!("{n_est} estimators × ")
+                    } else {
+                        String::new()
+                    },
+                    if self.slots_csv.is_some() {
+                        format!(", --slots-csv of {nodes} node(s)")
+                    } else {
+                        String::new()
+                    },
+                    if particles > 0 {
+                        format!(", --particles {particles}")
+                    } else {
+                        String::new()
+                    },
+                ) + if shm > 0 {
+                    " and the estimate queue's shared memory at the accepted QoS limit"
                 } else {
-                    String::new()
-                },
-                if self.slots_csv.is_some() {
-                    format!(", --slots-csv of {nodes} node(s)")
-                } else {
-                    String::new()
-                },
-                if particles > 0 {
-                    format!(", --particles {particles}")
-                } else {
-                    String::new()
-                },
-            ) + if shm > 0 {
-                " and the estimate queue's shared memory at the accepted QoS limit"
-            } else {
-                ""
-            }),
-            recording.saturating_add(pf).saturating_add(shm),
-        )
+                    ""
+                }),
+                recording.saturating_add(pf).saturating_add(shm),
+            )
     }
 }
+
+/// Address space the loop maps beyond what `--max-memory` counts, under `ulimit -v`: the
+/// assembler's window of pending instants, the publisher's slot segment and the services'
+/// shared state it maps, its threads and the writers of its outputs (docs/security.md,
+/// "Limits of the machine", has the measurements behind this figure).
+const RUN_ADDRESS_RESERVE: u64 = 12 << 20;
 
 fn observation_bytes() -> u64 {
     size_of::<wire::Observation>() as u64

@@ -291,6 +291,13 @@ impl Assembler {
         self.restart_pending = true;
     }
 
+    /// The slot that was pushed as [`Pushed::NewStream`] is not a restart (the loop knows
+    /// the publisher of the node's stream is alive, and another one sent it): counted and
+    /// skipped, the node's stream goes on.
+    pub fn refuse_restart(&mut self) -> Pushed {
+        self.skip(Reason::ForeignRestart)
+    }
+
     fn note(&mut self, r: Reason, first: bool) {
         if first && self.first_seen.is_none() {
             self.first_seen = Some(r);
@@ -304,6 +311,7 @@ impl Assembler {
             Reason::Header => &mut s.header,
             Reason::Stream => &mut s.stream,
             Reason::Stale => &mut s.stale_stream,
+            Reason::ForeignRestart => &mut s.foreign_restart,
             Reason::Gap => &mut s.gap,
             Reason::Marker => &mut s.marker,
             Reason::AfterMarker => &mut s.after_marker,

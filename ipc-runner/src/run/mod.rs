@@ -38,15 +38,17 @@
 //!
 //! The parts, one file each: `args` ([`RunArgs`]), `slot_loop` (the loop, [`run_loop`]),
 //! `instant` (one instant's work), `publish`, `truth` (the evaluation beside the loop),
-//! `wait`, `report` ([`RunReport`], the output files, the exit code), `trajectories`
-//! ([`Trajectories`]); and the public [`assemble`] (slots → instants), [`select`] (estimators
-//! by name) and [`system`] (CPU pinning, memory locking).
+//! `wait`, `restart` (which restarts are believed), `report` ([`RunReport`], the output
+//! files, the exit code), `trajectories` ([`Trajectories`]); and the public [`assemble`]
+//! (slots → instants), [`select`] (estimators by name) and [`system`] (CPU pinning, memory
+//! locking).
 
 mod args;
 pub mod assemble;
 mod instant;
 mod publish;
 mod report;
+mod restart;
 pub mod select;
 mod slot_loop;
 pub mod system;

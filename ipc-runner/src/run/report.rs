@@ -366,26 +366,7 @@ pub fn exit_code(r: &RunReport) -> i32 {
     }
 }
 
-/// Writes `text` to the regular file (or new file) `path` whole or not at all: into a file
-/// beside it, renamed over it once written and synced (a full disk left a 0-byte `--json`
-/// behind).
+/// Writes `text` to `path` whole or not at all (a full disk left a 0-byte `--json` behind).
 fn write_whole(path: &std::path::Path, text: &str) -> Result<()> {
-    use std::io::Write;
-    // A FIFO, a device or a symlink's target are written in place, never replaced.
-    let regular = std::fs::symlink_metadata(path).map_or(true, |m| m.file_type().is_file());
-    if !regular {
-        return std::fs::write(path, text).with_context(|| format!("cannot write {path:?}"));
-    }
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(format!(".{}.tmp", std::process::id()));
-    let tmp = std::path::PathBuf::from(tmp);
-    let written = std::fs::File::create(&tmp).and_then(|mut f| {
-        f.write_all(text.as_bytes())?;
-        f.sync_all()
-    });
-    if let Err(e) = written.and_then(|()| std::fs::rename(&tmp, path)) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(anyhow::Error::new(e).context(format!("cannot write {path:?}")));
-    }
-    Ok(())
+    estpipe_process::whole_file::write(path, text).with_context(|| format!("cannot write {path:?}"))
 }

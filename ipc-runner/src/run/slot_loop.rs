@@ -17,6 +17,7 @@ use super::args::{RunArgs, WaitMode};
 use super::assemble::{self, Assembler, Counts, Limits, Pushed, Reason};
 use super::instant::Runner;
 use super::report::{Ending, RunReport, Stalls};
+use super::restart::StreamOwners;
 use super::system;
 use super::trajectories::Trajectories;
 use super::wait::{self, Waiter, Woke};
@@ -106,6 +107,7 @@ pub fn run_loop(
         expected,
         last_update_ns: 0,
         relay: Relay::default(),
+        owners: StreamOwners::default(),
     };
 
     // Before announcing the wait: from here on SIGINT/SIGTERM/SIGHUP set the flag every wait mode
@@ -158,7 +160,7 @@ pub fn run_loop(
             if lp.asm.counts.received == 0 {
                 bail!("{why} before it sent a slot");
             }
-            lp.say(&format!("publisher lost: {why}"));
+            lp.say_always(&format!("publisher lost: {why}"));
             lp.publisher_losses += 1;
             lp.flush();
             break Ending::PublisherLost;
@@ -222,6 +224,8 @@ struct Loop<'a> {
     last_update_ns: u64,
     /// Which publisher forwards each node's stream.
     relay: Relay,
+    /// Which publisher started each node's stream (which restarts are believed).
+    owners: StreamOwners,
 }
 
 /// Which publisher each node's slots come from, and whether it is a bridge's estimator side
@@ -261,6 +265,12 @@ impl Loop<'_> {
         }
     }
 
+    /// The line that says why the run ends with an error: `--quiet` hides progress, never
+    /// this (it hid the reason of a "publisher lost", exit code 3).
+    fn say_always(&self, m: &str) {
+        estpipe_process::errln!("ipc-runner: {m}");
+    }
+
     /// Handles every slot that is there; `Some` when the stream ended.
     #[inline]
     fn drain(&mut self, hooks: &mut Hooks<'_>) -> Result<Option<Ending>> {
@@ -279,11 +289,9 @@ impl Loop<'_> {
             let slot = sample.payload();
             let header = sample.user_header();
             let m = usize::from(slot.node);
-            if m < MAX_NODES {
-                let origin = sample.origin().value();
-                if self.relay.origin[m] != Some(origin) {
-                    self.new_origin(m, origin, slot.stream_id);
-                }
+            let origin = sample.origin().value();
+            if m < MAX_NODES && self.relay.origin[m] != Some(origin) {
+                self.new_origin(m, origin, slot.stream_id);
             }
             // Before any estimator has stepped, a stream of another shape or model is refused
             // (exit 2), never fed to estimators built for this one; later such a slot is
@@ -308,6 +316,18 @@ impl Loop<'_> {
                 .push(slot, header, recv_ns, &mut |k, obs: &[Observation]| {
                     runner.on_instant(t, k, obs);
                 });
+            if pushed == Pushed::NewStream
+                && !self.owners.believe(
+                    m,
+                    self.asm.stream_of(slot.node),
+                    origin,
+                    t,
+                    recv_ns,
+                    self.deadline.period_ns + self.deadline.deadline_ns,
+                )
+            {
+                pushed = self.asm.refuse_restart();
+            }
             if pushed == Pushed::NewStream {
                 self.new_stream()?;
                 self.runner.slot.stream_id = self.asm.stream_of(0).unwrap_or(slot.stream_id);
@@ -318,6 +338,13 @@ impl Loop<'_> {
                         runner.on_instant(t, k, obs);
                     });
             }
+            self.owners.note(
+                m,
+                self.asm.stream_of(slot.node),
+                slot.stream_id,
+                origin,
+                recv_ns,
+            );
             if let Some(r) = self.asm.take_first_seen() {
                 self.warn(r, slot);
             }
@@ -538,17 +565,20 @@ impl Loop<'_> {
         } else {
             String::new()
         };
-        self.say(&format!(
+        let lost = format!(
             "publisher lost: no slot for {:.1} ms after instant {} (deadline {} ms past the \
              expected slot); cleaned up {} dead node(s), {publishers} publisher(s) remain{why}",
             silence_ns as f64 / 1e6,
             self.runner.last_k,
             args.deadline_ms,
             cleaned.cleanups,
-        ));
+        );
         if !args.wait_for_restart {
+            self.say_always(&lost);
             return Some(Ending::PublisherLost);
         }
+        // Waited for: not the end of the run, so progress.
+        self.say(&lost);
         self.say("waiting for channel-sim to restart (--wait-for-restart)");
         // The lost publisher's stream is over: a restarted one may begin anywhere (its
         // first slot may itself have been lost) and starts a new session.

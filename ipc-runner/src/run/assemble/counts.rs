@@ -37,6 +37,10 @@ pub struct Skipped {
     pub stream: u64,
     /// The stream id of a stream a restart replaced.
     pub stale_stream: u64,
+    /// A new stream at `k = 1` from another publisher than the one whose slot started the
+    /// node's stream, while that one is still registered: not a restart (docs/security.md,
+    /// "What the runner assumes").
+    pub foreign_restart: u64,
     /// `k` more than `--max-gap` past the node's last instant.
     pub gap: u64,
     /// An END/ABORT before the node's last instant or more than `--max-gap` past it.
@@ -62,6 +66,7 @@ impl Skipped {
             + self.non_finite
             + self.stream
             + self.stale_stream
+            + self.foreign_restart
             + self.gap
             + self.marker
             + self.after_marker
@@ -84,6 +89,7 @@ impl Skipped {
             ("non_finite", self.non_finite),
             ("stream", self.stream),
             ("stale_stream", self.stale_stream),
+            ("foreign_restart", self.foreign_restart),
             ("gap", self.gap),
             ("marker", self.marker),
             ("after_marker", self.after_marker),
@@ -192,6 +198,8 @@ pub enum Reason {
     Stream,
     /// A replaced stream's slot.
     Stale,
+    /// A new stream from a second publisher while the stream's own is alive.
+    ForeignRestart,
     /// A jump of `k` beyond `--max-gap`.
     Gap,
     /// An END/ABORT out of bounds.
@@ -221,6 +229,10 @@ impl Reason {
                              first slot (no restart): counted and skipped"
                 .into(),
             Self::Stale => "a slot of a stream a restart replaced: counted and skipped".into(),
+            Self::ForeignRestart => "a new stream at k = 1 from another publisher while the \
+                                     publisher of its node's stream is alive (no restart): \
+                                     counted and skipped"
+                .into(),
             Self::Gap => "a slot whose k jumps more than --max-gap past its node's last \
                           instant: counted and skipped (no instants filled)"
                 .into(),
