@@ -297,7 +297,8 @@ fn check_latency_trace(out: &std::path::Path, r: &serde_json::Value, steps: u32)
 
 /// The plot after the run (`trajectories.svg`): every estimator in the legend, with its ±2σ
 /// band or saying it has no covariance; at least one band polygon per banded estimator and
-/// component; the node strip's totals are the run's counts (no loss, no `--lag` here).
+/// component; the node strip's totals are the run's counts (no loss, no `--lag` here). (The
+/// SVG backend writes each text on a line of its own.)
 fn check_trajectories_plot(out: &std::path::Path, r: &serde_json::Value, nx: usize) {
     let svg = std::fs::read_to_string(out.join("trajectories.svg")).unwrap();
     let names: Vec<&str> = r["estimators"]
@@ -308,11 +309,12 @@ fn check_trajectories_plot(out: &std::path::Path, r: &serde_json::Value, nx: usi
         .collect();
     let banded = names
         .iter()
-        .filter(|n| svg.contains(&format!(">{n} ± 2σ<")))
+        .filter(|n| svg.contains(&format!("\n{n} ± 2σ\n")))
         .count();
     for n in &names {
         assert!(
-            svg.contains(&format!(">{n} ± 2σ<")) || svg.contains(&format!(">{n} (no covariance)<")),
+            svg.contains(&format!("\n{n} ± 2σ\n"))
+                || svg.contains(&format!("\n{n} (no covariance)\n")),
             "{n} not in the legend"
         );
     }
@@ -327,8 +329,8 @@ fn check_trajectories_plot(out: &std::path::Path, r: &serde_json::Value, nx: usi
         ("delivered", "delivered"),
         ("dropped by the channel", "dropped_by_channel"),
     ] {
-        let want = format!("{label}: {}<", c[key]);
+        let want = format!("\n{label}: {}\n", c[key]);
         assert!(svg.contains(&want), "the strip lacks {want:?}");
     }
-    assert!(svg.contains(">lost (IPC or network): 0<") && svg.contains(">late (--lag): 0<"));
+    assert!(svg.contains("\nlost (IPC or network): 0\n") && svg.contains("\nlate (--lag): 0\n"));
 }

@@ -24,7 +24,7 @@ const LEGEND_WIDTH: u32 = 210;
 const STATE_HEIGHT: u32 = 260;
 /// A node's row in the strip, and the strip's axes.
 const NODE_ROW: u32 = 22;
-const STRIP_AXES: u32 = 58;
+const STRIP_AXES: u32 = 72;
 
 /// The strip's colours by slot status, as the live page draws them (ipc-runner/view/view.js).
 const STATUS: [(u8, RGBColor, &str); 4] = [
@@ -233,17 +233,19 @@ where
     chart
         .configure_mesh()
         .disable_mesh()
-        .y_labels(nodes + 1)
-        .y_label_formatter(&|v| {
-            // Row m spans [nodes − m − 1, nodes − m]: node 0 on top, labelled at its middle.
-            let m = nodes as f64 - v - 0.5;
-            if m >= 0.0 && m.fract().abs() < 1e-9 {
-                format!("node {m}")
-            } else {
-                String::new()
-            }
-        })
+        .disable_y_axis()
         .draw()?;
+    // The rows' names left of the strip (node 0 on top).
+    let font = (FONT, 12).into_font().color(&BLACK);
+    let (_, y0) = area.get_base_pixel();
+    for node in 0..nodes {
+        let (_, y) = chart.backend_coord(&(0.0, (nodes - node) as f64 - 0.5));
+        area.draw(&Text::new(
+            format!("node {node}"),
+            (4, y - y0 - 6),
+            font.clone(),
+        ))?;
+    }
     for node in 0..nodes {
         let top = (nodes - node) as f64;
         chart.draw_series(strip_runs(traj, node).into_iter().map(|(a, b, s)| {
