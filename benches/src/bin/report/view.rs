@@ -93,6 +93,7 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
                 ("n", &n),
                 ("off", &format!("{:.1}", per[0].1)),
                 ("on", &format!("{:.1}", per[1].1)),
+                ("diff", &format!("{:.1}", per[1].1 - per[0].1)),
             ],
         ),
     );
