@@ -9,7 +9,7 @@
 #                                  # builds two extra kf_interleaved variants and b7a974e's
 #                                  # ipc-runner, a few minutes each)
 #   benches/run.sh --quick         # short runs, indicative only
-#   benches/run.sh --skip firmware,eval       # parts: criterion,icount,firmware,pipeline,bridge,eval-baseline,eval
+#   benches/run.sh --skip firmware,eval       # parts: criterion,icount,firmware,pipeline,bridge,eval-baseline,eval,view
 #
 # Needs valgrind (apt-get install valgrind); the firmware part needs what .ci/firmware needs
 # (qemu-system-arm, the thumbv7em-none-eabihf target) and is reported as not run otherwise.
@@ -21,6 +21,7 @@ export IOX2_LOG_LEVEL=Error
 # builds the plain-release variants of kf_interleaved into target/plain-release and
 # target/x86-64-v3 itself.
 cargo build --profile bench -p benches --bins
-# With the bridge: the part `bridge` runs `ipc-runner demo --via zenoh`.
-cargo build --release -p ipc-runner --features bridge
+# With the bridge: the part `bridge` runs `ipc-runner demo --via zenoh`; with the live view:
+# the part `view` runs `ipc-runner demo --view`.
+cargo build --release -p ipc-runner --features bridge,view
 exec target/release/report "$@"

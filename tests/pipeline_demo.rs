@@ -175,6 +175,7 @@ fn check_gated(
     assert_eq!(rows.len(), steps as usize);
     let reported = r["estimators"].as_array().unwrap();
     assert!(!reported.is_empty());
+    check_trajectories_plot(&out, &r, nx);
     for (e, rep) in reported.iter().enumerate() {
         let name = rep["name"].as_str().unwrap();
         let j_eval = traj.names.iter().position(|n| *n == name).unwrap();
@@ -292,4 +293,44 @@ fn check_latency_trace(out: &std::path::Path, r: &serde_json::Value, steps: u32)
     }
     let svg = std::fs::read_to_string(out.join("latency-trace.svg")).unwrap_or_default();
     assert!(svg.contains("end to end, max per bin"), "latency-trace.svg");
+}
+
+/// The plot after the run (`trajectories.svg`): every estimator in the legend, with its ±2σ
+/// band or saying it has no covariance; at least one band polygon per banded estimator and
+/// component; the node strip's totals are the run's counts (no loss, no `--lag` here). (The
+/// SVG backend writes each text on a line of its own.)
+fn check_trajectories_plot(out: &std::path::Path, r: &serde_json::Value, nx: usize) {
+    let svg = std::fs::read_to_string(out.join("trajectories.svg")).unwrap();
+    let names: Vec<&str> = r["estimators"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap())
+        .collect();
+    let banded = names
+        .iter()
+        .filter(|n| svg.contains(&format!("\n{n} ± 2σ\n")))
+        .count();
+    for n in &names {
+        assert!(
+            svg.contains(&format!("\n{n} ± 2σ\n"))
+                || svg.contains(&format!("\n{n} (no covariance)\n")),
+            "{n} not in the legend"
+        );
+    }
+    assert!(banded > 0, "no estimator with a band: {names:?}");
+    let polygons = svg.matches("<polygon").count();
+    assert!(
+        polygons >= banded * nx,
+        "{polygons} band polygons for {banded} × {nx}"
+    );
+    let c = &r["counts"];
+    for (label, key) in [
+        ("delivered", "delivered"),
+        ("dropped by the channel", "dropped_by_channel"),
+    ] {
+        let want = format!("\n{label}: {}\n", c[key]);
+        assert!(svg.contains(&want), "the strip lacks {want:?}");
+    }
+    assert!(svg.contains("\nlost (IPC or network): 0\n") && svg.contains("\nlate (--lag): 0\n"));
 }

@@ -206,3 +206,158 @@ fn hostile_clients_do_not_stop_the_view_or_the_run() {
     assert_eq!(rows.len(), n as usize);
     drop(stalled);
 }
+
+/// The websocket upgrade of `/ws` on `s`; the server's 101 read up to its blank line.
+fn upgrade(s: &mut TcpStream) {
+    write!(
+        s,
+        "GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    )
+    .unwrap();
+    let mut head = Vec::new();
+    let mut b = [0u8; 1];
+    while !head.ends_with(b"\r\n\r\n") {
+        s.read_exact(&mut b).unwrap();
+        head.push(b[0]);
+        assert!(head.len() < 4096, "no end of the upgrade's answer");
+    }
+    let head = String::from_utf8_lossy(&head);
+    assert!(head.starts_with("HTTP/1.1 101"), "{head}");
+}
+
+/// The next message of the server (unmasked, unfragmented: what the view sends): its opcode
+/// and payload.
+fn ws_message(s: &mut TcpStream) -> std::io::Result<(u8, Vec<u8>)> {
+    let mut h = [0u8; 2];
+    s.read_exact(&mut h)?;
+    let len = match h[1] & 0x7f {
+        126 => {
+            let mut l = [0u8; 2];
+            s.read_exact(&mut l)?;
+            u64::from(u16::from_be_bytes(l))
+        }
+        127 => {
+            let mut l = [0u8; 8];
+            s.read_exact(&mut l)?;
+            u64::from_be_bytes(l)
+        }
+        l => u64::from(l),
+    };
+    assert_eq!(h[1] & 0x80, 0, "a server's frame is never masked");
+    assert!(len <= 64 << 20, "a frame of {len} bytes");
+    let mut payload = vec![0u8; len as usize];
+    s.read_exact(&mut payload)?;
+    Ok((h[0] & 0x0f, payload))
+}
+
+/// What a page that reads every frame saw until the state "run ended".
+#[derive(Debug, Default)]
+struct Seen {
+    frames: u64,
+    points: u64,
+    /// Points received in frames after one that said a page had been dropped.
+    points_after_drop: u64,
+    last: serde_json::Value,
+}
+
+/// Reads the view's frames on a fresh websocket until one says "run ended" (or 120 s pass).
+fn read_until_ended(addr: &str) -> Seen {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    upgrade(&mut s);
+    let mut seen = Seen::default();
+    loop {
+        let (op, payload) = ws_message(&mut s).unwrap_or_else(|e| panic!("{e}: {seen:?}"));
+        match op {
+            1 => {}
+            8 => panic!("the server closed the reading page: {seen:?}"),
+            _ => continue,
+        }
+        let v: serde_json::Value = serde_json::from_slice(&payload).unwrap();
+        if v.get("reset").is_some() {
+            continue;
+        }
+        seen.frames += 1;
+        let points = v["points"].as_array().map_or(0, Vec::len) as u64;
+        seen.points += points;
+        if v["pages_dropped"].as_u64().unwrap_or(0) > 0 {
+            seen.points_after_drop += points;
+        }
+        let ended = v["state"] == "run ended";
+        seen.last = v;
+        if ended {
+            return seen;
+        }
+    }
+}
+
+/// A page that stops reading is dropped, never waited for (docs/view.md, "Hostile pages"):
+/// a websocket whose socket has a tiny receive buffer (set before it connects, so that the
+/// loopback connection's window stays small) upgrades and never reads a byte, while a second
+/// page reads every frame of a 1 kHz `demo --view` that sends every instant. The server must
+/// drop the first (its stderr line, and the frames' `pages_dropped`) and close it; the reading
+/// page must get every instant, some after the drop; the run must complete every instant.
+#[test]
+fn a_page_that_stops_reading_is_dropped_while_a_reading_page_keeps_up() {
+    use socket2::{Domain, Socket, Type};
+    let dir = scratch("view-stalled");
+    let n = 15000u32;
+    let mut demo = start_demo(
+        &dir,
+        "view-stalled",
+        n,
+        1000,
+        &["--view-linger", "60", "--view-points-per-s", "100000"],
+    );
+    let addr = view_addr(&demo);
+    let stalled = Socket::new(Domain::IPV4, Type::STREAM, None).unwrap();
+    // The kernel's minimum (it doubles what it is given and has a floor of its own).
+    stalled.set_recv_buffer_size(1024).unwrap();
+    let sockaddr: std::net::SocketAddr = addr.parse().unwrap();
+    stalled.connect(&sockaddr.into()).unwrap();
+    let mut stalled: TcpStream = stalled.into();
+    upgrade(&mut stalled);
+    let reader = {
+        let addr = addr.clone();
+        std::thread::spawn(move || read_until_ended(&addr))
+    };
+    let seen = reader.join().unwrap();
+    demo.wait_for_stderr("view: the run ended", 300);
+    let err = demo.err();
+    let drops = err.matches("view: dropped a page that").count();
+    assert_eq!(drops, 1, "the stalled page dropped once:\n{err}");
+    assert_eq!(seen.last["pages_dropped"], 1, "{:?}", seen.last);
+    assert_eq!(seen.last["instants"], u64::from(n), "{:?}", seen.last);
+    // Nothing thinned (`--view-points-per-s`): every instant reached the reading page.
+    assert_eq!(seen.points, u64::from(n), "{seen:?}");
+    assert!(
+        seen.points_after_drop > 0,
+        "the drop came after the run: {seen:?}"
+    );
+    // The server closed the stalled page: what was on its way drains, then the end.
+    stalled
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let mut sink = [0u8; 65536];
+    loop {
+        match stalled.read(&mut sink) {
+            Ok(0) => break,
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => break,
+            Err(e) => panic!("the stalled page is still connected ({e})"),
+        }
+    }
+    demo.signal(libc::SIGINT);
+    let status = demo.wait(60);
+    assert!(status.success(), "demo: {status}\n{}", demo.err());
+    let (_, rows) = csv(&dir.join("out/estimates.csv"));
+    assert_eq!(rows.len(), n as usize);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/report.json")).unwrap())
+            .unwrap();
+    eprintln!(
+        "reading page: {} frames, {} points ({} after the drop); end-to-end p50 {} µs",
+        seen.frames, seen.points, seen.points_after_drop, report["latency"]["end_to_end"]["p50_us"]
+    );
+}

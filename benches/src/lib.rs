@@ -13,3 +13,4 @@ pub mod compare;
 pub mod estimators;
 pub mod late;
 pub mod problems;
+pub mod view_tap;

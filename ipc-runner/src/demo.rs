@@ -554,7 +554,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     }
     run::finish(&rargs, &report, &traj, spec.ny())?;
     let plot = args.plot_path();
-    if let Err(e) = plot_trajectories(&traj, &plot, scenario.name()) {
+    if let Err(e) = crate::plot::trajectories::plot(&traj, &plot, scenario.name()) {
         estpipe_process::errln!("demo: no plot ({e:#})");
     }
     let lat = &report.latency;
@@ -603,108 +603,4 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     );
     view.end();
     Ok(run::exit_code(&report))
-}
-
-/// One panel per state component: truth and each estimator over k (first session). SVG, or
-/// PNG when `path` ends in `.png`.
-pub fn plot_trajectories(traj: &run::Trajectories, path: &Path, title: &str) -> Result<()> {
-    use plotters::prelude::*;
-    crate::plot::register_font();
-    let size = (900, 260 * traj.nx.max(1) as u32);
-    if path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-    {
-        draw_trajectories(
-            BitMapBackend::new(path, size).into_drawing_area(),
-            traj,
-            title,
-        )
-    } else {
-        draw_trajectories(SVGBackend::new(path, size).into_drawing_area(), traj, title)
-    }
-}
-
-fn draw_trajectories<DB: plotters::prelude::DrawingBackend>(
-    root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
-    traj: &run::Trajectories,
-    title: &str,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    use plotters::prelude::*;
-    let nx = traj.nx.max(1);
-    let n = traj
-        .keys
-        .iter()
-        .take_while(|(s, _)| *s == traj.keys.first().map_or(1, |f| f.0))
-        .count();
-    let ne = traj.names.len();
-    root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
-    let panels = root.split_evenly((nx, 1));
-    let colors = [&BLUE, &RED, &GREEN, &MAGENTA, &CYAN, &BLACK];
-    for (j, panel) in panels.iter().enumerate() {
-        let truth: Vec<(f64, f64)> = (0..n)
-            .map(|i| (f64::from(traj.keys[i].1), traj.truth[i * nx + j]))
-            .filter(|p| p.1.is_finite())
-            .collect();
-        let est = |e: usize| -> Vec<(f64, f64)> {
-            (0..n)
-                .map(|i| {
-                    (
-                        f64::from(traj.keys[i].1),
-                        traj.estimates[(i * ne + e) * nx + j],
-                    )
-                })
-                .filter(|p| p.1.is_finite())
-                .collect()
-        };
-        let all: Vec<f64> = truth
-            .iter()
-            .map(|p| p.1)
-            .chain((0..ne).flat_map(|e| est(e).into_iter().map(|p| p.1)))
-            .collect();
-        let (lo, hi) = all
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let (lo, hi) = if lo < hi { (lo, hi) } else { (-1.0, 1.0) };
-        let pad = 0.05 * (hi - lo);
-        let kmax = traj.keys.get(n.saturating_sub(1)).map_or(1, |k| k.1).max(1);
-        let mut chart = ChartBuilder::on(panel)
-            .caption(format!("{title}: x[{j}]"), ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(28)
-            .y_label_area_size(50)
-            .build_cartesian_2d(0f64..f64::from(kmax), (lo - pad)..(hi + pad))
-            .map_err(|e| anyhow!("plot: {e}"))?;
-        chart
-            .configure_mesh()
-            .x_desc("k")
-            .draw()
-            .map_err(|e| anyhow!("plot: {e}"))?;
-        chart
-            .draw_series(LineSeries::new(truth, BLACK.stroke_width(2)))
-            .map_err(|e| anyhow!("plot: {e}"))?
-            .label("truth")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
-        for e in 0..ne {
-            let c = colors[e % colors.len()];
-            chart
-                .draw_series(LineSeries::new(est(e), c))
-                .map_err(|e| anyhow!("plot: {e}"))?
-                .label(traj.names[e].clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| anyhow!("plot: {e}"))?;
-    }
-    root.present().map_err(|e| anyhow!("plot: {e}"))?;
-    Ok(())
 }

@@ -135,6 +135,10 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
     for (name, f) in benches::late::kernels() {
         out.push((Box::leak(name.into_boxed_str()), repeat(f)));
     }
+    // The live view's tap (report part `view`, not the `icount` table).
+    for (name, f) in benches::view_tap::kernels() {
+        out.push((Box::leak(name.into_boxed_str()), repeat(f)));
+    }
     out
 }
 

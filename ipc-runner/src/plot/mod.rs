@@ -2,7 +2,8 @@
 //! (the papers' MSE figures) above one run's true and estimated trajectories, one panel per
 //! state — and holds what every plot shares (font, palette, legend, file check); the others
 //! are [`bound`] (seed 003's Fig. 3), [`tokens`] (seed 004's Fig. 2), [`latency`] (percentile
-//! ladders) and [`trace`] (latency over a run).
+//! ladders), [`trace`] (latency over a run) and [`trajectories`] (a run's estimates with their
+//! bands and the node strip, after `demo`).
 //!
 //! `.svg` or `.png` by the file's extension. PNG text is rendered with DejaVu Sans, embedded
 //! from `assets/` (Bitstream Vera licence, `assets/DejaVuSans.LICENSE`).
@@ -12,6 +13,7 @@ pub mod latency;
 pub mod rate;
 pub mod tokens;
 pub mod trace;
+pub mod trajectories;
 
 use std::path::Path;
 

@@ -251,7 +251,7 @@ impl RunArgs {
         particles: usize,
     ) -> Result<(), BadInput> {
         let (nx, nodes, n_est) = (nx as u64, nodes as u64, n_est as u64);
-        let per_instant = 8 + 24 + 8 * nx * (1 + n_est);
+        let per_instant = 8 + 24 + nodes + 8 * nx * (1 + 2 * n_est);
         let slots = if self.slots_csv.is_some() {
             product(&[u64::from(self.steps), nodes, observation_bytes()])
         } else {

@@ -36,6 +36,8 @@ pub(super) struct Runner {
     xhat: Vec<[f64; MAX_NX]>,
     /// The covariance an estimator wrote (row-major), before it is packed on the wire.
     p_full: [f64; MAX_NX * MAX_NX],
+    /// Per estimator, the diagonal of its latest covariance (recorded for the plot's bands).
+    var: Vec<[f64; MAX_NX]>,
     rejected: Vec<u64>,
     names: Vec<[u8; 16]>,
     /// Per estimator, when its step of the current instant started and ended (recorded in the
@@ -96,6 +98,7 @@ impl Runner {
             nx,
             xhat: vec![[0.0; MAX_NX]; n_est],
             p_full: [0.0; MAX_NX * MAX_NX],
+            var: vec![[f64::NAN; MAX_NX]; n_est],
             rejected: vec![0; n_est],
             names,
             step_ns: vec![(0, 0); n_est],
@@ -132,6 +135,9 @@ impl Runner {
             est.estimate(&mut xhat[..nx]);
             let cov_kind = est.covariance(&mut self.p_full[..nx * nx]);
             let t1 = wire::monotonic_ns();
+            for (i, v) in self.var[e][..nx].iter_mut().enumerate() {
+                *v = self.p_full[i * nx + i];
+            }
             self.step_ns[e] = (t0, t1);
             let seq = self.est_seq;
             self.est_seq += 1;
@@ -200,6 +206,7 @@ impl Runner {
         // where this run did.
         if let Some(o) = obs.iter().find(|o| o.flags & wire::FLAG_IPC_LOST == 0) {
             self.tap.late(k, o.node);
+            self.traj.mark_late((self.session, k), o.node);
             if self.traj.slots.len() < self.traj.slots.capacity() {
                 self.traj.slots.push(*o);
                 self.traj
@@ -236,6 +243,8 @@ impl Runner {
                 [self.slot.send_ns, self.slot.recv_ns, done_ns],
                 truth.as_ref(),
                 &self.xhat,
+                &self.var,
+                obs,
             );
         }
         if let Some(x) = &truth {

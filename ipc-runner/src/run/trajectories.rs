@@ -5,6 +5,10 @@ use anyhow::{Context, Result};
 use estpipe_wire::Observation;
 use estpipe_wire::MAX_NX;
 
+/// Recorded instants a late slot's instant is looked for in ([`Trajectories::mark_late`]):
+/// a late slot is at most `--lag` ≤ [`crate::estimators::MAX_LAG`] instants old.
+const LATE_SEARCH: usize = crate::estimators::MAX_LAG as usize + 1;
+
 /// Recorded trajectories (preallocated; recording stops when full).
 #[derive(Debug, Default)]
 pub struct Trajectories {
@@ -14,6 +18,13 @@ pub struct Trajectories {
     pub truth: Vec<f64>,
     /// Estimates per instant and estimator (`n_est · nx` values).
     pub estimates: Vec<f64>,
+    /// Per instant and estimator, the variance of each component (`n_est · nx` values: the
+    /// diagonal of the covariance or bound the estimator publishes, NaN when it publishes
+    /// none): the ±2σ bands of the demo's plot, as the live view draws them (docs/view.md).
+    pub var: Vec<f64>,
+    /// Per instant and node, what became of its slot (`nodes` values, the live view's
+    /// [`crate::view::tap`] codes: delivered, dropped, lost, late): the plot's node strip.
+    pub status: Vec<u8>,
     /// Per instant: the completing slot's send time, its receive time and the time the
     /// instant's estimates were all published (`CLOCK_MONOTONIC` ns).
     pub timing: Vec<[u64; 3]>,
@@ -60,6 +71,8 @@ impl Trajectories {
             keys: Vec::with_capacity(instants),
             truth: Vec::with_capacity(instants * nx),
             estimates: Vec::with_capacity(instants * nx * names.len()),
+            var: Vec::with_capacity(instants * nx * names.len()),
+            status: Vec::with_capacity(instants * nodes),
             timing: Vec::with_capacity(instants),
             slots: Vec::with_capacity(slots * nodes),
             late_after: Vec::new(),
@@ -68,14 +81,17 @@ impl Trajectories {
         }
     }
 
-    /// Records instant `k` of `session`: its `timing`, `truth` (NaN when missing) and every
-    /// estimator's estimate (first `nx` values of each in `xhat`).
+    /// Records instant `k` of `session`: its `timing`, `truth` (NaN when missing), every
+    /// estimator's estimate and variances (first `nx` values of each in `xhat`, `var`) and
+    /// every node's slot (`obs`, in node order; a node missing from it was lost).
     pub(super) fn record(
         &mut self,
         (session, k): (u32, u32),
         timing: [u64; 3],
         truth: Option<&[f64; MAX_NX]>,
         xhat: &[[f64; MAX_NX]],
+        var: &[[f64; MAX_NX]],
+        obs: &[Observation],
     ) {
         let nx = self.nx;
         self.keys.push((session, k));
@@ -85,6 +101,34 @@ impl Trajectories {
         }
         for x in xhat {
             self.estimates.extend_from_slice(&x[..nx]);
+        }
+        for v in var {
+            self.var.extend_from_slice(&v[..nx]);
+        }
+        for n in 0..self.nodes {
+            self.status.push(
+                obs.get(n)
+                    .map_or(crate::view::tap::LOST, crate::view::tap::slot_status),
+            );
+        }
+    }
+
+    /// Marks node `node`'s slot of instant `k` of `session` late (it came after the instant
+    /// was handed on, `--lag`); only the newest recorded instants are looked at.
+    pub(super) fn mark_late(&mut self, (session, k): (u32, u32), node: u8) {
+        let node = usize::from(node);
+        if node >= self.nodes {
+            return;
+        }
+        let found = self
+            .keys
+            .iter()
+            .rev()
+            .take(LATE_SEARCH)
+            .position(|&key| key == (session, k));
+        if let Some(back) = found {
+            let i = self.keys.len() - 1 - back;
+            self.status[i * self.nodes + node] = crate::view::tap::LATE;
         }
     }
 

@@ -52,6 +52,9 @@ struct Feed {
     last_instant: Option<Instant>,
     ended: bool,
     last_state: &'static str,
+    /// Pages the server dropped for not keeping up (the hub's count), as last sent.
+    pages_dropped: u64,
+    last_pages_dropped: u64,
 }
 
 fn nonfinite_null(v: &[f64]) -> Value {
@@ -84,6 +87,8 @@ impl Feed {
             last_instant: None,
             ended: false,
             last_state: "",
+            pages_dropped: 0,
+            last_pages_dropped: 0,
         }
     }
 
@@ -175,10 +180,14 @@ impl Feed {
     /// The frame of the points since the last one, and whether it has points.
     fn frame(&mut self, now: Instant) -> Option<(String, bool)> {
         let state = self.state(now);
-        if self.pending.is_empty() && state == self.last_state {
+        if self.pending.is_empty()
+            && state == self.last_state
+            && self.pages_dropped == self.last_pages_dropped
+        {
             return None;
         }
         self.last_state = state;
+        self.last_pages_dropped = self.pages_dropped;
         let n = self.pending.len();
         let points: Vec<Value> = keep(n, self.max_points)
             .into_iter()
@@ -218,6 +227,7 @@ impl Feed {
             "points": points,
             "frame_counts": &self.frame_counts[..nodes],
             "totals": &self.totals[..nodes],
+            "pages_dropped": self.pages_dropped,
             "latency": {"p50_us": nonfinite_null(&[p50])[0], "p99_us": nonfinite_null(&[p99])[0], "window": w},
         });
         self.frame_counts = [[0; 4]; MAX_NODES];
@@ -269,6 +279,7 @@ pub fn run(prefix: &str, events: Receiver<ViewEvent>, hub: Arc<Hub>, max_points_
         }
         if now >= next_frame {
             next_frame = now + FRAME;
+            feed.pages_dropped = hub.dropped.load(std::sync::atomic::Ordering::Relaxed);
             if let Some((f, has_points)) = feed.frame(now) {
                 hub.publish(Arc::from(f), has_points);
             }
@@ -355,5 +366,10 @@ mod tests {
         let v: Value = serde_json::from_str(&f.frame(Instant::now()).unwrap().0).unwrap();
         assert_eq!(v["state"], "run ended");
         assert!(f.frame(Instant::now()).is_none(), "nothing new, no frame");
+        // A page dropped by the server is news of its own.
+        f.pages_dropped = 1;
+        let v: Value = serde_json::from_str(&f.frame(Instant::now()).unwrap().0).unwrap();
+        assert_eq!(v["pages_dropped"], 1);
+        assert!(f.frame(Instant::now()).is_none());
     }
 }

@@ -79,8 +79,10 @@ impl Hub {
         (past, rx)
     }
 
-    /// Counts a page that fell behind.
-    pub fn drop_slow(&self) {
-        self.dropped.fetch_add(1, Ordering::Relaxed);
+    /// Counts a page dropped for not keeping up (`why`), and says so on stderr: a page that
+    /// stops reading is let go, never waited for (docs/view.md, "Hostile pages").
+    pub fn drop_slow(&self, why: &str) {
+        let n = self.dropped.fetch_add(1, Ordering::Relaxed) + 1;
+        estpipe_process::errln!("view: dropped a page that {why} ({n} dropped so far)");
     }
 }

@@ -82,38 +82,52 @@ impl Drop for Connected {
     }
 }
 
-async fn send(socket: &mut WebSocket, frame: &str) -> bool {
+/// What became of a frame sent to a page.
+enum Sent {
+    Taken,
+    /// The page is gone (closed, reset): not counted as dropped.
+    Gone,
+    /// Not taken within [`SEND_TIMEOUT`]: the page is dropped.
+    Slow,
+}
+
+async fn send(socket: &mut WebSocket, frame: &str) -> Sent {
     let msg = Message::Text(frame.to_owned().into());
-    matches!(
-        tokio::time::timeout(SEND_TIMEOUT, socket.send(msg)).await,
-        Ok(Ok(()))
-    )
+    match tokio::time::timeout(SEND_TIMEOUT, socket.send(msg)).await {
+        Ok(Ok(())) => Sent::Taken,
+        Ok(Err(_)) => Sent::Gone,
+        Err(_) => Sent::Slow,
+    }
 }
 
 async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
     hub.clients.fetch_add(1, Ordering::Relaxed);
     let _connected = Connected(Arc::clone(&hub));
     let (past, mut rx) = hub.subscribe();
-    if !send(&mut socket, r#"{"reset":true}"#).await {
-        return;
-    }
+    let mut sent = send(&mut socket, r#"{"reset":true}"#).await;
     for f in past {
-        if !send(&mut socket, &f).await {
-            hub.drop_slow();
-            return;
+        if !matches!(sent, Sent::Taken) {
+            break;
         }
+        sent = send(&mut socket, &f).await;
     }
     loop {
-        tokio::select! {
+        match sent {
+            Sent::Taken => {}
+            Sent::Gone => return,
+            Sent::Slow => {
+                hub.drop_slow(&format!(
+                    "did not take a frame within {} s",
+                    SEND_TIMEOUT.as_secs()
+                ));
+                return;
+            }
+        }
+        sent = tokio::select! {
             r = rx.recv() => match r {
-                Ok(f) => {
-                    if !send(&mut socket, &f).await {
-                        hub.drop_slow();
-                        return;
-                    }
-                }
-                Err(RecvError::Lagged(_)) => {
-                    hub.drop_slow();
+                Ok(f) => send(&mut socket, &f).await,
+                Err(RecvError::Lagged(n)) => {
+                    hub.drop_slow(&format!("fell {n} frames behind"));
                     let _ = tokio::time::timeout(SEND_TIMEOUT, socket.send(Message::Close(None))).await;
                     return;
                 }
@@ -121,8 +135,8 @@ async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
             },
             m = socket.recv() => match m {
                 None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
-                Some(Ok(_)) => {}
+                Some(Ok(_)) => Sent::Taken,
             },
-        }
+        };
     }
 }

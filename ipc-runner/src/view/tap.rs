@@ -16,6 +16,20 @@ pub const LOST: u8 = 2;
 /// Arrived after its instant was handed on (`--lag`).
 pub const LATE: u8 = 3;
 
+/// What became of a node's slot at its instant: [`DELIVERED`], [`LOST`] (flagged lost in the
+/// IPC or on the network) or [`DROPPED`] (by the channel); the plots of a finished run use the
+/// same codes.
+#[inline]
+pub fn slot_status(o: &Observation) -> u8 {
+    if o.delivered {
+        DELIVERED
+    } else if o.flags & (FLAG_IPC_LOST | FLAG_NET_LOST) != 0 {
+        LOST
+    } else {
+        DROPPED
+    }
+}
+
 /// One instant as the loop saw it.
 #[derive(Clone, Copy, Debug)]
 pub struct InstantEvent {
@@ -77,13 +91,7 @@ impl ViewTap {
         let Some(tx) = &self.0 else { return };
         let mut status = [DELIVERED; MAX_NODES];
         for (s, o) in status.iter_mut().zip(obs) {
-            *s = if o.delivered {
-                DELIVERED
-            } else if o.flags & (FLAG_IPC_LOST | FLAG_NET_LOST) != 0 {
-                LOST
-            } else {
-                DROPPED
-            };
+            *s = slot_status(o);
         }
         let _ = tx.try_send(ViewEvent::Instant(InstantEvent {
             session,

@@ -19,7 +19,9 @@
 //!   `b7a974e`, CPU time and instructions side by side, the JSON compared, where the
 //!   instructions go;
 //! - `eval` ([`eval_throughput`]): Monte-Carlo throughput of `ipc-runner eval` per scenario
-//!   preset.
+//!   preset;
+//! - `view` ([`view`]): the live view's cost to the loop, short runs with and without a
+//!   reading page in alternating pairs, and the tap's instructions per instant.
 //!
 //! Retired (issue #23): the raw transports' ping-pong (`ipc`, with its `ipc_latency` binary)
 //! and the idling penalty (`idle_penalty`), which measured the p99 tails of a shared 2-core
@@ -51,6 +53,7 @@ mod pct;
 mod pipeline;
 mod prose;
 mod rate;
+mod view;
 
 use anyhow::{Context, Result};
 use command::say;
@@ -82,6 +85,7 @@ const SECTIONS: &[(&str, &str)] = &[
         "## Monte-Carlo evaluation: issue #23's command",
     ),
     ("eval", "## Monte-Carlo evaluation throughput"),
+    ("view", "## The live view's cost to the loop"),
 ];
 
 /// Part `name`'s section of the previous file `old` (from its heading up to the next part's
@@ -168,6 +172,7 @@ fn run() -> Result<()> {
     body.part(&o, "bridge", bridge::part);
     body.part(&o, "eval-baseline", eval_baseline::part);
     body.part(&o, "eval", eval_throughput::part);
+    body.part(&o, "view", view::part);
 
     let mut md = machine.header(&o);
     md.push_str(&body.md);

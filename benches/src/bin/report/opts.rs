@@ -4,7 +4,7 @@ use anyhow::{anyhow, bail, Result};
 use std::path::PathBuf;
 
 const USAGE: &str =
-    "report [--quick] [--plain-release] [--skip criterion,icount,firmware,pipeline,bridge,eval-baseline,eval] [--out FILE]";
+    "report [--quick] [--plain-release] [--skip criterion,icount,firmware,pipeline,bridge,eval-baseline,eval,view] [--out FILE]";
 
 /// The parts, in the order they run (`--skip` takes these names).
 pub const PARTS: &[&str] = &[
@@ -15,6 +15,7 @@ pub const PARTS: &[&str] = &[
     "bridge",
     "eval-baseline",
     "eval",
+    "view",
 ];
 
 pub struct Opts {

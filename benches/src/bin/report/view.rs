@@ -1,0 +1,232 @@
+//! Part `view`: what the live view costs the loop (docs/view.md, "Cost to the loop"; issue
+//! #36: the end-to-end p50 with a connected page within 5 % of without). Short `demo` runs
+//! in pairs, one without a view and one with `--view` and a page reading every frame, the
+//! order alternating from pair to pair, all in this process; per pair the ratio of the two
+//! p50s, then the median ratio and its spread over the pairs — a pair's two runs are seconds
+//! apart, so a VM whose load drifts over minutes moves both. Beside it, the instructions the
+//! loop's tap executes per instant with and without a view (callgrind, deterministic), which
+//! do not depend on the load at all.
+
+use crate::command::say;
+use crate::demo::demo_scenario;
+use crate::icount::callgrind_ir;
+use crate::opts::Opts;
+use crate::prose;
+use anyhow::{anyhow, bail, Context, Result};
+use std::fmt::Write as _;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+/// The loop's rate in these runs.
+const RATE: f64 = 1000.0;
+
+/// One run: the end-to-end p50 and p99 (µs) and the bytes the page read (`None` without a
+/// view).
+struct Run {
+    p50: f64,
+    p99: f64,
+    page_bytes: Option<u64>,
+}
+
+pub fn part(o: &Opts, md: &mut String) -> Result<()> {
+    let (pairs, steps) = if o.quick { (4, 1000) } else { (30, 3000) };
+    prose::push(md, &intro(pairs, steps));
+    let mut rows = Vec::new();
+    for i in 0..pairs {
+        // Alternating order: a trend over the part cancels instead of favouring one side.
+        let view_first = i % 2 == 1;
+        let a = run(o, view_first, steps, i)?;
+        let b = run(o, !view_first, steps, i)?;
+        let (off, on) = if view_first { (b, a) } else { (a, b) };
+        say(&format!(
+            "view pair {i}: p50 {:.1} µs without, {:.1} µs with a page ({} bytes read)",
+            off.p50,
+            on.p50,
+            on.page_bytes.unwrap_or(0)
+        ));
+        rows.push((off, on));
+    }
+    let mut ratios: Vec<f64> = rows.iter().map(|(off, on)| on.p50 / off.p50).collect();
+    ratios.sort_by(f64::total_cmp);
+    let q = |p: f64| quantile(&ratios, p);
+    let median = |f: &dyn Fn(&(Run, Run)) -> f64| {
+        let mut v: Vec<f64> = rows.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        quantile(&v, 0.5)
+    };
+    let slower = rows.iter().filter(|(off, on)| on.p50 > off.p50).count();
+    let bytes = median(&|r| r.1.page_bytes.unwrap_or(0) as f64);
+    let _ = writeln!(
+        md,
+        "| pairs | p50 without (median) | p50 with a page (median) | ratio of the pair's p50s: median | 25–75 % | min–max | pairs slower with a page |\n|---:|---:|---:|---:|---:|---:|---:|\n| {pairs} | {:.1} µs | {:.1} µs | **{:.3}** | {:.3}–{:.3} | {:.3}–{:.3} | {slower} of {pairs} |\n",
+        median(&|r| r.0.p50),
+        median(&|r| r.1.p50),
+        q(0.5),
+        q(0.25),
+        q(0.75),
+        q(0.0),
+        q(1.0),
+    );
+    let _ = writeln!(
+        md,
+        "p99 (medians over the pairs): {:.0} µs without, {:.0} µs with a page. The page read {:.0} kB per run (median).\n",
+        median(&|r| r.0.p99),
+        median(&|r| r.1.p99),
+        bytes / 1e3
+    );
+    // The tap's instructions per instant, (I(2N) − I(N)) / N as part `icount` counts.
+    let bin = o.target.join("release/icount");
+    let n: u64 = if o.quick { 2000 } else { 20_000 };
+    let mut per = Vec::new();
+    for k in ["view/tap-off", "view/tap-on"] {
+        say(&format!("callgrind {k}"));
+        let a = callgrind_ir(&bin, k, n)?;
+        let b = callgrind_ir(&bin, k, 2 * n)?;
+        per.push((k, b.saturating_sub(a) as f64 / n as f64));
+    }
+    prose::push(
+        md,
+        &prose::fill(
+            include_str!("prose/view_icount.md"),
+            &[
+                ("n", &n),
+                ("off", &format!("{:.1}", per[0].1)),
+                ("on", &format!("{:.1}", per[1].1)),
+                ("diff", &format!("{:.1}", per[1].1 - per[0].1)),
+            ],
+        ),
+    );
+    Ok(())
+}
+
+fn intro(pairs: usize, steps: u32) -> String {
+    prose::fill(
+        include_str!("prose/view.md"),
+        &[
+            ("pairs", &pairs),
+            ("steps", &steps),
+            ("rate", &RATE),
+            ("scenario", &demo_scenario()),
+        ],
+    )
+}
+
+/// The value at fraction `p` of `sorted` (linear between neighbours).
+fn quantile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let at = p * (sorted.len() - 1) as f64;
+    let (lo, hi) = (at.floor() as usize, at.ceil() as usize);
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (at - lo as f64)
+}
+
+/// One `demo` of `steps` instants at [`RATE`], with a view and a reading page when `view`.
+fn run(o: &Opts, view: bool, steps: u32, pair: usize) -> Result<Run> {
+    let bin = o.target.join("release/ipc-runner");
+    let tag = format!(
+        "{}-{pair}-{}",
+        std::process::id(),
+        if view { "on" } else { "off" }
+    );
+    let out = std::env::temp_dir().join(format!("benches-report-view-{tag}"));
+    let mut cmd = Command::new("timeout");
+    cmd.arg("300")
+        .arg(&bin)
+        .args(["demo", "--quiet", "--wait", "spin", "--scenario"])
+        .arg(demo_scenario())
+        .args(["--rate", &RATE.to_string(), "--steps", &steps.to_string()])
+        .args(["--prefix", &format!("benches-report-view-{tag}")])
+        .arg("--out")
+        .arg(&out)
+        .env("IOX2_LOG_LEVEL", "Error")
+        .stdout(Stdio::null());
+    if view {
+        cmd.args(["--view", "--view-addr", "127.0.0.1:0"])
+            .stderr(Stdio::piped());
+    } else {
+        cmd.stderr(Stdio::null());
+    }
+    let mut child = cmd.spawn().context("ipc-runner demo")?;
+    // The page: it connects as soon as the view says where it is, and reads every byte until
+    // the process ends.
+    let page = child.stderr.take().map(|err| {
+        std::thread::spawn(move || -> Result<u64> {
+            let mut lines = BufReader::new(err).lines();
+            let addr = loop {
+                let l = lines
+                    .next()
+                    .ok_or_else(|| anyhow!("the demo ended before its view"))??;
+                if let Some(a) = l.strip_prefix("view: http://") {
+                    break a.trim_end_matches('/').to_string();
+                }
+            };
+            // The rest of stderr is drained so that the demo never blocks on it.
+            let drain = std::thread::spawn(move || lines.for_each(drop));
+            let mut s = std::net::TcpStream::connect(&addr)?;
+            s.set_read_timeout(Some(Duration::from_secs(300)))?;
+            write!(
+                s,
+                "GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+                 Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+            )?;
+            let mut buf = vec![0u8; 1 << 16];
+            let mut n = 0u64;
+            loop {
+                match s.read(&mut buf) {
+                    Ok(0) | Err(_) => break,
+                    Ok(k) => n += k as u64,
+                }
+            }
+            let _ = drain.join();
+            Ok(n)
+        })
+    });
+    let status = child.wait().context("ipc-runner demo")?;
+    let page_bytes = match page {
+        Some(t) => Some(
+            t.join()
+                .map_err(|_| anyhow!("the page's thread panicked"))??,
+        ),
+        None => None,
+    };
+    let read = || -> Result<(f64, f64)> {
+        if !status.success() {
+            bail!("ipc-runner demo (view: {view}) failed ({status})");
+        }
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json"))?)?;
+        let e = &r["latency"]["end_to_end"];
+        let f = |k: &str| {
+            e[k].as_f64()
+                .ok_or_else(|| anyhow!("report.json: no latency.end_to_end.{k}"))
+        };
+        Ok((f("p50_us")?, f("p99_us")?))
+    };
+    let res = read();
+    let _ = std::fs::remove_dir_all(&out);
+    let (p50, p99) = res?;
+    Ok(Run {
+        p50,
+        p99,
+        page_bytes,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_prose_fills() {
+        assert!(super::intro(30, 3000).contains("30 pairs of runs of 3000 instants"));
+    }
+
+    #[test]
+    fn quantiles_interpolate() {
+        let v = [1.0, 2.0, 3.0, 4.0];
+        assert_eq!(super::quantile(&v, 0.5), 2.5);
+        assert_eq!(super::quantile(&v, 0.0), 1.0);
+        assert_eq!(super::quantile(&v, 1.0), 4.0);
+        assert_eq!(super::quantile(&[7.0], 0.25), 7.0);
+    }
+}
