@@ -33,6 +33,11 @@ pub struct Delay {
     pub jitter: Duration,
     /// Whether a datagram may overtake an earlier one.
     pub reorder: bool,
+    /// The first this many datagrams keep their order even with `reorder`: zenoh's session
+    /// set-up and declarations cross the same link, and an overtaken declaration is dropped
+    /// like a slot, so a link reordering from its first datagram can keep the bridges from
+    /// ever matching (docs/bridge.md, "A delaying link, tested").
+    pub in_order_first: u64,
     /// Seed of the jitter (xorshift64; not 0).
     pub seed: u64,
 }
@@ -176,7 +181,7 @@ fn down(
                 let u = (rng >> 11) as f64 / (1u64 << 53) as f64;
                 let own = d.mean.as_secs_f64() + (2.0 * u - 1.0) * d.jitter.as_secs_f64();
                 let mut release = at + Duration::from_secs_f64(own.max(0.0));
-                if !d.reorder {
+                if !d.reorder || arrivals < d.in_order_first {
                     if let Some(l) = last_release.filter(|&l| l > release) {
                         release = l;
                         counts.held_behind.fetch_add(1, Ordering::Relaxed);
