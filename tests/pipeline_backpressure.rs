@@ -53,6 +53,26 @@ fn wait_for_subscriber(p: &str) {
     }
 }
 
+/// Waits until the runner on `p` has published an estimate (it has received a slot).
+fn wait_for_first_estimate(p: &str) {
+    use iceoryx2::prelude::*;
+    set_log_level(LogLevel::Error);
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let sub = estpipe_wire::estimate_service(&node, p)
+        .unwrap()
+        .subscriber_builder()
+        .create()
+        .unwrap();
+    let start = Instant::now();
+    while sub.receive().unwrap().is_none() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no estimate on {p} within 30 s"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 #[test]
 fn rate_0_loses_no_slot_of_100000() {
     let dir = scratch("lossless");
@@ -121,7 +141,10 @@ fn a_blocked_publisher_notices_a_sigkilled_runner() {
         &p,
         &["--rate", "0", "--steps", "100000", "--connect-timeout", "1"],
     );
-    std::thread::sleep(Duration::from_millis(500));
+    // Killed only once it has stepped an instant: iceoryx2 0.10 blocks a sender only after the
+    // subscriber's first receive (docs/wire.md, "Stream rules"), and a fixed sleep was too short
+    // for a loaded machine (the runner never read, the publisher never blocked).
+    wait_for_first_estimate(&p);
     let t = Instant::now();
     run.signal(libc::SIGKILL);
     publ.wait_for_stderr("subscriber lost", 10);
