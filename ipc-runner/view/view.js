@@ -5,8 +5,10 @@
 
 const MAX_POINTS = 20000; // per series, oldest dropped
 const STRIP_COLORS = ['#3a9d3a', '#f0a030', '#d62728', '#8e44ad'];
-const EST_COLORS = ['#1f77b4', '#d62728', '#2ca02c', '#9467bd', '#8c564b', '#e377c2',
-  '#17becf', '#bcbd22'];
+// The after-run plots' palette (plot::color in ipc-runner/src/plot/mod.rs): Okabe–Ito, then
+// darker variants; black is the truth's.
+const EST_COLORS = ['#0072b2', '#d55e00', '#009e73', '#cc79a7', '#e69f00', '#56b4e9',
+  '#787878', '#967800', '#00466e', '#8c3c00', '#006446', '#82466e'];
 
 const S = (window.viewState = {
   connected: false, state: 'connecting', instants: 0, frames: 0, names: [], nx: 0,
@@ -56,7 +58,7 @@ function build(names, nx) {
     });
     const div = document.createElement('div');
     div.className = 'panel';
-    div.innerHTML = `<h2>x<sub>${j}</sub>: truth, x̂ and ±2σ</h2>`;
+    div.innerHTML = `<h2>x<sub>${j + 1}</sub>: truth, x̂ and ±2σ</h2>`;
     document.getElementById('plots').appendChild(div);
     const opts = {
       width, height: 220, series, bands,

@@ -193,7 +193,7 @@ where
     let pad = 0.08 * (hi - lo);
     let (ylo, yhi) = (lo - pad, hi + pad);
     let mut chart = ChartBuilder::on(panel)
-        .caption(format!("{title}: x[{j}]"), (FONT, 16))
+        .caption(format!("{title}: x{}", j + 1), (FONT, 16))
         .margin(8)
         .x_label_area_size(28)
         .y_label_area_size(56)
