@@ -2,8 +2,8 @@
 //! (`estimator-core/firmware/vectors/occlusion.bin`, `nn.bin` and `tobit.bin`).
 //!
 //! ```text
-//! cargo run -p channel-sim --example firmware_vectors            # (re)write the file
-//! cargo run -p channel-sim --example firmware_vectors -- --check # verify it is reproduced
+//! cargo run --release -p channel-sim --example firmware_vectors            # (re)write the file
+//! cargo run --release -p channel-sim --example firmware_vectors -- --check # verify it is reproduced
 //! ```
 //!
 //! `occlusion.bin` is run 0 of channel-sim's `occlusion` preset (seed 001's Section IV example,

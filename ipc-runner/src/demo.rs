@@ -453,7 +453,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     rargs.latency_csv = Some(args.out.join("latency.csv"));
     rargs.json = Some(args.out.join("report.json"));
     rargs.mcap = args.mcap.clone();
-    let view = crate::view::View::start(&args.view, &prefix)?;
+    let view = crate::view::View::start(&args.view)?;
     rargs.view_tap = view.tap();
 
     if let Some(n) = &nodes {

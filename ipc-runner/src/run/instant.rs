@@ -38,6 +38,8 @@ pub(super) struct Runner {
     p_full: [f64; MAX_NX * MAX_NX],
     /// Per estimator, the diagonal of its latest covariance (recorded for the plot's bands).
     var: Vec<[f64; MAX_NX]>,
+    /// Per estimator, what its latest covariance is (the estimate message's `cov_kind`).
+    cov_kind: Vec<u32>,
     rejected: Vec<u64>,
     names: Vec<[u8; 16]>,
     /// Per estimator, when its step of the current instant started and ended (recorded in the
@@ -99,6 +101,7 @@ impl Runner {
             xhat: vec![[0.0; MAX_NX]; n_est],
             p_full: [0.0; MAX_NX * MAX_NX],
             var: vec![[f64::NAN; MAX_NX]; n_est],
+            cov_kind: vec![0; n_est],
             rejected: vec![0; n_est],
             names,
             step_ns: vec![(0, 0); n_est],
@@ -121,6 +124,34 @@ impl Runner {
     /// against truth (MSE, recording) runs after publishing, off the latency path.
     #[inline]
     pub(super) fn on_instant(&mut self, t: &Transport, k: u32, obs: &[Observation]) {
+        let done_ns = self.step_and_publish(t, k, obs);
+        // Statistics after the estimates are out: a histogram bucket can be a cache miss.
+        for &(t0, t1) in &self.step_ns {
+            Latency::record(&mut self.latency.step, t0, t1);
+        }
+        // A slot's unusable send time (0, or in the future) is not a latency.
+        if self.slot.send_ns != 0 {
+            Latency::record(&mut self.latency.end_to_end, self.slot.send_ns, done_ns);
+        }
+        self.last_k = k;
+        // The slot log (for `replay`) in instant order, whatever order the nodes' slots
+        // came in; a slot the runner lost is missing from it, which `replay` reads as lost.
+        for o in obs {
+            if o.flags & wire::FLAG_IPC_LOST == 0
+                && self.traj.slots.len() < self.traj.slots.capacity()
+            {
+                self.traj.slots.push(*o);
+            }
+        }
+        self.evaluate(t, k, done_ns, obs);
+        self.out.loan_ahead(t);
+    }
+
+    /// The latency path of instant `k`: every estimator stepped and its estimate published;
+    /// returns when the last was out. Never inlined, so that an instruction count can tell
+    /// it from what follows it (BENCHMARKS.md, "The live view's cost to the loop").
+    #[inline(never)]
+    fn step_and_publish(&mut self, t: &Transport, k: u32, obs: &[Observation]) -> u64 {
         let nx = self.nx;
         for (e, est) in self.estimators.iter_mut().enumerate() {
             let t0 = wire::monotonic_ns();
@@ -138,6 +169,7 @@ impl Runner {
             for (i, v) in self.var[e][..nx].iter_mut().enumerate() {
                 *v = self.p_full[i * nx + i];
             }
+            self.cov_kind[e] = cov_kind.wire();
             self.step_ns[e] = (t0, t1);
             let seq = self.est_seq;
             self.est_seq += 1;
@@ -166,27 +198,7 @@ impl Runner {
             Estimate::pack_covariance(nx, &self.p_full[..nx * nx], &mut msg.p);
             self.out.send(t, e, msg);
         }
-        let done_ns = wire::monotonic_ns();
-        // Statistics after the estimates are out: a histogram bucket can be a cache miss.
-        for &(t0, t1) in &self.step_ns {
-            Latency::record(&mut self.latency.step, t0, t1);
-        }
-        // A slot's unusable send time (0, or in the future) is not a latency.
-        if self.slot.send_ns != 0 {
-            Latency::record(&mut self.latency.end_to_end, self.slot.send_ns, done_ns);
-        }
-        self.last_k = k;
-        // The slot log (for `replay`) in instant order, whatever order the nodes' slots
-        // came in; a slot the runner lost is missing from it, which `replay` reads as lost.
-        for o in obs {
-            if o.flags & wire::FLAG_IPC_LOST == 0
-                && self.traj.slots.len() < self.traj.slots.capacity()
-            {
-                self.traj.slots.push(*o);
-            }
-        }
-        self.evaluate(t, k, done_ns, obs);
-        self.out.loan_ahead(t);
+        wire::monotonic_ns()
     }
 
     /// A slot of instant `k` that arrived after `k` was handed on, within `--lag`: every
@@ -249,6 +261,27 @@ impl Runner {
         }
         if let Some(x) = &truth {
             self.scores.score(x, &self.xhat, self.nx);
+        }
+        // The view gets the estimates here, after they are out, from the loop's own copy: a
+        // subscriber of its own on `<prefix>/estimates` would make every send deliver to one
+        // more queue, on the latency path (docs/view.md, "Cost to the loop").
+        if self.tap.is_on() {
+            let latency_us = if self.slot.send_ns != 0 && done_ns >= self.slot.send_ns {
+                (done_ns - self.slot.send_ns) as f64 * 1e-3
+            } else {
+                f64::NAN
+            };
+            for e in 0..self.xhat.len() {
+                self.tap.estimate(crate::view::EstimateEvent {
+                    k,
+                    name: self.names[e],
+                    nx: self.nx as u8,
+                    x: self.xhat[e],
+                    var: self.var[e],
+                    cov_kind: self.cov_kind[e],
+                    latency_us,
+                });
+            }
         }
         self.tap.instant(self.session, k, obs, truth.as_ref());
     }

@@ -97,7 +97,7 @@ pub fn main(args: &RunArgs) -> Result<i32> {
     .map_err(|e| limits::BadInput(format!("{e:#}")))?;
     let n_est = make()?.len();
     args.check_memory(spec.nx(), spec.nodes(), n_est, particles)?;
-    let view = crate::view::View::start(&args.view, &args.prefix)?;
+    let view = crate::view::View::start(&args.view)?;
     let mut args = args.clone();
     args.view_tap = view.tap();
     let (report, traj) = run_loop(&args, &spec, &make, Hooks::default())?;

@@ -1,13 +1,12 @@
-//! The live view's reader (docs/view.md): its own thread and iceoryx2 node, subscribed to
-//! `<prefix>/estimates` like any other consumer (docs/wire.md), joined per instant with the
-//! loop's [`ViewEvent`]s (node statuses, truth); every 50 ms one JSON frame of the decimated
-//! points ([`super::decimate`]) to the [`Hub`]. Nothing here can slow the loop: the estimate
-//! service overwrites the oldest sample for a slow reader, and the tap drops.
+//! The live view's reader (docs/view.md): its own thread, reading the loop's [`ViewEvent`]s
+//! (each estimate as published, then the instant's node statuses and truth); every 50 ms one
+//! JSON frame of the decimated points ([`super::decimate`]) to the [`Hub`]. Nothing here can
+//! slow the loop: the tap drops what a slow reader has no room for.
 
 use super::decimate::{keep, Window};
 use super::hub::Hub;
-use super::tap::{InstantEvent, ViewEvent, LATE};
-use estpipe_wire::{Estimate, MAX_NODES};
+use super::tap::{EstimateEvent, InstantEvent, ViewEvent, LATE};
+use estpipe_wire::MAX_NODES;
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::sync::mpsc::{Receiver, TryRecvError};
@@ -92,9 +91,9 @@ impl Feed {
         }
     }
 
-    /// One estimate from the service.
-    fn estimate(&mut self, e: &Estimate) {
-        let nx = (e.nx as usize).min(e.x.len());
+    /// One estimate, as published.
+    fn estimate(&mut self, e: &EstimateEvent) {
+        let nx = usize::from(e.nx).min(e.x.len());
         let e_idx = match self.index.get(&e.name) {
             Some(&i) => i,
             None => {
@@ -111,23 +110,16 @@ impl Feed {
             }
         };
         let l = &mut self.latest[e_idx];
-        // Packed upper triangle: P[i][i] at i·nx − i·(i−1)/2 (docs/wire.md, Estimate).
-        let sigma = (0..nx)
-            .map(|i| {
-                let at = i * nx - i * i.saturating_sub(1) / 2;
-                e.p.get(at).map_or(f64::NAN, |v| v.sqrt())
-            })
-            .collect();
+        let sigma = e.var[..nx].iter().map(|v| v.sqrt()).collect();
         if l.recent.len() == RECENT {
             l.recent.pop_front();
         }
         l.recent.push_back((e.k, e.x[..nx].to_vec(), sigma));
         l.cov_kind = e.cov_kind;
         self.nx = self.nx.max(nx);
-        if e.slot_send_ns != 0 && e.step_done_ns >= e.slot_send_ns {
-            let us = (e.step_done_ns - e.slot_send_ns) as f64 * 1e-3;
+        if e.latency_us.is_finite() {
             let v = self.lat_by_k.entry(e.k).or_insert(0.0);
-            *v = v.max(us);
+            *v = v.max(e.latency_us);
         }
     }
 
@@ -155,6 +147,7 @@ impl Feed {
                     self.pending.push(i);
                 }
             }
+            ViewEvent::Estimate(e) => self.estimate(&e),
             ViewEvent::Late { node, .. } => {
                 let n = usize::from(node).min(MAX_NODES - 1);
                 self.totals[n][usize::from(LATE)] += 1;
@@ -235,41 +228,15 @@ impl Feed {
     }
 }
 
-/// Reads `<prefix>/estimates` and `events` until the process ends, publishing frames to `hub`.
-/// An estimate service that cannot be opened is retried every second (the view says "no
-/// publisher" meanwhile).
-/// Points per series and second at most: `max_points_per_s` (docs/view.md, Decimation).
-pub fn run(prefix: &str, events: Receiver<ViewEvent>, hub: Arc<Hub>, max_points_per_s: u32) {
-    use iceoryx2::prelude::*;
-    let node = match NodeBuilder::new().create::<ipc::Service>() {
-        Ok(n) => n,
-        Err(e) => {
-            estpipe_process::errln!(
-                "view: cannot create an iceoryx2 node ({e}); the view shows no estimates"
-            );
-            return;
-        }
-    };
-    let mut sub = None;
-    let mut next_try = Instant::now();
+/// Reads `events` until the process ends, publishing frames to `hub`. Points per series and
+/// second at most: `max_points_per_s` (docs/view.md, Decimation).
+pub fn run(events: Receiver<ViewEvent>, hub: Arc<Hub>, max_points_per_s: u32) {
     let per_frame = (f64::from(max_points_per_s) * FRAME.as_secs_f64()).ceil() as usize;
     let mut feed = Feed::new(per_frame.max(1));
     let mut next_frame = Instant::now() + FRAME;
     let mut events_open = true;
     loop {
         let now = Instant::now();
-        if sub.is_none() && now >= next_try {
-            next_try = now + Duration::from_secs(1);
-            sub = estpipe_wire::estimate_service(&node, prefix)
-                .ok()
-                .and_then(|s| s.subscriber_builder().buffer_size(1024).create().ok());
-        }
-        if let Some(s) = &sub {
-            while let Ok(Some(sample)) = s.receive() {
-                feed.estimate(sample.payload());
-            }
-        }
-        // After the estimates: an instant's event comes after its estimates were sent.
         while events_open {
             match events.try_recv() {
                 Ok(ev) => feed.event(ev),
@@ -294,28 +261,19 @@ mod tests {
     use crate::view::decimate::MAX_POINTS;
     use crate::view::tap::{DELIVERED, DROPPED};
 
-    fn est(name: &str, k: u32, x0: f64, p00: f64) -> Estimate {
-        let mut e = Estimate {
-            version: estpipe_wire::WIRE_VERSION,
+    fn est(name: &str, k: u32, x0: f64, p00: f64) -> EstimateEvent {
+        let mut e = EstimateEvent {
             k,
-            stream_id: 1,
-            seq: 0,
-            estimator: 0,
+            name: estpipe_wire::Estimate::encode_name(name),
             nx: 2,
-            name: Estimate::encode_name(name),
-            status: 0,
-            cov_kind: 1,
             x: [0.0; estpipe_wire::MAX_NX],
-            p: [0.0; estpipe_wire::COV_LEN],
-            slot_send_ns: 1_000,
-            receive_ns: 1_000,
-            step_done_ns: 1_000 + 1_000 * u64::from(k),
-            late_folded: 0,
-            revised_from: 0,
+            var: [0.0; estpipe_wire::MAX_NX],
+            cov_kind: 1,
+            latency_us: f64::from(k),
         };
         e.x[0] = x0;
-        e.p[0] = p00;
-        e.p[2] = 9.0; // P11 of nx = 2
+        e.var[0] = p00;
+        e.var[1] = 9.0;
         e
     }
 
@@ -332,7 +290,7 @@ mod tests {
         })
     }
 
-    /// Estimates joined with their instants, σ from the packed diagonal, counts per node, the
+    /// Estimates joined with their instants, σ from the diagonal, counts per node, the
     /// latency window, thinning past MAX_POINTS and the states.
     #[test]
     fn frames_join_estimates_and_instants() {

@@ -4,7 +4,7 @@
 //! (p50/p99 over the newest 1000 instants).
 //!
 //! The parts: [`tap`] (the loop's non-blocking queue; always built), and with the `view`
-//! feature `feed` (the reader of `<prefix>/estimates`), `decimate`, `hub` (the frames to the
+//! feature `feed` (the reader of the tap), `decimate`, `hub` (the frames to the
 //! pages), `server` (HTTP and the websocket) and `assets` (the embedded page).
 
 pub mod tap;
@@ -20,10 +20,11 @@ pub mod hub;
 #[cfg(feature = "view")]
 pub mod server;
 
-pub use tap::{ViewEvent, ViewTap};
+pub use tap::{EstimateEvent, ViewEvent, ViewTap};
 
-/// Events the loop may be ahead of the view before the tap drops (4 s at 1 kHz).
-pub const TAP_QUEUE: usize = 4096;
+/// Events the loop may be ahead of the view before the tap drops: an instant is one event per
+/// estimator and one of its own (about 1 s at 1 kHz with 15 estimators).
+pub const TAP_QUEUE: usize = 16384;
 
 /// The view's options of `run` and `demo`.
 #[derive(Clone, Debug, clap::Args)]
@@ -76,26 +77,25 @@ pub struct View {
 }
 
 impl View {
-    /// Starts the view of `prefix` when `args` ask for it (prints its address on stderr); an
-    /// address that cannot be bound is an error before the run starts.
-    pub fn start(args: &ViewArgs, prefix: &str) -> anyhow::Result<Self> {
+    /// Starts the view when `args` ask for it (prints its address on stderr); an address that
+    /// cannot be bound is an error before the run starts.
+    pub fn start(args: &ViewArgs) -> anyhow::Result<Self> {
         #[cfg(feature = "view")]
         if args.view {
             let hub = std::sync::Arc::new(hub::Hub::default());
             let addr = server::start(args.view_addr, std::sync::Arc::clone(&hub))?;
             let (tx, rx) = std::sync::mpsc::sync_channel(TAP_QUEUE);
-            let prefix = prefix.to_string();
             let rate = args.view_points_per_s;
             std::thread::Builder::new()
                 .name("view-feed".into())
-                .spawn(move || feed::run(&prefix, rx, hub, rate))?;
+                .spawn(move || feed::run(rx, hub, rate))?;
             estpipe_process::errln!("view: http://{addr}/");
             return Ok(Self {
                 tap: ViewTap::new(tx),
                 linger: args.view_linger,
             });
         }
-        let _ = (args, prefix);
+        let _ = args;
         Ok(Self::default())
     }
 

@@ -1,8 +1,10 @@
 //! The loop's side of the live view (docs/view.md): after an instant's estimates are
-//! published, what the estimates service does not carry — every node's slot status and the
-//! truth — goes into a bounded queue with `try_send`, which never blocks and allocates
+//! published, each estimator's x̂ and the diagonal of its covariance, every node's slot status
+//! and the truth go into a bounded queue with `try_send`, which never blocks and allocates
 //! nothing; when the view falls behind the record is dropped (counted by the view as a gap).
-//! Without `--view` the tap is empty and costs one branch.
+//! The view does not subscribe to `<prefix>/estimates`: one more subscriber would cost every
+//! send a delivery on the latency path. Without `--view` the tap is empty and costs one
+//! branch.
 
 use estpipe_wire::{Observation, FLAG_IPC_LOST, FLAG_NET_LOST, MAX_NODES, MAX_NX};
 use std::sync::mpsc::SyncSender;
@@ -47,9 +49,31 @@ pub struct InstantEvent {
     pub truth: [f64; MAX_NX],
 }
 
+/// One estimator's estimate of an instant, the values it was published with.
+#[derive(Clone, Copy, Debug)]
+pub struct EstimateEvent {
+    /// The instant.
+    pub k: u32,
+    /// The estimator's name, as on the wire (NUL-padded).
+    pub name: [u8; 16],
+    /// Valid entries of `x` and `var`.
+    pub nx: u8,
+    /// x̂_k.
+    pub x: [f64; MAX_NX],
+    /// The diagonal of the published covariance (or bound).
+    pub var: [f64; MAX_NX],
+    /// The estimate message's `cov_kind`.
+    pub cov_kind: u32,
+    /// The runner's end-to-end latency of the instant (slot sent → estimates published), µs;
+    /// NaN when the slot's send time is unusable.
+    pub latency_us: f64,
+}
+
 /// What the loop tells the view.
 #[derive(Clone, Copy, Debug)]
 pub enum ViewEvent {
+    /// An estimate was published (before its instant's [`ViewEvent::Instant`]).
+    Estimate(EstimateEvent),
     /// An instant's estimates were published.
     Instant(InstantEvent),
     /// A late slot of instant `k` from `node` arrived.
@@ -77,6 +101,14 @@ impl ViewTap {
     #[inline]
     pub fn is_on(&self) -> bool {
         self.0.is_some()
+    }
+
+    /// An estimate that was published; never blocks.
+    #[inline]
+    pub fn estimate(&self, e: EstimateEvent) {
+        if let Some(tx) = &self.0 {
+            let _ = tx.try_send(ViewEvent::Estimate(e));
+        }
     }
 
     /// Instant `k`'s node statuses and truth; never blocks.

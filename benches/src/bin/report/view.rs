@@ -85,6 +85,69 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         let b = callgrind_ir(&bin, k, 2 * n)?;
         per.push((k, b.saturating_sub(a) as f64 / n as f64));
     }
+    // The loop, instant by instant, with and without a page: the demo's main thread under
+    // callgrind, three functions' inclusive counts, (I(2N) − I(N)) / N, `reps` runs each.
+    let (ln, reps) = if o.quick { (500, 1) } else { (2000, 2) };
+    // [view off/on][function] → the per-instant figures of the runs.
+    let mut per_instant = vec![vec![Vec::new(); LOOP_FUNCTIONS.len()]; 2];
+    for r in 0..reps {
+        for (i, view) in [false, true].into_iter().enumerate() {
+            say(&format!("callgrind: the demo's loop, view {view}, run {r}"));
+            let a = loop_ir(o, view, ln, r)?;
+            let b = loop_ir(o, view, 2 * ln, r)?;
+            for f in 0..LOOP_FUNCTIONS.len() {
+                if let (Some(a), Some(b)) = (a[f], b[f]) {
+                    per_instant[i][f].push(b.saturating_sub(a) as f64 / f64::from(ln));
+                }
+            }
+        }
+    }
+    let span = |v: &[f64]| {
+        if v.is_empty() {
+            return "–".to_string();
+        }
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        if hi - lo < 0.5 {
+            format!("{lo:.0}")
+        } else {
+            format!("{lo:.0}–{hi:.0}")
+        }
+    };
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let mut table = String::from(
+        "| function (inclusive) | what it is | instructions / instant, no view | with a page | with ÷ without |\n|---|---|---:|---:|---:|\n",
+    );
+    for (f, (name, what)) in LOOP_FUNCTIONS.iter().enumerate() {
+        let (off, on) = (&per_instant[0][f], &per_instant[1][f]);
+        let ratio = if off.is_empty() || on.is_empty() {
+            "–".to_string()
+        } else {
+            format!("{:.3}", mean(on) / mean(off))
+        };
+        let _ = writeln!(
+            table,
+            "| `{name}` | {what} | {} | {} | {ratio} |",
+            span(off),
+            span(on)
+        );
+    }
+    prose::push(
+        md,
+        &prose::fill(
+            include_str!("prose/view_loop.md"),
+            &[
+                ("n", &ln),
+                ("reps", &reps),
+                ("rate", &LOOP_RATE),
+                ("scenario", &demo_scenario()),
+                ("table", &table),
+            ],
+        ),
+    );
     prose::push(
         md,
         &prose::fill(
@@ -120,6 +183,137 @@ fn quantile(sorted: &[f64], p: f64) -> f64 {
     let at = p * (sorted.len() - 1) as f64;
     let (lo, hi) = (at.floor() as usize, at.ceil() as usize);
     sorted[lo] + (sorted[hi] - sorted[lo]) * (at - lo as f64)
+}
+
+/// The rate of the runs under callgrind: slow enough for the loop under valgrind to keep up,
+/// so that every instant is one wake-up.
+const LOOP_RATE: f64 = 200.0;
+
+/// The loop's functions counted, each with what it is: the symbol's tail in callgrind's
+/// function names.
+const LOOP_FUNCTIONS: [(&str, &str); 3] = [
+    (
+        "Runner::step_and_publish",
+        "the latency path: every estimator stepped, every estimate published",
+    ),
+    (
+        "Runner::on_instant",
+        "the instant: the latency path, then the histograms, the evaluation and the view's tap",
+    ),
+    (
+        "Loop::drain",
+        "the loop's work per wake-up: the slots received and assembled, the instants",
+    ),
+];
+
+/// The inclusive instructions of [`LOOP_FUNCTIONS`] on the main thread (the loop) of a
+/// `demo --wait block` of `steps` instants under callgrind, with a view and a page reading it
+/// when `view`; `None` where callgrind saw no such function (inlined).
+fn loop_ir(o: &Opts, view: bool, steps: u32, rep: usize) -> Result<[Option<u64>; 3]> {
+    let bin = o.target.join("release/ipc-runner");
+    let tag = format!(
+        "{}-{rep}-{steps}-{}",
+        std::process::id(),
+        if view { "on" } else { "off" }
+    );
+    let dir = std::env::temp_dir().join(format!("benches-report-viewloop-{tag}"));
+    std::fs::create_dir_all(&dir)?;
+    let mut cmd = Command::new("timeout");
+    cmd.arg("600")
+        .arg("valgrind")
+        .args([
+            "--tool=callgrind",
+            "--separate-threads=yes",
+            "--toggle-collect=ipc_runner::run::slot_loop::Loop::drain",
+        ])
+        .arg(format!(
+            "--callgrind-out-file={}",
+            dir.join("cg.out").display()
+        ))
+        .arg(&bin)
+        .args(["demo", "--quiet", "--wait", "block", "--scenario"])
+        .arg(demo_scenario())
+        .args([
+            "--rate",
+            &LOOP_RATE.to_string(),
+            "--steps",
+            &steps.to_string(),
+        ])
+        .args(["--prefix", &format!("benches-report-viewloop-{tag}")])
+        .arg("--out")
+        .arg(dir.join("out"))
+        .env("IOX2_LOG_LEVEL", "Error")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    if view {
+        cmd.args(["--view", "--view-addr", "127.0.0.1:0"]);
+    }
+    let mut child = cmd.spawn().context("valgrind ipc-runner demo")?;
+    let err = child.stderr.take().expect("piped");
+    let page = std::thread::spawn(move || -> Result<()> {
+        let mut lines = BufReader::new(err).lines();
+        let mut s = None;
+        for l in lines.by_ref() {
+            let l = l?;
+            if let Some(a) = l.strip_prefix("view: http://") {
+                s = Some(page_connect(a.trim_end_matches('/'))?);
+                break;
+            }
+        }
+        let Some(mut s) = s else { return Ok(()) };
+        let drain = std::thread::spawn(move || lines.for_each(drop));
+        let mut buf = vec![0u8; 1 << 16];
+        while let Ok(k) = s.read(&mut buf) {
+            if k == 0 {
+                break;
+            }
+        }
+        let _ = drain.join();
+        Ok(())
+    });
+    let status = child.wait().context("valgrind ipc-runner demo")?;
+    page.join()
+        .map_err(|_| anyhow!("the page's thread panicked"))??;
+    if !status.success() {
+        bail!("valgrind ipc-runner demo (view: {view}, {steps} instants) failed ({status})");
+    }
+    // --separate-threads: one file per thread, `-01` the main thread, which runs the loop.
+    let out = Command::new("callgrind_annotate")
+        .args(["--inclusive=yes", "--threshold=100"])
+        .arg(dir.join("cg.out-01"))
+        .output()
+        .context("callgrind_annotate (valgrind)")?;
+    let _ = std::fs::remove_dir_all(&dir);
+    if !out.status.success() {
+        bail!("callgrind_annotate failed");
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    Ok(LOOP_FUNCTIONS.map(|(name, _)| inclusive(&text, name)))
+}
+
+/// The count of the first line of `callgrind_annotate` output whose function ends in `name`
+/// (`9,445,308 (100.0%)  ???:path::to::name [binary]`).
+fn inclusive(annotate: &str, name: &str) -> Option<u64> {
+    annotate.lines().find_map(|l| {
+        let (count, rest) = l.trim_start().split_once(' ')?;
+        let func = rest.split_whitespace().nth(1)?;
+        if !func.ends_with(&format!("::{name}")) {
+            return None;
+        }
+        count.replace(',', "").parse().ok()
+    })
+}
+
+/// A page's websocket to the view at `addr` (host:port), upgraded.
+fn page_connect(addr: &str) -> Result<std::net::TcpStream> {
+    let mut s = std::net::TcpStream::connect(addr)?;
+    s.set_read_timeout(Some(Duration::from_secs(600)))?;
+    write!(
+        s,
+        "GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    )?;
+    Ok(s)
 }
 
 /// One `demo` of `steps` instants at [`RATE`], with a view and a reading page when `view`.
@@ -164,13 +358,7 @@ fn run(o: &Opts, view: bool, steps: u32, pair: usize) -> Result<Run> {
             };
             // The rest of stderr is drained so that the demo never blocks on it.
             let drain = std::thread::spawn(move || lines.for_each(drop));
-            let mut s = std::net::TcpStream::connect(&addr)?;
-            s.set_read_timeout(Some(Duration::from_secs(300)))?;
-            write!(
-                s,
-                "GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
-                 Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
-            )?;
+            let mut s = page_connect(&addr)?;
             let mut buf = vec![0u8; 1 << 16];
             let mut n = 0u64;
             loop {
@@ -219,6 +407,14 @@ mod tests {
     #[test]
     fn the_prose_fills() {
         assert!(super::intro(30, 3000).contains("30 pairs of runs of 3000 instants"));
+    }
+
+    #[test]
+    fn callgrind_annotate_lines_parse() {
+        let t = "Profiled target: x\n9,445,308 (100.0%)  ???:ipc_runner::run::slot_loop::Loop::drain [/b]\n5,388,888 (57.05%)  ???:ipc_runner::run::instant::Runner::on_instant [/b]\n";
+        assert_eq!(super::inclusive(t, "Loop::drain"), Some(9_445_308));
+        assert_eq!(super::inclusive(t, "Runner::on_instant"), Some(5_388_888));
+        assert_eq!(super::inclusive(t, "Runner::step_and_publish"), None);
     }
 
     #[test]
