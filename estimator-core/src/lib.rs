@@ -31,7 +31,9 @@
 //!   tail-accurate inverse Mills ratio, log-sum-exp; [`gsum`]: Gaussian-sum tables;
 //!   [`CovarianceUpdate`]: the Joseph or standard covariance form (chosen at run time, or at
 //!   compile time through [`CovarianceForm`]).
-//! * [`papers`]: the papers' numerical examples as ready-made values.
+//! * [`papers`]: the papers' numerical examples as ready-made values; [`floor`]: the
+//!   operations one step of each estimator needs, counted from its equations (the floor the
+//!   firmware's measured instructions are compared with).
 //! * [`error`], [`real`]: the error type and the scalar trait.
 //!
 //! # One estimator interface
@@ -106,6 +108,7 @@ pub mod estimate;
 pub mod estimator;
 pub mod filter;
 pub mod fixed_lag;
+pub mod floor;
 pub mod gauss;
 pub mod gsum;
 pub mod linalg;

@@ -72,6 +72,10 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
     if let Ok(speed) = read("speed_step_counts.csv") {
         crate::firmware_speed::render(md, &data.steps, &data.sizes, &speed);
     }
+    // Issue #37: the heavy estimators against their floor, branch by branch.
+    if let Ok(branches) = read("branch_counts.csv") {
+        crate::firmware_heavy::render(md, &branches);
+    }
     // Late packets (issue #33): the fixed-lag binaries, if .ci/firmware counted them.
     if let Ok(lag) = read("lag_counts.csv") {
         crate::late::firmware(md, &lag, &data.sizes);

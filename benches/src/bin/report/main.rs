@@ -40,6 +40,7 @@ mod demo;
 mod eval_baseline;
 mod eval_throughput;
 mod firmware;
+mod firmware_heavy;
 mod firmware_speed;
 mod format;
 mod header;

@@ -22,7 +22,7 @@ use nalgebra::{SMatrix, SVector};
 use super::bound::{
     normalised_regressor, optimal_gain, propagate_bounds, GainSolver, NnBoundConfig, StepMatrices,
 };
-use super::system::{Activation, CoupledNoiseSystem};
+use super::system::{Activation, CoupledNoiseSystem, SystemMatrices};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::linalg::{check_finite, check_spd, symmetrize};
@@ -53,6 +53,10 @@ pub struct NnTbcpEstimator<
     y: Option<SVector<T, NY>>,
     gain: SMatrix<T, NX, NY>,
     phi_norm: T,
+    /// `(A_k, B_k, C_k, D_k)`, made by the step to `k` (which needed `C_k`, `D_k`) and kept
+    /// for the step from `k`, so that each instant's matrices are made once (`None` before
+    /// the first step).
+    ahead: Option<SystemMatrices<T, NX, NW, NY>>,
 }
 
 impl<
@@ -92,6 +96,7 @@ impl<
             y: None,
             gain: SMatrix::zeros(),
             phi_norm,
+            ahead: None,
         })
     }
 
@@ -156,6 +161,11 @@ impl<
     ///
     /// On error (non-finite input, a bound overflowing, a singular gain system) nothing
     /// changes.
+    ///
+    /// `sys` must be the same system at every step (as [`OnModel`] holds it): the matrices
+    /// of instant `k + 1`, made here for `C_{k+1}` and `D_{k+1}`, are kept and used by the
+    /// next step as `A_{k+1} … D_{k+1}` (on a single-precision FPU, seed 003's `sin k` and
+    /// `cos k` are software double-precision kernels and most of a step).
     pub fn step<S: CoupledNoiseSystem<T, NX, NW, NY>>(
         &mut self,
         sys: &S,
@@ -166,14 +176,18 @@ impl<
         }
         let k = self.k;
         let (x, p) = (*self.est.state(), *self.est.covariance());
-        let (a, b, c, d) = sys.matrices(k);
+        let (a, b, c, d) = match self.ahead {
+            Some(m) => m,
+            None => sys.matrices(k),
+        };
+        let ahead = sys.matrices(k + 1);
         let s = StepMatrices {
             a,
             b,
             c,
             d,
-            c_next: sys.c(k + 1),
-            d_next: sys.d(k + 1),
+            c_next: ahead.2,
+            d_next: ahead.3,
             gamma: self.y.is_some(),
             gamma_next: y_next.is_some(),
         };
@@ -217,6 +231,7 @@ impl<
         self.y = y_next.copied();
         self.gain = l;
         self.phi_norm = phi_norm;
+        self.ahead = Some(ahead);
         Ok(())
     }
 }
