@@ -35,6 +35,7 @@
 #define ESTPIPE_FLAG_RANDOM_LOSS (1u << 3)
 #define ESTPIPE_FLAG_OCCLUDED (1u << 4)
 #define ESTPIPE_FLAG_TOKENS (1u << 5)
+#define ESTPIPE_FLAG_NET_LOST (1u << 30)
 #define ESTPIPE_FLAG_IPC_LOST (1u << 31)
 
 #define ESTPIPE_STATUS_OK 0u
