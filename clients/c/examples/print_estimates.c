@@ -19,9 +19,11 @@
 
 #define ME "print_estimates"
 
-static void print_name(const estpipe_Estimate *e) {
+/* The estimator's name (zero-padded UTF-8), padded with spaces to `width`. */
+static void print_name(const estpipe_Estimate *e, size_t width) {
     size_t n = strnlen((const char *)e->name, sizeof e->name);
     fwrite(e->name, 1, n, stdout);
+    for (; n < width; n++) putchar(' ');
 }
 
 int main(int argc, char **argv) {
@@ -73,14 +75,14 @@ int main(int argc, char **argv) {
         size_t np = (size_t)nx * (nx + 1) / 2;
         if (csv) {
             printf("%u,", e.k);
-            print_name(&e);
+            print_name(&e, 0);
             printf(",%u", e.status);
             for (uint32_t j = 0; j < nx; j++) printf(",%.17g", e.x[j]);
             for (size_t j = 0; j < np; j++) printf(",%.17g", e.p[j]);
             putchar('\n');
         } else {
             printf("k %5u ", e.k);
-            print_name(&e);
+            print_name(&e, 8);
             printf(" x̂ [");
             for (uint32_t j = 0; j < nx; j++) printf("%s%.6g", j ? ", " : "", e.x[j]);
             printf("]  P [");
