@@ -40,6 +40,7 @@ use estpipe_wire::{self as wire, Slot, StreamHeader, Truth, SLOT_ABORT, SLOT_DAT
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::SendError;
 use iceoryx2::prelude::*;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// Command-line options of the publisher (`channel-sim …` or `ipc-runner channel-sim …`).
@@ -171,7 +172,10 @@ fn stream_id() -> u64 {
     (u64::from(std::process::id()) << 32) ^ wire::monotonic_ns()
 }
 
-enum Stop {
+/// Why a wait ended early.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// SIGINT/SIGTERM/SIGHUP, or the end of the `--parent-pid` process ([`Gate::stop_requested`]).
     Signal,
 }
 
@@ -182,7 +186,7 @@ pub const STOP_SLICE: Duration = Duration::from_millis(50);
 /// Sleeps for `d`, or until [`Gate::stop_requested`]. A sleep cut short by any other signal
 /// (SIGCONT, SIGSTOP then SIGCONT, SIGUSR1: iceoryx2 reports every interrupted sleep the
 /// same way) is taken up again for the time that is left, so it changes nothing.
-fn wait(node: &Node<ipc::Service>, gate: &Gate, d: Duration) -> Result<(), Stop> {
+pub fn wait(node: &Node<ipc::Service>, gate: &Gate, d: Duration) -> Result<(), Stop> {
     let end = std::time::Instant::now() + d;
     loop {
         if gate.stop_requested() {
@@ -198,7 +202,8 @@ fn wait(node: &Node<ipc::Service>, gate: &Gate, d: Duration) -> Result<(), Stop>
 }
 
 /// What became of a slot handed to [`SlotSender::send`].
-enum Sent {
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sent {
     /// Delivered to every subscriber (or, in discard mode, dropped for a full one).
     Done,
     /// A termination request arrived while the send was blocked.
@@ -210,12 +215,17 @@ enum Sent {
 
 /// The slot publisher with what every send needs: the stream header, the back-pressure
 /// gate and the node (for dead-node cleanup).
-struct SlotSender<'a> {
+///
+/// Public so that every publisher of the product sends a slot by the same rules
+/// (`docs/wire.md`, "Sending a slot"): `channel-sim` here, and the C client library
+/// (`clients/c/ffi`), which owns its node, service and gate, hence the [`Arc`]s.
+#[derive(Debug)]
+pub struct SlotSender {
     publisher: Publisher<ipc::Service, Slot, StreamHeader>,
     header: StreamHeader,
-    gate: &'a Gate,
-    node: &'a Node<ipc::Service>,
-    service: &'a SlotService,
+    gate: Arc<Gate>,
+    node: Arc<Node<ipc::Service>>,
+    service: Arc<SlotService>,
     /// Slots sent again after a blocked send gave up or a subscriber missed them.
     resent: u64,
     /// Slots a subscriber did not receive in discard mode (one per slot and subscriber).
@@ -224,8 +234,41 @@ struct SlotSender<'a> {
     unconnected_at: Option<usize>,
 }
 
-impl SlotSender<'_> {
-    fn subscribers(&self) -> usize {
+impl SlotSender {
+    /// A sender of `publisher`'s slots (created on `service` with
+    /// `RetryUntilDelivered` and `gate`'s [`Gate::handler`]), each with the user header
+    /// `header`.
+    pub fn new(
+        publisher: Publisher<ipc::Service, Slot, StreamHeader>,
+        header: StreamHeader,
+        gate: Arc<Gate>,
+        node: Arc<Node<ipc::Service>>,
+        service: Arc<SlotService>,
+    ) -> Self {
+        Self {
+            publisher,
+            header,
+            gate,
+            node,
+            service,
+            resent: 0,
+            discarded: 0,
+            unconnected_at: None,
+        }
+    }
+
+    /// Slots sent again after a blocked send gave up or a subscriber missed them.
+    pub fn resent(&self) -> u64 {
+        self.resent
+    }
+
+    /// Slots a subscriber did not receive in discard mode (one per slot and subscriber).
+    pub fn discarded(&self) -> u64 {
+        self.discarded
+    }
+
+    /// The subscribers of the slot service now.
+    pub fn subscribers(&self) -> usize {
         self.service.dynamic_config().number_of_subscribers()
     }
 
@@ -251,7 +294,7 @@ impl SlotSender<'_> {
     ///
     /// A second subscriber that already had the slot then receives it twice; the runner
     /// ignores a `seq` it has seen.
-    fn send(&mut self, slot: Slot, give_up: Option<std::time::Instant>) -> Result<Sent> {
+    pub fn send(&mut self, slot: Slot, give_up: Option<std::time::Instant>) -> Result<Sent> {
         let blocking = self.gate.mode() != Mode::Discard;
         let mut last_check = std::time::Instant::now();
         let mut internal_errors = 0u32;
@@ -355,8 +398,9 @@ const MAX_NOT_CONNECTED_PAUSE: Duration = Duration::from_millis(10);
 /// before the error counts as real.
 const MAX_INTERRUPTED_SENDS: u32 = 1000;
 
-/// Waits until `count()` > 0, cleaning up dead nodes on the way. `Ok(false)` on timeout.
-fn wait_for_subscriber(
+/// Waits until `count()` > 0, cleaning up dead nodes on the way. `Ok(false)` on timeout
+/// (`timeout` seconds; 0 waits for ever).
+pub fn wait_for_subscriber(
     node: &Node<ipc::Service>,
     gate: &Gate,
     count: impl Fn() -> usize,
@@ -475,12 +519,12 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
 
     // Before anything can wait: SIGINT/SIGTERM/SIGHUP set a flag from here on, nothing else stops.
     estpipe_process::signal::install();
-    let node = estpipe_process::node::create("channel-sim")?;
+    let node = Arc::new(estpipe_process::node::create("channel-sim")?);
     // A SIGKILLed predecessor leaves its ports registered; remove them before we claim ours.
     let _ = node.try_cleanup_dead_nodes();
 
     let header = stream_header(&*scenario);
-    let slots = wire::slot_service(&node, &args.prefix)?;
+    let slots = Arc::new(wire::slot_service(&node, &args.prefix)?);
     let truth = wire::truth_service(&node, &args.prefix)?;
     let ready = wire::ready_event_service(&node, &args.prefix)?;
     let gate = Gate::new();
@@ -548,16 +592,13 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     let wire_version = hooks.wire_version.unwrap_or(wire::WIRE_VERSION);
     let mut report = PublisherReport::default();
     let n_subs = || slots.dynamic_config().number_of_subscribers();
-    let mut sender = SlotSender {
+    let mut sender = SlotSender::new(
         publisher,
         header,
-        gate: &gate,
-        node: &node,
-        service: &slots,
-        resent: 0,
-        discarded: 0,
-        unconnected_at: None,
-    };
+        Arc::clone(&gate),
+        Arc::clone(&node),
+        Arc::clone(&slots),
+    );
 
     // Sensor nodes are connected and configured before the wait for a subscriber, so that a
     // node that is not there is said at once.

@@ -3,9 +3,11 @@
  * time below; clients/c/check_layout.c checks them again at run time and a Rust test compares
  * its output with the Rust types, so this header cannot drift from them.
  *
- * To publish or subscribe, use iceoryx2's C binding (iox2) with these structs as payload and
- * user header and the type names ESTPIPE_TYPE_NAME_* (iceoryx2 compares name, size and
- * alignment), with the QoS of docs/wire.md ("Services and QoS").
+ * To publish or subscribe, use the C client library (estpipe.h, built by cargo: iceoryx2 0.10's
+ * own C binding is not on crates.io), or iceoryx2's C binding (iox2) built from its repository
+ * with these structs as payload and user header and the type names ESTPIPE_TYPE_NAME_*
+ * (iceoryx2 compares name, size and alignment), with the QoS and the sending rules of
+ * docs/wire.md ("Services and QoS", "Sending a slot").
  *
  * Since wire version 3, every sensor node is its own stream (docs/wire.md, "Stream rules"): its
  * own stream_id, seq = k - 1 (estpipe_seq_of), one END/ABORT marker per node with node set
@@ -35,6 +37,7 @@
 #define ESTPIPE_FLAG_RANDOM_LOSS (1u << 3)
 #define ESTPIPE_FLAG_OCCLUDED (1u << 4)
 #define ESTPIPE_FLAG_TOKENS (1u << 5)
+#define ESTPIPE_FLAG_NET_LOST (1u << 30)
 #define ESTPIPE_FLAG_IPC_LOST (1u << 31)
 
 #define ESTPIPE_STATUS_OK 0u
