@@ -27,7 +27,6 @@
 //! the README states.
 
 #[path = "pipeline_common.rs"]
-#[allow(dead_code)]
 mod common;
 #[path = "firmware_qemu/qemu.rs"]
 #[allow(dead_code)]
