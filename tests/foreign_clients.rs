@@ -8,11 +8,14 @@
 
 #[path = "pipeline_common.rs"]
 mod common;
+#[path = "replay_check.rs"]
+mod replay_check;
 #[path = "skip_log.rs"]
 mod skip_log;
 
+use replay_check::estimate_bits;
+
 use common::{prefix, scratch, Proc};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 fn repo() -> PathBuf {
@@ -56,26 +59,6 @@ fn run_python(py: &Path, code: &str) -> (Option<i32>, String, String) {
         String::from_utf8_lossy(&o.stdout).into_owned(),
         String::from_utf8_lossy(&o.stderr).into_owned(),
     )
-}
-
-/// `(k, estimator column) → value bits` of a CSV with a `k` column and `<est>_<j>` columns.
-fn estimate_bits(path: &Path, names: &[String]) -> BTreeMap<(u32, String), u64> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let kcol = head.iter().position(|h| *h == "k").unwrap();
-    let mut out = BTreeMap::new();
-    for l in lines {
-        let cells: Vec<&str> = l.split(',').collect();
-        let k: u32 = cells[kcol].parse().unwrap();
-        for (c, h) in head.iter().enumerate() {
-            if names.iter().any(|n| h.starts_with(&format!("{n}_"))) {
-                let v: f64 = cells[c].parse().unwrap();
-                out.insert((k, h.to_string()), v.to_bits());
-            }
-        }
-    }
-    out
 }
 
 fn header_json(dir: &Path, scenario: &str) -> PathBuf {

@@ -11,11 +11,12 @@
 
 #[path = "pipeline_common.rs"]
 mod common;
+#[path = "replay_check.rs"]
+mod replay_check;
 #[path = "skip_log.rs"]
 mod skip_log;
 
 use common::{prefix, scratch, Proc};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -90,26 +91,6 @@ fn compile(cc: &str, dir: &Path, name: &str) -> PathBuf {
     exe
 }
 
-/// `(k, estimator column) → value bits` of a CSV with a `k` column and `<est>_<j>` columns.
-fn estimate_bits(path: &Path, names: &[String]) -> BTreeMap<(u32, String), u64> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let kcol = head.iter().position(|h| *h == "k").unwrap();
-    let mut out = BTreeMap::new();
-    for l in lines {
-        let cells: Vec<&str> = l.split(',').collect();
-        let k: u32 = cells[kcol].parse().unwrap();
-        for (c, h) in head.iter().enumerate() {
-            if names.iter().any(|n| h.starts_with(&format!("{n}_"))) {
-                let v: f64 = cells[c].parse().unwrap();
-                out.insert((k, h.to_string()), v.to_bits());
-            }
-        }
-    }
-    out
-}
-
 /// Feeds `slots` (a slot log of `scenario`) through the C publisher at `rate` into the runner
 /// and checks the estimates against a replay.
 fn c_feeds_the_runner(
@@ -121,14 +102,7 @@ fn c_feeds_the_runner(
 ) {
     let dir = scratch(&format!("c-{name}"));
     let p = prefix(&format!("c-{name}"));
-    let instants: u32 = {
-        let text = std::fs::read_to_string(slots).unwrap();
-        text.lines()
-            .skip(1)
-            .filter_map(|l| l.split(',').next()?.parse().ok())
-            .max()
-            .unwrap()
-    };
+    let instants = replay_check::last_instant(slots);
     let steps = instants.to_string();
 
     let mut header = Proc::start(&dir, "header", &[&["stream-header"][..], scenario].concat());
@@ -175,54 +149,16 @@ fn c_feeds_the_runner(
     assert!(publ.wait(60).success(), "publisher: {}", publ.err());
     assert!(sub.wait(60).success(), "subscriber: {}", sub.err());
 
-    let r = common::report(&json);
-    assert_eq!(r["ending"], "completed", "{r}");
-    assert_eq!(r["counts"]["lost_in_ipc"], 0, "{r}");
-    assert_eq!(r["counts"]["instants"], instants, "{r}");
-    let names: Vec<String> = r["estimators"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["name"].as_str().unwrap().to_string())
-        .collect();
-
-    let replay_csv = dir.join("replay.csv");
-    let mut replay_args = vec![
-        "replay",
-        "--input",
-        slots.to_str().unwrap(),
-        "--output",
-        replay_csv.to_str().unwrap(),
-    ];
-    replay_args.extend_from_slice(scenario);
-    let mut replay = Proc::start(&dir, "replay", &replay_args);
-    assert!(replay.wait(60).success(), "{}", replay.err());
-
-    let want = estimate_bits(&replay_csv, &names);
-    assert!(!want.is_empty());
-    let live = estimate_bits(&est_csv, &names);
-    assert_eq!(
-        live, want,
-        "{name}: the runner's estimates differ from the replay's"
-    );
-
-    // The subscriber's rows: k,estimator,status,x_0..x_{nx-1},p_0.. (%.17g reads back exactly).
-    let mut seen = BTreeMap::new();
-    for l in sub.out().lines() {
-        let c: Vec<&str> = l.split(',').collect();
-        let k: u32 = c[0].parse().unwrap();
-        let nx = (0..)
-            .take_while(|j| want.contains_key(&(k, format!("{}_{j}", c[1]))))
-            .count();
-        for j in 0..nx {
-            let v: f64 = c[3 + j].parse().unwrap();
-            seen.insert((k, format!("{}_{j}", c[1])), v.to_bits());
-        }
-    }
-    // Every instant of every estimator, bit for bit.
-    assert_eq!(
-        seen, want,
-        "{name}: the C subscriber's estimates differ from the replay's"
+    let names = replay_check::equal_to_replay(
+        &dir,
+        name,
+        "C",
+        &json,
+        &est_csv,
+        slots,
+        scenario,
+        instants,
+        &sub.out(),
     );
     eprintln!(
         "{name}: {instants} instants × {} estimator(s) from the C publisher at --rate {rate} \

@@ -9,11 +9,12 @@
 
 #[path = "pipeline_common.rs"]
 mod common;
+#[path = "replay_check.rs"]
+mod replay_check;
 #[path = "skip_log.rs"]
 mod skip_log;
 
 use common::{prefix, scratch, Proc};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 fn repo() -> PathBuf {
@@ -45,40 +46,13 @@ fn python() -> Option<PathBuf> {
     Some(PathBuf::from(py))
 }
 
-/// `(k, estimator column) → value bits` of a CSV with a `k` column and `<est>_<j>` columns.
-fn estimate_bits(path: &Path, names: &[String]) -> BTreeMap<(u32, String), u64> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let kcol = head.iter().position(|h| *h == "k").unwrap();
-    let mut out = BTreeMap::new();
-    for l in lines {
-        let cells: Vec<&str> = l.split(',').collect();
-        let k: u32 = cells[kcol].parse().unwrap();
-        for (c, h) in head.iter().enumerate() {
-            if names.iter().any(|n| h.starts_with(&format!("{n}_"))) {
-                let v: f64 = cells[c].parse().unwrap();
-                out.insert((k, h.to_string()), v.to_bits());
-            }
-        }
-    }
-    out
-}
-
 /// Feeds `slots` (a slot log of `scenario`, `--config FILE` or `--scenario NAME`) through the
 /// Python publisher into the runner and checks the estimates against a replay.
 fn python_feeds_the_runner(py: &Path, name: &str, scenario: &[&str], slots: &Path) {
     let dir = scratch(&format!("python-{name}"));
     let p = prefix(&format!("python-{name}"));
     let clients = repo().join("clients/python/examples");
-    let instants: u32 = {
-        let text = std::fs::read_to_string(slots).unwrap();
-        text.lines()
-            .skip(1)
-            .filter_map(|l| l.split(',').next()?.parse().ok())
-            .max()
-            .unwrap()
-    };
+    let instants = replay_check::last_instant(slots);
     let steps = instants.to_string();
 
     // The header the publisher must write, as a foreign publisher gets it.
@@ -134,53 +108,16 @@ fn python_feeds_the_runner(py: &Path, name: &str, scenario: &[&str], slots: &Pat
     assert!(publ.wait(60).success(), "publisher: {}", publ.err());
     assert!(sub.wait(60).success(), "subscriber: {}", sub.err());
 
-    let r = common::report(&json);
-    assert_eq!(r["ending"], "completed", "{r}");
-    assert_eq!(r["counts"]["lost_in_ipc"], 0, "{r}");
-    assert_eq!(r["counts"]["instants"], instants, "{r}");
-    let names: Vec<String> = r["estimators"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["name"].as_str().unwrap().to_string())
-        .collect();
-
-    let replay_csv = dir.join("replay.csv");
-    let mut replay_args = vec![
-        "replay",
-        "--input",
-        slots.to_str().unwrap(),
-        "--output",
-        replay_csv.to_str().unwrap(),
-    ];
-    replay_args.extend_from_slice(scenario);
-    let mut replay = Proc::start(&dir, "replay", &replay_args);
-    assert!(replay.wait(60).success(), "{}", replay.err());
-
-    let want = estimate_bits(&replay_csv, &names);
-    assert!(!want.is_empty());
-    let live = estimate_bits(&est_csv, &names);
-    assert_eq!(
-        live, want,
-        "{name}: the runner's estimates differ from the replay's"
-    );
-
-    // The subscriber's rows: k,estimator,status,x_0..x_{nx-1},p_0.. (Python's repr is exact).
-    let mut seen = BTreeMap::new();
-    for l in sub.out().lines() {
-        let c: Vec<&str> = l.split(',').collect();
-        let k: u32 = c[0].parse().unwrap();
-        let nx = (0..)
-            .take_while(|j| want.contains_key(&(k, format!("{}_{j}", c[1]))))
-            .count();
-        for j in 0..nx {
-            let v: f64 = c[3 + j].parse().unwrap();
-            seen.insert((k, format!("{}_{j}", c[1])), v.to_bits());
-        }
-    }
-    assert_eq!(
-        seen, want,
-        "{name}: the Python subscriber's estimates differ from the replay's"
+    let names = replay_check::equal_to_replay(
+        &dir,
+        name,
+        "Python",
+        &json,
+        &est_csv,
+        slots,
+        scenario,
+        instants,
+        &sub.out(),
     );
     eprintln!(
         "{name}: {instants} instants × {} estimator(s) from the Python publisher equal the replay bit for bit",

@@ -309,7 +309,7 @@ where
             })
     };
     // The axis fits the truth and every estimate that stays near it; one that leaves (a
-    // diverging EKF) is drawn clamped to the edge and named so, not allowed to flatten the rest.
+    // diverging EKF) is drawn where it is inside and named so, not allowed to flatten the rest.
     let (t_lo, t_hi) = span(&truth);
     let reach = 3.0 * (t_hi - t_lo).max(1e-9);
     let near = |pts: &[(f64, f64)]| {
@@ -351,10 +351,20 @@ where
         let label = if near(&points) {
             (*name).to_owned()
         } else {
-            format!("{name} (off scale, clamped)")
+            format!("{name} (partly off scale)")
         };
-        let clamped = points.into_iter().map(|(k, v)| (k, v.clamp(lo, hi)));
-        chart.draw_series(LineSeries::new(clamped, c.stroke_width(1)))?;
+        // An off-scale series is drawn in the pieces that stay inside the axis: clamped to
+        // its edges it would paint the panel with vertical strokes and hide the truth.
+        let inside = |v: f64| v >= lo && v <= hi;
+        let mut piece: Vec<(f64, f64)> = Vec::new();
+        for (k, v) in points {
+            if inside(v) {
+                piece.push((k, v));
+            } else if !piece.is_empty() {
+                chart.draw_series(LineSeries::new(piece.drain(..), c.stroke_width(1)))?;
+            }
+        }
+        chart.draw_series(LineSeries::new(piece, c.stroke_width(1)))?;
         entries.push((label, c, 1));
     }
     Ok(entries)
