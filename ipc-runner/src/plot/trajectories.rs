@@ -195,10 +195,15 @@ where
     let mut chart = ChartBuilder::on(panel)
         .caption(format!("{title}: x{}", j + 1), (FONT, 16))
         .margin(8)
+        .margin_right(24)
         .x_label_area_size(28)
         .y_label_area_size(56)
         .build_cartesian_2d(0f64..kmax, ylo..yhi)?;
-    chart.configure_mesh().x_desc("k").draw()?;
+    chart
+        .configure_mesh()
+        .x_desc("k")
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .draw()?;
     let clamp = |v: f64| v.clamp(ylo, yhi);
     for (e, pieces) in bands.iter().enumerate() {
         let fill = color(e).mix(0.18).filled();
@@ -227,13 +232,16 @@ where
     let mut chart = ChartBuilder::on(area)
         .caption("sensor nodes: each instant's slot", (FONT, 14))
         .margin(8)
-        .x_label_area_size(20)
+        .margin_right(24)
+        .x_label_area_size(24)
         .y_label_area_size(56)
         .build_cartesian_2d(0f64..kmax, 0f64..nodes as f64)?;
     chart
         .configure_mesh()
         .disable_mesh()
         .disable_y_axis()
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .x_label_style((FONT, 12))
         .draw()?;
     // The rows' names left of the strip (node 0 on top).
     let font = (FONT, 12).into_font().color(&BLACK);
