@@ -190,28 +190,7 @@ fn the_c_publisher_feeds_the_runner_and_the_estimates_equal_the_replay() {
     // A longer log of the linear preset, recorded by the runner from channel-sim, as fast as
     // possible: 2000 instants fill the runner's queue (--buffer 256), so the sends block and
     // a slot that found the queue full before the runner connected goes again.
-    let dir = scratch("c-record");
-    let p = prefix("c-record");
-    let log = dir.join("linear-slots.csv");
-    let mut run = Proc::start(
-        &dir,
-        "record",
-        &[
-            "run",
-            "--scenario",
-            "linear",
-            "--prefix",
-            &p,
-            "--steps",
-            "2000",
-            "--slots-csv",
-            log.to_str().unwrap(),
-        ],
-    );
-    run.wait_for_stderr("waiting for channel-sim", 30);
-    let mut publ = common::start_channel_sim(&dir, &p, "linear", 2000, 0);
-    assert!(publ.wait(60).success(), "{}", publ.err());
-    assert!(run.wait(60).success(), "{}", run.err());
+    let (dir, log) = replay_check::record_linear_log("c-record");
     c_feeds_the_runner(&exes, "linear", &["--scenario", "linear"], &log, "0");
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&bin);

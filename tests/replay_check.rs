@@ -106,3 +106,31 @@ pub fn equal_to_replay(
     );
     names
 }
+
+/// A slot log of the `linear` preset, 2000 instants, recorded by a runner fed by channel-sim
+/// as fast as it goes, in a scratch directory named after `tag`: `(directory, log)`.
+pub fn record_linear_log(tag: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = common::scratch(tag);
+    let p = common::prefix(tag);
+    let log = dir.join("linear-slots.csv");
+    let mut run = Proc::start(
+        &dir,
+        "record",
+        &[
+            "run",
+            "--scenario",
+            "linear",
+            "--prefix",
+            &p,
+            "--steps",
+            "2000",
+            "--slots-csv",
+            log.to_str().unwrap(),
+        ],
+    );
+    run.wait_for_stderr("waiting for channel-sim", 30);
+    let mut publ = common::start_channel_sim(&dir, &p, "linear", 2000, 0);
+    assert!(publ.wait(60).success(), "{}", publ.err());
+    assert!(run.wait(60).success(), "{}", run.err());
+    (dir, log)
+}
