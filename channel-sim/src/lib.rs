@@ -26,6 +26,7 @@ pub mod rng;
 pub mod scenario;
 pub mod sensor_node;
 pub mod sim;
+pub mod slot_sender;
 pub mod validate;
 pub mod wire;
 
