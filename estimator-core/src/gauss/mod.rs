@@ -27,19 +27,27 @@ pub const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_741_78;
 
 /// Above this ζ, λ is evaluated by its continued fraction instead of `pdf/sf`.
 pub(crate) const CF_THRESHOLD: f64 = 4.0;
-/// Terms of the backward continued-fraction evaluation. The fraction converges faster the
-/// larger ζ is; these counts reach one ulp in f64 with a margin of 1.5× (measured against a
-/// 40-digit reference: 40 terms at ζ = 4, 32 at 5, 24 at 6, 16 from 8 on).
+/// Terms of the backward continued-fraction evaluation at `z`, for the precision of `T`. The
+/// fraction converges faster the larger ζ is. In `f64` these counts reach one ulp with a
+/// margin of 1.5× (measured against a 40-digit reference: 40 terms at ζ = 4, 32 at 5, 24 at
+/// 6, 16 from 8 on, for the tail `t = λ − ζ` itself to half an ulp, which
+/// [`inv_mills_delta`] needs). In `f32` far fewer do (half an `f32` ulp of `t` by 12 terms
+/// at ζ = 4, 9 at 5, 8 at 6, 6 at 8; the counts below are 1.5× those): the
+/// single-precision filters, the firmware's, do not pay for digits they cannot hold (the
+/// test `f32_tail_terms_reach_the_f64_reference` holds them to it).
 #[inline]
-fn cf_terms(z: f64) -> usize {
-    if z < 5.0 {
-        64
-    } else if z < 6.0 {
-        48
-    } else if z < 8.0 {
-        36
-    } else {
-        24
+fn cf_terms<T: Real>(z: T) -> usize {
+    let z = z.to_f64();
+    let single = T::EPS.to_f64() > 1e-10;
+    match (single, z) {
+        (false, z) if z < 5.0 => 64,
+        (false, z) if z < 6.0 => 48,
+        (false, z) if z < 8.0 => 36,
+        (false, _) => 24,
+        (true, z) if z < 5.0 => 18,
+        (true, z) if z < 6.0 => 14,
+        (true, z) if z < 8.0 => 12,
+        (true, _) => 9,
     }
 }
 
@@ -75,7 +83,7 @@ pub fn sf<T: Real>(x: T) -> T {
 #[inline]
 pub(crate) fn cf_tail<T: Real>(z: T) -> T {
     let mut t = T::zero();
-    let mut n = cf_terms(z.to_f64());
+    let mut n = cf_terms(z);
     while n >= 2 {
         t = T::lit(n as f64) / (z + t);
         n -= 1;
@@ -91,6 +99,18 @@ pub fn inv_mills<T: Real>(z: T) -> T {
         z + cf_tail(z)
     } else {
         pdf(z) / sf(z)
+    }
+}
+
+/// [`inv_mills`] where `sf_z` = [`sf`]`(z)` is already known (the Tobit statistics need both):
+/// the same bits, without evaluating `erfc` a second time.
+#[inline]
+#[must_use]
+pub fn inv_mills_given_sf<T: Real>(z: T, sf_z: T) -> T {
+    if z > T::lit(CF_THRESHOLD) {
+        z + cf_tail(z)
+    } else {
+        pdf(z) / sf_z
     }
 }
 
@@ -135,7 +155,7 @@ pub fn ln_sf_pair<T: Real>(a: T, b: T) -> (T, T) {
 /// side by side: the same operations per point as two calls.
 #[inline]
 fn cf_tail_pair<T: Real>(a: T, b: T) -> (T, T) {
-    let (na, nb) = (cf_terms(a.to_f64()), cf_terms(b.to_f64()));
+    let (na, nb) = (cf_terms(a), cf_terms(b));
     let (mut ta, mut tb) = (T::zero(), T::zero());
     let mut n = na.max(nb);
     // The point with more terms goes first, alone, until the other's terms begin.
@@ -270,6 +290,56 @@ pub fn log_sum_exp<T: Real>(xs: &[T]) -> T {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The `f32` continued fraction with its own term counts ([`cf_terms`]) against the `f64`
+    /// one: `t = λ − ζ` and λ within 2 `f32` ulps of the `f64` values (rounded to `f32`) on
+    /// a fine grid over every count's range, which is what the `f32` recurrence reaches
+    /// with as many terms as `f64` takes (its own rounding, not the truncation, is what is
+    /// left: `f32_tail_error_is_rounding_not_truncation` below). Too few terms would miss
+    /// by hundreds of ulps at ζ = 4.
+    #[test]
+    fn f32_tail_terms_reach_the_f64_reference() {
+        let ulps = |a: f32, b: f32| (a.to_bits() as i64 - b.to_bits() as i64).abs();
+        let mut worst = (0, 0.0f32);
+        let mut z = 4.0001f32;
+        while z < 40.0 {
+            let t32 = cf_tail(z);
+            let t64 = cf_tail(f64::from(z)) as f32;
+            let l32 = inv_mills(z);
+            let l64 = inv_mills(f64::from(z)) as f32;
+            let d = ulps(t32, t64).max(ulps(l32, l64));
+            if d > worst.0 {
+                worst = (d, z);
+            }
+            z += 0.003;
+        }
+        assert!(worst.0 <= 2, "{} ulps at ζ = {}", worst.0, worst.1);
+    }
+
+    /// The truncation error the `f32` counts leave is far below the rounding error: the
+    /// tail with 64 terms in every range (the `f64` counts, in `f32` arithmetic) and with
+    /// the `f32` counts differ by at most one ulp anywhere on the grid.
+    #[test]
+    fn f32_tail_error_is_rounding_not_truncation() {
+        let long = |z: f32| {
+            let mut t = 0.0f32;
+            let mut n = 64;
+            while n >= 2 {
+                t = n as f32 / (z + t);
+                n -= 1;
+            }
+            1.0 / (z + t)
+        };
+        let mut z = 4.0001f32;
+        while z < 40.0 {
+            let (a, b) = (cf_tail(z), long(z));
+            assert!(
+                (a.to_bits() as i64 - b.to_bits() as i64).abs() <= 1,
+                "ζ = {z}: {a} against {b}"
+            );
+            z += 0.003;
+        }
+    }
 
     /// The pair is the two single evaluations bit for bit, on both sides of the continued
     /// fraction's threshold and of its term counts, at ∞, in f64 and f32.

@@ -7,8 +7,9 @@
 //! another, and about the longest one when they run side by side, because independent
 //! divisions overlap in the divider. Every point still goes through exactly the operations of
 //! its single evaluation, so the results are the same bits. A size-optimised build
-//! (`small_code`, the firmware's: an in-order Cortex-M4 has no latency to hide) evaluates the
-//! intervals one at a time ([`ln_interval_prob_one`]), with the same results.
+//! (`small_code`) and an in-order microcontroller (`in_order_core`, the Cortex-M4: there is
+//! no latency to hide) evaluate the intervals one at a time ([`ln_interval_prob_one`]), with
+//! the same results.
 
 use super::{cf_terms, ln_interval_prob, ln_pdf, ln_sf, CF_THRESHOLD};
 use crate::Real;
@@ -88,7 +89,7 @@ fn cf_tails<T: Real, const W: usize>(z: &[T; W]) -> [T; W] {
     let mut terms = [0usize; W];
     for (m, &z) in terms.iter_mut().zip(z) {
         if z > cf {
-            *m = cf_terms(z.to_f64());
+            *m = cf_terms(z);
         }
     }
     let mut t = [T::zero(); W];
@@ -135,9 +136,9 @@ enum Finish<T> {
 ///
 /// `out` shorter than `ends` gets the first `out.len()` results.
 pub fn ln_interval_prob_each<T: Real>(ends: &[(T, T)], out: &mut [T]) {
-    if cfg!(small_code) {
-        // A size-optimised build (the firmware's): on an in-order core there is no latency
-        // to hide, and the lanes would only add instructions and code.
+    if cfg!(any(small_code, in_order_core)) {
+        // A size-optimised build, or an in-order core: there is no latency to hide, and the
+        // lanes would only add instructions and code.
         for (&(a, b), o) in ends.iter().zip(out) {
             *o = ln_interval_prob_one(a, b);
         }

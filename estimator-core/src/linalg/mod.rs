@@ -117,14 +117,23 @@ pub fn cholesky<T: Real, const N: usize>(
     let scale = sym.amax();
     let chol = sym.cholesky().ok_or(Error::NotPositiveDefinite { what })?;
     let l = chol.l_dirty();
-    let floor = (T::EPS * scale).sqrt();
+    let floor2 = T::EPS * scale;
     for i in 0..N {
         let d = l[(i, i)];
-        if !d.finite() || d <= floor {
+        if !d.finite() || !above_sqrt(d, floor2) {
             return Err(Error::NotPositiveDefinite { what });
         }
     }
     Ok(chol)
+}
+
+/// `d > √x` (`x ≥ 0`, `√x` rounded as `x.sqrt()` rounds it), exactly, but without the square
+/// root when `d² > 2x`: then `d > 1.4 √x` even with the rounding of `d²` and `2x`, far above
+/// the rounded root. Only pivots within a factor 1.4 of the floor pay for the root (a software
+/// routine on the Cortex-M4, called once per factorisation before).
+#[inline]
+fn above_sqrt<T: Real>(d: T, x: T) -> bool {
+    d * d > x + x || d > x.sqrt()
 }
 
 /// Validates that `m` is symmetric positive definite (see [`cholesky`]).
@@ -153,6 +162,23 @@ pub fn solve_spd_right<T: Real, const N: usize, const M: usize>(
 ) -> Result<SMatrix<T, M, N>> {
     // X A = B  ⇔  A Xᵀ = Bᵀ (A symmetric).
     Ok(solve_spd(a, &b.transpose(), what)?.transpose())
+}
+
+/// [`inverse_spd`]`(a)` and [`solve_spd`]`(a, b)` from one factorisation of `a`: the same
+/// bits and the same errors, in the same order, as the two calls (information-form fusion
+/// needs both of every matrix).
+#[allow(clippy::type_complexity)]
+pub fn inverse_and_solve_spd<T: Real, const N: usize, const M: usize>(
+    a: &SMatrix<T, N, N>,
+    b: &SMatrix<T, N, M>,
+    what: &'static str,
+) -> Result<(SMatrix<T, N, N>, SMatrix<T, N, M>)> {
+    let chol = cholesky(a, what)?;
+    let inv = chol.inverse();
+    check_finite(&inv, what)?;
+    let x = chol.solve(b);
+    check_finite(&x, what)?;
+    Ok((symmetrize(&inv), x))
 }
 
 /// `ln det A` of a symmetric positive-definite matrix, from its Cholesky factor.
@@ -224,6 +250,61 @@ mod tests {
             5.0,
             f64::INFINITY
         ]));
+    }
+
+    /// One factorisation gives what the two calls give, bit for bit, and their errors.
+    #[test]
+    fn inverse_and_solve_is_the_two_calls() {
+        let a = matrix![4.0f64, 1.0, 0.3; 1.0, 3.0, -0.7; 0.3, -0.7, 2.0];
+        let b = matrix![1.0f64, -2.0; 0.5, 3.0; 7.0, 1e-3];
+        let (inv, x) = inverse_and_solve_spd(&a, &b, "a").unwrap();
+        assert_eq!(inv, inverse_spd(&a, "a").unwrap());
+        assert_eq!(x, solve_spd(&a, &b, "a").unwrap());
+        let bad = matrix![1.0f64, 2.0, 0.0; 2.0, 1.0, 0.0; 0.0, 0.0, 1.0];
+        assert_eq!(
+            inverse_and_solve_spd(&bad, &b, "bad"),
+            Err(Error::NotPositiveDefinite { what: "bad" })
+        );
+        let eye = matrix![1.0f64, 0.0; 0.0, 1.0];
+        assert_eq!(
+            inverse_and_solve_spd(&eye, &matrix![f64::NAN; 1.0], "b"),
+            Err(Error::NonFinite { what: "b" })
+        );
+    }
+
+    /// The root-free test is `d > √x` itself, at the boundary and around it, in both
+    /// precisions (and with the comparisons NaN makes false).
+    #[test]
+    fn above_sqrt_is_the_comparison_with_the_root() {
+        for &x in &[0.0f64, 1e-300, 2.2e-16, 1.0, 2.0, 3.0, 1e300] {
+            let r = x.sqrt();
+            let mut d = r / 2.0;
+            while d < r * 2.0 + 1e-300 {
+                assert_eq!(above_sqrt(d, x), d > r, "{d} against √{x}");
+                let next = f64::from_bits(d.to_bits() + 1);
+                d = if next - r < 1e-3 * r && r - next < 1e-3 * r {
+                    next
+                } else {
+                    d * 1.001
+                };
+                if d == 0.0 {
+                    d = f64::MIN_POSITIVE;
+                }
+            }
+            for k in -40i64..=40 {
+                let d = f64::from_bits((r.to_bits() as i64 + k).max(0) as u64);
+                assert_eq!(above_sqrt(d, x), d > r, "{d} against √{x}");
+            }
+        }
+        for &x in &[1.19e-7f32, 1.0, 7.0, 3e38] {
+            let r = x.sqrt();
+            for k in -40i32..=40 {
+                let d = f32::from_bits((r.to_bits() as i32 + k) as u32);
+                assert_eq!(above_sqrt(d, x), d > r, "{d} against √{x}");
+            }
+        }
+        assert!(!above_sqrt(f64::NAN, 1.0));
+        assert!(!above_sqrt(1.0, f64::NAN));
     }
 
     #[test]

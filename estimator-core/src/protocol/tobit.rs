@@ -18,7 +18,7 @@
 
 use nalgebra::SVector;
 
-use crate::gauss::{cdf, inv_mills, inv_mills_delta, sf};
+use crate::gauss::{cdf, inv_mills_delta, inv_mills_given_sf, sf};
 use crate::linalg::check_finite;
 use crate::{Error, Real, Result};
 
@@ -59,7 +59,8 @@ pub fn prob_uncensored<T: Real>(mu: T, tau: T, r: T) -> T {
 #[must_use]
 pub fn censored_mean<T: Real>(mu: T, tau: T, r: T) -> T {
     let z = standardized_threshold(mu, tau, r);
-    sf(z) * (mu + r.sqrt() * inv_mills(z)) + cdf(z) * tau
+    let p = sf(z);
+    p * (mu + r.sqrt() * inv_mills_given_sf(z, p)) + cdf(z) * tau
 }
 
 /// Eq. (7) as written: `R (1 − φ(ζ))`, which is `Var(z | z > τ)` (the truncated Gaussian).
@@ -78,7 +79,7 @@ pub fn censored_variance<T: Real>(mu: T, tau: T, r: T) -> T {
     let p = sf(z);
     let v = r * (T::one() - inv_mills_delta(z));
     // m − τ = μ − τ + s λ(ζ) = s (λ(ζ) − ζ).
-    let gap = s * (inv_mills(z) - z);
+    let gap = s * (inv_mills_given_sf(z, p) - z);
     p * v + p * cdf(z) * gap * gap
 }
 
@@ -123,7 +124,7 @@ impl<T: Real, const NY: usize> TobitStats<T, NY> {
         for j in 0..NY {
             let z = standardized_threshold(mu[j], tau[j], r[j]);
             let p = sf(z);
-            let l = inv_mills(z);
+            let l = inv_mills_given_sf(z, p);
             out.zeta[j] = z;
             out.rho[j] = p;
             out.upsilon[j] = p * cdf(z);
@@ -147,6 +148,7 @@ impl<T: Real, const NY: usize> TobitStats<T, NY> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gauss::inv_mills;
     use nalgebra::vector;
 
     /// Composite Simpson rule on [a, b] with `n` (even) intervals — independent of `erfc`.

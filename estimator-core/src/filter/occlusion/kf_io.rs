@@ -111,10 +111,10 @@ impl<T: Real, const NX: usize, const S: usize> KfIoConfig<T, NX, S> {
         }
         // The gaps the sum is likely to need, together: within the skip margin of the
         // anchor's bound, and some slack for how loose the bounds are.
-        // (Not on a size-optimised build: there nothing runs side by side, so every gap is
-        // evaluated only when the sum needs it.)
+        // (Not on a size-optimised build nor on an in-order core: there nothing runs side by
+        // side, so every gap is evaluated only when the sum needs it.)
         let likely = anchor.1 - margin - T::lit(SPECULATION_SLACK);
-        if !cfg!(small_code) {
+        if !cfg!(any(small_code, in_order_core)) {
             gaps.ahead(likely);
         }
         let at_anchor = gaps.get(anchor.0);

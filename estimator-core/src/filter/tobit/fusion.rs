@@ -13,19 +13,20 @@
 //! on the sensor side, [`crate::protocol::shared_token_bucket`].) Initialisation follows (51)
 //! too: local filters start from `x̄₀` and `α_m⁻¹ P₀`.
 //!
-//! The information matrices `P̄_m⁻¹` and `P^g` are the paper's results, so they are formed with
-//! [`inverse_spd`]; `P̄_m⁻¹ x̂_m` and `x̂^g` come from Cholesky solves.
+//! The information matrices `P̄_m⁻¹` and `P^g` are the paper's results, so they are formed as
+//! inverses; `P̄_m⁻¹ x̂_m` and `x̂^g` come from solves with the same Cholesky factor
+//! ([`inverse_and_solve_spd`]: one factorisation per matrix).
 
 use nalgebra::{SMatrix, SVector};
 
 use super::config::diagonal_variances;
 use super::config::TobitFilterConfig;
-use super::local::TobitFilter;
+use super::local::{BoundCheck, TobitFilter};
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::silence::Arrival;
-use crate::linalg::{check_finite, inverse_spd, solve_spd, symmetrize};
+use crate::linalg::{check_finite, check_spd, inverse_and_solve_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
 use crate::{Error, Real, Result};
@@ -38,12 +39,12 @@ pub fn federated_fuse<T: Real, const NX: usize, const L: usize>(
     let mut info = SMatrix::<T, NX, NX>::zeros();
     let mut info_x = SVector::<T, NX>::zeros();
     for m in 0..L {
-        info += inverse_spd(&ps[m], "local bound")?;
-        info_x += solve_spd(&ps[m], &xs[m], "local bound")?;
+        let (inv, inv_x) = inverse_and_solve_spd(&ps[m], &xs[m], "local bound")?;
+        info += inv;
+        info_x += inv_x;
     }
     let info = symmetrize(&info);
-    let pg = inverse_spd(&info, "fused information")?;
-    let xg = solve_spd(&info, &info_x, "fused information")?;
+    let (pg, xg) = inverse_and_solve_spd(&info, &info_x, "fused information")?;
     check_finite(&xg, "fused estimate")?;
     Ok((xg, pg))
 }
@@ -190,12 +191,27 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         let mut ps = [SMatrix::<T, NX, NX>::zeros(); L];
         for m in 0..L {
             let q_m = bqb / self.alpha[m];
-            locals[m].step_arrival(a, &q_m, gu, &c[m], &r[m], arrivals[m])?;
+            // Every local bound is factorised by `federated_fuse` below, under the same name.
+            locals[m].step_arrival_bound(
+                a,
+                &q_m,
+                gu,
+                &c[m],
+                &r[m],
+                arrivals[m],
+                BoundCheck::ByCaller,
+            )?;
             (xs[m], ps[m]) = locals[m].estimate().into_parts();
         }
         let (xg, pg) = federated_fuse(&xs, &ps)?;
+        // The reset (51) hands node m `P^g / α_m`: with `α_m > 0` it is positive definite
+        // exactly when `P^g` is, so `P^g` is factorised once here instead of every node's
+        // copy (`x̂^g` is finite: `federated_fuse` checked it).
+        check_spd(&pg, "reset bound")?;
         for m in 0..L {
-            locals[m].reset(xg, pg / self.alpha[m])?;
+            let p = symmetrize(&(pg / self.alpha[m]));
+            check_finite(&p, "reset bound")?;
+            locals[m].reset_checked(Estimate::trusted(xg, p));
         }
         self.locals = locals;
         self.local_est = core::array::from_fn(|m| Estimate::trusted(xs[m], ps[m]));

@@ -77,6 +77,17 @@ pub struct LocalStepPlan<T: Real, const NX: usize, const NY: usize> {
     pub problem: GainProblem<T, NX, NY>,
 }
 
+/// Who validates the bound a local step forms (positive definite, by a Cholesky
+/// factorisation named "local bound").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum BoundCheck {
+    /// The step itself, before it changes anything: a filter on its own.
+    Here,
+    /// The fusion centre, whose (50) factorises every local bound under the same name before
+    /// any filter is committed (the step is all-or-nothing there too).
+    ByCaller,
+}
+
 /// One node's local Tobit filter: x̂, P̄, the held measurement ȳ and Ḡ.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TobitFilter<T: Real, const NX: usize, const NY: usize> {
@@ -150,6 +161,12 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
     pub fn reset(&mut self, x: SVector<T, NX>, p: SMatrix<T, NX, NX>) -> Result<()> {
         self.est = Estimate::named(x, p, "reset state", "reset bound")?;
         Ok(())
+    }
+
+    /// [`TobitFilter::reset`] with an estimate the fusion has already validated.
+    #[inline]
+    pub(crate) fn reset_checked(&mut self, est: Estimate<T, NX>) {
+        self.est = est;
     }
 
     /// Computes (21), (23), (29) and the matrices of (30) for one instant without changing
@@ -305,6 +322,22 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         r: &SVector<T, NY>,
         arrival: Arrival<'_, T, NY>,
     ) -> Result<()> {
+        self.step_arrival_bound(a, bqb, gu, c, r, arrival, BoundCheck::Here)
+    }
+
+    /// [`TobitFilter::step_arrival`], with the factorisation that validates the new bound
+    /// left to the caller where it factorises the same bound anyway ([`BoundCheck`]).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn step_arrival_bound(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+        arrival: Arrival<'_, T, NY>,
+        bound_check: BoundCheck,
+    ) -> Result<()> {
         let received = match arrival {
             Arrival::Received(y) => Some(y),
             _ => None,
@@ -367,7 +400,11 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             }
         };
         check_finite(&x, "local estimate")?;
-        check_spd(&p, "local bound")?;
+        match bound_check {
+            BoundCheck::Here => check_spd(&p, "local bound")?,
+            // Finite all the same: the caller's factorisation must see what this one would.
+            BoundCheck::ByCaller => check_finite(&p, "local bound")?,
+        }
         let g = plan.xi;
         if !g.finite() {
             return Err(Error::NonFinite { what: "G bar" });
