@@ -45,6 +45,7 @@
 
 mod args;
 pub mod assemble;
+mod deadline;
 mod instant;
 mod publish;
 mod report;

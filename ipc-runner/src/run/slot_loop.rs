@@ -15,10 +15,11 @@ use std::time::Duration;
 
 use super::args::{RunArgs, WaitMode};
 use super::assemble::{self, Assembler, Counts, Limits, Pushed, Reason};
+use super::deadline::Deadline;
 use super::instant::Runner;
 use super::report::{Ending, RunReport, Stalls};
 use super::restart::StreamOwners;
-use super::system;
+use super::system::Machine;
 use super::trajectories::Trajectories;
 use super::wait::{self, Waiter, Woke};
 
@@ -623,67 +624,6 @@ impl Loop<'_> {
     }
 }
 
-/// How long a wait for a stream's first slot spins before it sleeps.
-const IDLE_AFTER_NS: u64 = 100_000_000;
-
-/// When the next slot is due.
-struct Deadline {
-    deadline_ns: u64,
-    connect_ns: u64,
-    /// `--stall-limit` (0: none).
-    stall_ns: u64,
-    period_ns: u64,
-    /// `None` while waiting for the first slot of a stream (the connect timeout applies).
-    last_data_ns: Option<u64>,
-    waiting_since: u64,
-    /// While the publisher is stalled: when to look at it again.
-    recheck_ns: Option<u64>,
-}
-
-impl Deadline {
-    fn new(args: &RunArgs) -> Self {
-        Self {
-            deadline_ns: (args.deadline_ms * 1e6) as u64,
-            connect_ns: (args.connect_timeout * 1e9) as u64,
-            stall_ns: (args.stall_limit * 1e9) as u64,
-            period_ns: 0,
-            last_data_ns: None,
-            waiting_since: wire::monotonic_ns(),
-            recheck_ns: None,
-        }
-    }
-
-    /// A slot arrived at `recv_ns`; the silence it ended if the publisher was stalled.
-    #[inline]
-    fn data(&mut self, recv_ns: u64) -> Option<u64> {
-        let last = self.last_data_ns.replace(recv_ns);
-        self.recheck_ns
-            .take()
-            .map(|_| recv_ns.saturating_sub(last.unwrap_or(recv_ns)))
-    }
-
-    /// Whether the loop has waited for a stream's first slot longer than [`IDLE_AFTER_NS`]
-    /// at `now` (the first moments of a wait still spin: a publisher that is already there
-    /// gets the spin loop's latency from its first slot on).
-    #[inline]
-    fn idle_since(&self, now: u64) -> bool {
-        self.last_data_ns.is_none() && now.saturating_sub(self.waiting_since) > IDLE_AFTER_NS
-    }
-
-    fn due(&self) -> u64 {
-        if let Some(t) = self.recheck_ns {
-            return t;
-        }
-        match self.last_data_ns {
-            Some(t_last) => t_last
-                .saturating_add(self.period_ns)
-                .saturating_add(self.deadline_ns),
-            None if self.connect_ns == 0 => u64::MAX,
-            None => self.waiting_since.saturating_add(self.connect_ns),
-        }
-    }
-}
-
 /// The allocation count of [`Hooks::alloc_probe`] at warm-up and at the end.
 struct Allocs {
     probe: Option<fn() -> usize>,
@@ -714,45 +654,6 @@ impl Allocs {
                 self.slots_at_warmup = counts.received;
                 self.published_at_warmup = published;
             }
-        }
-    }
-}
-
-/// What `--cpu` and `--mlock` achieved, and set-up conditions that will show in the latency.
-struct Machine {
-    cpu_pinning: Option<String>,
-    memory_lock: Option<String>,
-    warnings: Vec<String>,
-}
-
-impl Machine {
-    fn set_up(args: &RunArgs) -> Self {
-        let cpu_pinning = args.cpu.map(|c| match system::pin_to_cpu(c) {
-            Ok(()) => format!("pinned to CPU {c}"),
-            Err(e) => format!("not pinned ({e})"),
-        });
-        let memory_lock = args.mlock.then(|| match system::lock_memory() {
-            Ok(()) => "locked".to_string(),
-            Err(e) => format!("not locked ({e})"),
-        });
-        if !args.quiet {
-            for m in cpu_pinning.iter().chain(memory_lock.iter()) {
-                estpipe_process::errln!("ipc-runner: {m}");
-            }
-        }
-        // After pinning: a warning, not a refusal (a machine with throttling off passes).
-        let warnings: Vec<String> = (args.wait == WaitMode::Spin)
-            .then(system::spin_under_rt_throttling)
-            .flatten()
-            .into_iter()
-            .collect();
-        for w in &warnings {
-            estpipe_process::errln!("ipc-runner: {w}");
-        }
-        Self {
-            cpu_pinning,
-            memory_lock,
-            warnings,
         }
     }
 }

@@ -1,5 +1,7 @@
 //! Real-time niceties that need privileges: CPU pinning and memory locking. Both are
-//! best-effort — the outcome is reported, never fatal.
+//! best-effort — the outcome is reported, never fatal ([`Machine`] is what a run got).
+
+use super::args::{RunArgs, WaitMode};
 
 /// Pins the calling thread to `cpu`.
 pub fn pin_to_cpu(cpu: usize) -> Result<(), String> {
@@ -68,6 +70,45 @@ pub fn spin_under_rt_throttling() -> Option<String> {
         stall / 1000,
         period / 1000
     ))
+}
+
+/// What `--cpu` and `--mlock` achieved, and set-up conditions that will show in the latency.
+pub(super) struct Machine {
+    pub(super) cpu_pinning: Option<String>,
+    pub(super) memory_lock: Option<String>,
+    pub(super) warnings: Vec<String>,
+}
+
+impl Machine {
+    pub(super) fn set_up(args: &RunArgs) -> Self {
+        let cpu_pinning = args.cpu.map(|c| match pin_to_cpu(c) {
+            Ok(()) => format!("pinned to CPU {c}"),
+            Err(e) => format!("not pinned ({e})"),
+        });
+        let memory_lock = args.mlock.then(|| match lock_memory() {
+            Ok(()) => "locked".to_string(),
+            Err(e) => format!("not locked ({e})"),
+        });
+        if !args.quiet {
+            for m in cpu_pinning.iter().chain(memory_lock.iter()) {
+                estpipe_process::errln!("ipc-runner: {m}");
+            }
+        }
+        // After pinning: a warning, not a refusal (a machine with throttling off passes).
+        let warnings: Vec<String> = (args.wait == WaitMode::Spin)
+            .then(spin_under_rt_throttling)
+            .flatten()
+            .into_iter()
+            .collect();
+        for w in &warnings {
+            estpipe_process::errln!("ipc-runner: {w}");
+        }
+        Self {
+            cpu_pinning,
+            memory_lock,
+            warnings,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -125,6 +125,7 @@ pub fn render(md: &mut String, branches: &Csv) {
         );
     }
     md.push('\n');
+    prose::push(md, include_str!("prose/firmware_heavy_rest.md"));
 }
 
 #[cfg(test)]

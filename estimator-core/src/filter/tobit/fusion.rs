@@ -186,13 +186,34 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         r: &[SVector<T, NY>; L],
         arrivals: &[Arrival<'_, T, NY>; L],
     ) -> Result<()> {
-        let mut locals = self.locals;
+        // All-or-nothing: the local filters step in place and are put back on any error
+        // (one copy of them per step, not two).
+        let saved = self.locals;
+        let stepped = self.step_in_place(a, bqb, gu, c, r, arrivals);
+        if stepped.is_err() {
+            self.locals = saved;
+        }
+        stepped
+    }
+
+    /// The body of [`TobitFusion::step_arrivals`]: changes the local filters as it goes,
+    /// the fused and local estimates only once everything succeeded.
+    fn step_in_place(
+        &mut self,
+        a: &SMatrix<T, NX, NX>,
+        bqb: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &[SMatrix<T, NY, NX>; L],
+        r: &[SVector<T, NY>; L],
+        arrivals: &[Arrival<'_, T, NY>; L],
+    ) -> Result<()> {
         let mut xs = [SVector::<T, NX>::zeros(); L];
         let mut ps = [SMatrix::<T, NX, NX>::zeros(); L];
         for m in 0..L {
             let q_m = bqb / self.alpha[m];
+            let local = &mut self.locals[m];
             // Every local bound is factorised by `federated_fuse` below, under the same name.
-            locals[m].step_arrival_bound(
+            local.step_arrival_bound(
                 a,
                 &q_m,
                 gu,
@@ -201,7 +222,7 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
                 arrivals[m],
                 BoundCheck::ByCaller,
             )?;
-            (xs[m], ps[m]) = locals[m].estimate().into_parts();
+            (xs[m], ps[m]) = local.estimate().into_parts();
         }
         let (xg, pg) = federated_fuse(&xs, &ps)?;
         // The reset (51) hands node m `P^g / α_m`: with `α_m > 0` it is positive definite
@@ -211,9 +232,8 @@ impl<T: Real, const NX: usize, const NY: usize, const L: usize> TobitFusion<T, N
         for m in 0..L {
             let p = symmetrize(&(pg / self.alpha[m]));
             check_finite(&p, "reset bound")?;
-            locals[m].reset_checked(Estimate::trusted(xg, p));
+            self.locals[m].reset_checked(Estimate::trusted(xg, p));
         }
-        self.locals = locals;
         self.local_est = core::array::from_fn(|m| Estimate::trusted(xs[m], ps[m]));
         self.est = Estimate::trusted(xg, pg);
         Ok(())

@@ -358,30 +358,35 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         } else {
             None
         };
-        let mut plan = match (set, silence) {
+        // (S3), (S7): with the pseudo-measurement option a silence's set gives its centre as
+        // a measurement at θ = 0 and its covariance added to M; the held ȳ stays (it is the
+        // trigger's reference).
+        let pseudo = match (set, silence) {
             (Some(ball), Silence::PseudoMeasurement) => {
-                // (S3), (S7): the set's centre as a measurement at θ = 0, its covariance
-                // added to M; the held ȳ stays (it is the trigger's reference).
-                let (mean, var) = uniform_moments(&ball, Some(&self.cfg.tau));
-                let mut plan = self.plan_with_input(a, bqb, gu, c, r, Some(&mean))?;
-                for j in 0..NY {
-                    plan.problem.m[(j, j)] += var[j];
-                }
-                plan.y_bar = self.y_held;
-                plan
+                Some(uniform_moments(&ball, Some(&self.cfg.tau)))
             }
-            _ => self.plan_with_input(a, bqb, gu, c, r, received)?,
+            _ => None,
         };
-        let (x, p) = match (received, set, silence) {
-            (None, Some(ball), Silence::PseudoMeasurement) => {
-                let (mean, _) = uniform_moments(&ball, Some(&self.cfg.tau));
+        let measured = match &pseudo {
+            Some((mean, _)) => Some(mean),
+            None => received,
+        };
+        let mut plan = self.plan_with_input(a, bqb, gu, c, r, measured)?;
+        if let Some((_, var)) = &pseudo {
+            for j in 0..NY {
+                plan.problem.m[(j, j)] += var[j];
+            }
+            plan.y_bar = self.y_held;
+        }
+        let (x, p) = match (received, set, silence, &pseudo) {
+            (None, Some(_), Silence::PseudoMeasurement, Some((mean, _))) => {
                 let k = plan.problem.gain()?;
                 (
                     plan.x_prior + k * (mean - plan.stats.mean),
                     plan.problem.bound(&k),
                 )
             }
-            (None, Some(ball), Silence::TruncatedGaussian) => truncate_box(
+            (None, Some(ball), Silence::TruncatedGaussian, _) => truncate_box(
                 &plan.x_prior,
                 &plan.problem.p_prior,
                 c,
@@ -390,7 +395,9 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             )?,
             // Silence::Predict, and a silence-reading filter without a usable set: the
             // prediction (21), (29) is the estimate and its bound.
-            (None, _, s) if s != Silence::HeldMeasurement => (plan.x_prior, plan.problem.p_prior),
+            (None, _, s, _) if s != Silence::HeldMeasurement => {
+                (plan.x_prior, plan.problem.p_prior)
+            }
             _ => {
                 let k = plan.problem.gain()?;
                 (
