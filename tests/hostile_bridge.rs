@@ -11,6 +11,11 @@
 //!   estimate; a frozen runner costs slots dropped at the bridge, never a frozen bridge; a
 //!   foreign zenoh publisher flooding `<key>/slots` with garbage is counted by reason and
 //!   none of it reaches shared memory.
+//! * A foreign zenoh peer that read the stream id off `<key>/slots` floods `<key>/acks`, the
+//!   sensor side's input, with malformed acks (counted by reason), well-formed acks of
+//!   markers never sent and forged echoes of the stream's ENDs before they are sent (counted
+//!   as stale): no END is cancelled, the sensor side's memory stays bounded, and the run ends
+//!   as a clean one, with the same estimates.
 //!
 //! Every test has its own prefixes, key and port; readiness is read from stderr. Time bounds
 //! are generous for a loaded 2-core VM.
@@ -437,4 +442,142 @@ fn a_flood_of_foreign_messages_is_counted_by_reason_and_never_forwarded() {
     let skipped = r["counts"]["skipped"].as_object().unwrap();
     assert!(skipped.values().all(|v| v == 0), "{r}");
     eprintln!("flood refused by reason: {}", e["refused"]);
+}
+
+/// The peak resident memory of process `pid` (`VmHWM`), KiB.
+fn peak_rss_kib(pid: i32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap_or_else(|| panic!("no VmHWM in /proc/{pid}/status"))
+}
+
+/// A foreign zenoh peer on `<key>/acks`, the sensor side's input for the echoes of its
+/// END/ABORT markers, that first read the stream id off `<key>/slots`: empty, truncated,
+/// oversized, random, wrong-version and wrong-kind messages, data slots, markers of no node,
+/// well-formed acks of markers the stream never sends, and exact copies of the acks of the
+/// stream's future ENDs, while a real stream flows. The sensor side counts every malformed
+/// one by reason and every well-formed one as stale, its memory stays bounded, the forged
+/// echoes cancel no real END (each is repeated until its own echo comes), and the run ends
+/// as a clean run does, with the same estimates.
+#[test]
+fn a_flood_of_forged_acks_is_counted_and_cancels_no_real_end() {
+    const STEPS: u32 = 5000;
+    const OVERSIZED: u64 = 64;
+    const OVERSIZED_KIB: u64 = 1024;
+    let clean = bridged_run("hb-acks-ref", STEPS, false);
+    let c = Chain::new("hb-acks");
+    let mut est = c.estimator("estimator", &[]);
+    let mut run = c.runner("run", STEPS, &["--stall-limit", "20"]);
+    let mut sen = c.sensor("sensor", &[]);
+    // The estimator side subscribed first: the flooder's own reading of `<key>/slots` must not
+    // be what starts the stream.
+    sen.wait_for_stderr("forwarding", 30);
+    let flood_exe = Path::new(env!("CARGO_BIN_EXE_zenoh-flood"));
+    let (end_k, oversized, kib) = (
+        STEPS.to_string(),
+        OVERSIZED.to_string(),
+        OVERSIZED_KIB.to_string(),
+    );
+    let mut flood = Proc::start_program(
+        &c.dir,
+        "flood",
+        flood_exe,
+        &[
+            "--connect",
+            &c.endpoint,
+            "--key",
+            &c.key,
+            "--on",
+            "acks",
+            "--each",
+            "300",
+            "--oversized",
+            &oversized,
+            "--oversized-kib",
+            &kib,
+            "--end-k",
+            &end_k,
+        ],
+    );
+    flood.wait_for_stderr("reading", 30);
+    let peak_before = peak_rss_kib(sen.pid());
+    let mut publ = c.publisher("pub", STEPS, 1000);
+    let st = flood.wait(60);
+    assert!(st.success(), "flood: {st}\n{}", flood.err());
+    // The flood must have been over before the stream's END: the forged echoes of the ENDs
+    // are then acks of markers not yet sent, and the sensor side saw all of it.
+    assert!(
+        publ.child.as_mut().unwrap().try_wait().unwrap().is_none(),
+        "the flood outlasted the stream: make it shorter"
+    );
+    let peak_after = peak_rss_kib(sen.pid());
+    let sent: serde_json::Value = serde_json::from_str(flood.out().trim()).unwrap();
+    assert_ok(&mut publ, 60);
+    // The runner sees every node's END: it ends at once, not after --stall-limit.
+    let t = Instant::now();
+    assert_ok(&mut run, 60);
+    let ended = t.elapsed();
+    assert!(ended < Duration::from_secs(10), "the runner took {ended:?}");
+    assert_ok(&mut est, 30);
+    assert_ok(&mut sen, 30);
+
+    let s = c.report("bridge-sensor.json");
+    let e = c.report("bridge-estimator.json");
+    let n = |v: &serde_json::Value, f: &str| {
+        v[f].as_u64()
+            .unwrap_or_else(|| panic!("{f} not a count in {v}"))
+    };
+    // Every malformed message refused by the reason the flooder expected, nothing else.
+    assert_eq!(s["refused"], sent["refused"], "{s}");
+    let refused: u64 = sent["refused"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_u64().unwrap())
+        .sum();
+    assert_eq!(refused, 300 * 7 + OVERSIZED, "{sent}");
+    // Every well-formed forged ack is stale, as is every real echo after a marker's first;
+    // none of them is refused.
+    let forged_stale = n(&sent, "stale");
+    let nodes = n(&sent, "nodes");
+    assert_eq!(forged_stale, 300 * (4 + nodes), "{sent}");
+    let stale = n(&s, "acks_stale");
+    assert!(
+        stale >= forged_stale && stale - forged_stale <= n(&e, "acks") - n(&s, "markers_acked"),
+        "stale acks {stale}: forged {forged_stale}\n{s}\n{e}"
+    );
+    // Each node's END put, repeated until its own echo came, and acknowledged by it.
+    assert_eq!(n(&s, "markers"), nodes, "{s}");
+    assert_eq!(n(&s, "markers_acked"), nodes, "{s}");
+    assert_eq!(n(&s, "markers_unacked"), 0, "{s}");
+    assert!(n(&s, "marker_puts") >= nodes, "{s}");
+    assert_eq!(n(&e, "markers"), nodes, "{e}");
+    assert_eq!(n(&s, "slots"), u64::from(STEPS) * nodes, "{s}");
+    assert_eq!(e["refused"], serde_json::json!({}), "{e}");
+    // 64 MiB of oversized messages: none of them is kept.
+    let grew = peak_after.saturating_sub(peak_before);
+    assert!(
+        grew < OVERSIZED * OVERSIZED_KIB / 2,
+        "the sensor side's peak RSS grew by {grew} KiB during the flood"
+    );
+
+    let r = c.report("run.json");
+    let (received, _) = accounted(&r, STEPS);
+    assert_eq!(received, u64::from(STEPS), "{r}");
+    assert_eq!(r["ending"], "completed", "{r}");
+    let skipped = r["counts"]["skipped"].as_object().unwrap();
+    assert!(skipped.values().all(|v| v == 0), "{r}");
+    let flooded = estimates(&c.dir.join("run.csv"));
+    assert_eq!(flooded.len(), clean.len());
+    for (i, (x, y)) in clean.iter().zip(&flooded).enumerate() {
+        assert_eq!(x, y, "row {i} differs from the clean run's");
+    }
+    eprintln!(
+        "forged acks: refused by reason {}, {forged_stale} stale of {stale}; the sensor side's \
+         peak RSS grew {grew} KiB; the runner ended {ended:?} after the publisher",
+        s["refused"]
+    );
 }

@@ -35,7 +35,9 @@ struct Pending {
 pub enum Ack {
     /// It acknowledged a marker still being repeated: the repeats stop.
     Taken,
-    /// A well-formed acknowledgement of nothing pending (a second ack of the same marker).
+    /// A well-formed acknowledgement of nothing pending (a second ack of the same marker, or
+    /// one naming a marker not put, or not yet put): nothing changes, not even for a marker
+    /// of the same name put later. Counted in [`Markers::stale`].
     Stale,
 }
 
@@ -49,6 +51,8 @@ pub struct Markers {
     pub acked: u64,
     /// Markers given up on after [`RESEND_FOR`] without an acknowledgement.
     pub unacked: u64,
+    /// Well-formed acknowledgements of no pending marker ([`Ack::Stale`]).
+    pub stale: u64,
 }
 
 impl Default for Markers {
@@ -58,6 +62,7 @@ impl Default for Markers {
             last_resend: None,
             acked: 0,
             unacked: 0,
+            stale: 0,
         }
     }
 }
@@ -97,7 +102,10 @@ impl Markers {
                 self.acked += 1;
                 Ok(Ack::Taken)
             }
-            _ => Ok(Ack::Stale),
+            _ => {
+                self.stale += 1;
+                Ok(Ack::Stale)
+            }
         }
     }
 
@@ -193,6 +201,28 @@ mod tests {
         assert!(m.ack(&ma[..10]).is_err());
         assert!(!m.settled());
         assert_eq!(m.ack(&ma), Ok(Ack::Taken));
+    }
+
+    #[test]
+    fn an_ack_that_comes_before_its_marker_does_not_cancel_it() {
+        // A peer that read the stream id off `<key>/slots` can forge the echo of a node's
+        // END before the END is put: it acknowledges nothing, and the END, once put, is
+        // repeated until its own echo comes.
+        let t0 = Instant::now();
+        let mut m = Markers::default();
+        let (a, ma) = marker(1, 300, SLOT_END);
+        for _ in 0..1000 {
+            assert_eq!(m.ack(&ma), Ok(Ack::Stale));
+        }
+        assert!(m.settled());
+        m.put(&a, &ma, t0);
+        assert!(!m.settled());
+        for i in 1..5 {
+            assert_eq!(m.due(t0 + RESEND_EVERY * i), Some(ma), "repeat {i}");
+        }
+        assert_eq!(m.ack(&ma), Ok(Ack::Taken));
+        assert!(m.settled());
+        assert_eq!((m.acked, m.unacked, m.stale), (1, 0, 1000));
     }
 
     #[test]

@@ -70,6 +70,10 @@ pub struct BridgeReport {
     /// [`crate::markers::RESEND_FOR`] without an echo on `<key>/acks`, or replaced by a newer
     /// marker of the same node).
     pub markers_unacked: u64,
+    /// Sensor side: well-formed messages on `<key>/acks` that acknowledged no marker being
+    /// repeated (the echoes of a marker's repeats after the first, or acks naming another
+    /// marker, stream or node), dropped; malformed ones are in `refused`.
+    pub acks_stale: u64,
     /// Truth samples forwarded.
     pub truth: u64,
     /// Estimates forwarded.

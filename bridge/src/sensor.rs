@@ -170,7 +170,13 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
                 ended_at.get_or_insert_with(Instant::now);
             }
         }
-        while let Ok(Some(sample)) = z_acks.try_recv() {
+        // At most a burst per pass: a peer flooding `<key>/acks` faster than they are read
+        // must not keep this pass from the slots (what it left waits for the next pass).
+        for _ in 0..BURST {
+            let Ok(Some(sample)) = z_acks.try_recv() else {
+                break;
+            };
+            busy = true;
             match markers.ack(&sample.payload().to_bytes()) {
                 Ok(Ack::Taken | Ack::Stale) => {}
                 Err(reason) => report.refuse(reason),
@@ -212,6 +218,7 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
     }
     report.markers_acked = markers.acked;
     report.markers_unacked = markers.unacked;
+    report.acks_stale = markers.stale;
     drop(close_on_stop);
     close_within(session, CLOSE_WAIT);
     Ok(report)
