@@ -188,7 +188,12 @@ pub fn run(args: &BridgeArgs) -> Result<BridgeReport> {
             }
             report.marker_puts += 1;
         }
-        while let Ok(Some(sample)) = z_est.try_recv() {
+        // A burst per pass here too: estimates flooded onto `<key>/estimates` (by the far
+        // side or by a foreign peer) must not keep this pass from the slots.
+        for _ in 0..BURST {
+            let Ok(Some(sample)) = z_est.try_recv() else {
+                break;
+            };
             busy = true;
             last_estimate = Instant::now();
             match net::decode_estimate(&sample.payload().to_bytes()) {
