@@ -1,5 +1,5 @@
 //! Real-time niceties that need privileges: CPU pinning and memory locking. Both are
-//! best-effort — the outcome is reported, never fatal ([`Machine`] is what a run got).
+//! best-effort — the outcome is reported, never fatal (`Machine` is what a run got).
 
 use super::args::{RunArgs, WaitMode};
 
