@@ -30,6 +30,17 @@ use common::{prefix, scratch, Proc};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+/// The flooder `flood` ends cleanly while the publisher `publ` is still sending (a flood
+/// that outlasted the stream would not have been seen whole by the bridge under test).
+fn flood_ends_before_the_stream(flood: &mut Proc, publ: &mut Proc) {
+    let st = flood.wait(60);
+    assert!(st.success(), "flood: {st}\n{}", flood.err());
+    assert!(
+        publ.child.as_mut().unwrap().try_wait().unwrap().is_none(),
+        "the flood outlasted the stream: make it shorter"
+    );
+}
+
 /// `pipeline-node <args>` must fail with exit `code` and exactly one line on stderr, without
 /// a panic, within `secs`; its stderr.
 fn fails(dir: &Path, name: &str, args: &[&str], code: i32, secs: u64) -> String {
@@ -419,13 +430,8 @@ fn a_flood_of_foreign_messages_is_counted_by_reason_and_never_forwarded() {
     );
     flood.wait_for_stderr("flooding", 30);
     let mut publ = c.publisher("pub", STEPS, 1000);
-    let st = flood.wait(60);
-    assert!(st.success(), "flood: {st}\n{}", flood.err());
     // The flood must have been over before the stream's END, so that the bridge saw all of it.
-    assert!(
-        publ.child.as_mut().unwrap().try_wait().unwrap().is_none(),
-        "the flood outlasted the stream: make it shorter"
-    );
+    flood_ends_before_the_stream(&mut flood, &mut publ);
     let sent: serde_json::Value = serde_json::from_str(flood.out().trim()).unwrap();
     assert_ok(&mut publ, 60);
     assert_ok(&mut run, 60);
@@ -505,14 +511,9 @@ fn a_flood_of_forged_acks_is_counted_and_cancels_no_real_end() {
     flood.wait_for_stderr("reading", 30);
     let peak_before = peak_rss_kib(sen.pid());
     let mut publ = c.publisher("pub", STEPS, 1000);
-    let st = flood.wait(60);
-    assert!(st.success(), "flood: {st}\n{}", flood.err());
     // The flood must have been over before the stream's END: the forged echoes of the ENDs
     // are then acks of markers not yet sent, and the sensor side saw all of it.
-    assert!(
-        publ.child.as_mut().unwrap().try_wait().unwrap().is_none(),
-        "the flood outlasted the stream: make it shorter"
-    );
+    flood_ends_before_the_stream(&mut flood, &mut publ);
     let peak_after = peak_rss_kib(sen.pid());
     let sent: serde_json::Value = serde_json::from_str(flood.out().trim()).unwrap();
     assert_ok(&mut publ, 60);
