@@ -38,4 +38,4 @@ pub use nn::NnTbcpEstimator;
 pub use occlusion::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
 pub use sequential_kf::SequentialKf;
 pub use silence::kalman::SilenceKf;
-pub use tobit::{MirroredFusion, TobitFilter, TobitFusion};
+pub use tobit::{MirroredFusion, MomentMatchedTobit, TobitFilter, TobitFusion, TobitKf};

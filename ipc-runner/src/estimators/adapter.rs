@@ -109,6 +109,7 @@ where
     diagnostics: Diagnostics<E>,
     full_information: bool,
     cov_kind: CovarianceKind,
+    nees: bool,
 }
 
 impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
@@ -120,6 +121,7 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
             diagnostics: trace_p,
             full_information: false,
             cov_kind: CovarianceKind::Estimate,
+            nees: false,
         }
     }
 
@@ -139,6 +141,14 @@ impl<E: estimator_core::Estimator<f64, NX>, const NX: usize> Adapted<E, NX> {
     /// An oracle fed the observations before the channel ([`Estimator::full_information`]).
     pub(crate) fn with_full_information(mut self, full_information: bool) -> Self {
         self.full_information = full_information;
+        self
+    }
+
+    /// Reports `nees` = eᵀP⁻¹e against the truth and `inside_95` (the error inside the 95 %
+    /// ellipse of P) in evaluation, as the Tobit views do: opt-in, so that the JSON of the
+    /// estimators that never reported them stays as it was.
+    pub(crate) fn with_nees(mut self) -> Self {
+        self.nees = true;
         self
     }
 
@@ -267,6 +277,20 @@ where
             sink("gate_tested", f64::from(s.counts.tested));
             sink("gate_rejected", f64::from(s.counts.rejected));
             sink("gate_forced", f64::from(s.forced));
+        }
+    }
+
+    fn diagnostics_vs_truth(&self, truth: &[f64], sink: &mut dyn FnMut(&'static str, f64)) {
+        if !self.nees || NX > super::tobit::CHI2_95.len() {
+            return;
+        }
+        let (x, p) = self.core().estimate().into_parts();
+        let e = nalgebra::SVector::<f64, NX>::from_column_slice(&truth[..NX]) - x;
+        if let Ok(pe) = estimator_core::linalg::solve_spd(&p, &e, "covariance") {
+            let nees = e.dot(&pe);
+            sink("nees", nees);
+            let inside = nees <= super::tobit::CHI2_95[NX - 1];
+            sink("inside_95", f64::from(u8::from(inside)));
         }
     }
 
