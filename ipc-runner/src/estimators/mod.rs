@@ -28,6 +28,7 @@ pub mod silence_kf;
 mod slots;
 mod snapshot;
 pub mod tobit;
+pub mod tobit_central;
 
 use std::sync::Arc;
 
@@ -156,6 +157,7 @@ pub const FACTORIES: &[Factory] = &[
     pf::build,
     nn::build,
     tobit::build,
+    tobit_central::build,
     silence_kf::build,
 ];
 
