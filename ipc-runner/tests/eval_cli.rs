@@ -214,3 +214,52 @@ fn eval_defaults_to_occlusion_and_takes_horizon_for_steps() {
     assert_eq!(a, b, "--horizon and --steps differ");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--paired NAME`: a name that was not run is a one-line usage error; otherwise a table of
+/// every other estimator's paired difference, whose difference is the difference of the
+/// two averages (every run valid: the pairs are all runs).
+#[test]
+fn paired_differences_from_a_named_estimator() {
+    assert_usage_error(
+        &ipc_runner(&[
+            "eval", "--scenario", "linear", "--runs", "4", "--steps", "10", "--paired", "nope",
+        ]),
+        "--paired nope: not one of the estimators run",
+    );
+    let dir = temp_dir("paired");
+    let json = dir.join("e.json");
+    let out = ipc_runner(&[
+        "eval",
+        "--scenario",
+        "linear",
+        "--runs",
+        "40",
+        "--steps",
+        "50",
+        "--quiet",
+        "--paired",
+        "kf",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let table = stdout
+        .split("paired differences from kf")
+        .nth(1)
+        .expect("the paired table");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let avg = |n: &str| v["estimators"][n]["avg_mse"].as_f64().unwrap();
+    let row = table
+        .lines()
+        .find(|l| l.starts_with("ikf "))
+        .expect("an ikf row");
+    let diff: f64 = row.split_whitespace().nth(1).unwrap().parse().unwrap();
+    assert!(
+        (diff - (avg("ikf") - avg("kf"))).abs() < 1e-5,
+        "{row}: {} − {}",
+        avg("ikf"),
+        avg("kf")
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -73,6 +73,11 @@ pub struct EvalArgs {
     /// "Late packets").
     #[arg(long, value_name = "DIST")]
     pub transport_delay: Option<super::delay::Delay>,
+    /// Print every estimator's paired difference from the estimator NAME over the same runs
+    /// (mean of the per-run differences of the run-averaged MSE, its standard error, and the
+    /// difference relative to NAME), under the summary. NAME must be one of the estimators run.
+    #[arg(long, value_name = "NAME")]
+    pub paired: Option<String>,
     /// The estimators and their options (as in `run`, `demo` and `replay`); the summary and
     /// JSON count the gate's rejections.
     #[command(flatten)]
@@ -239,6 +244,14 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         .estimator
         .select(&all, scenario.name(), Feed::Simulation)
         .map_err(CommandError::usage)?;
+    if let Some(reference) = &args.paired {
+        if !options.estimators.iter().any(|n| n == reference) {
+            return Err(CommandError::usage(format!(
+                "--paired {reference}: not one of the estimators run ({})",
+                options.estimators.join(", ")
+            )));
+        }
+    }
     let run_config = RunConfig {
         // Always a count: rayon would read RAYON_NUM_THREADS again, unchecked.
         threads: Some(threads),
@@ -275,6 +288,9 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         failures.push(format!("{e:#}"));
     }
     estpipe_process::out!("{}", result.summary());
+    if let Some(reference) = &args.paired {
+        estpipe_process::out!("{}", super::paired::table(&result, reference));
+    }
     let mut wrote = Vec::new();
     if let Some(path) = &args.json {
         match write(path, &result.to_json()) {

@@ -51,6 +51,7 @@
 pub mod cli;
 pub mod delay;
 pub mod nn_bound;
+pub mod paired;
 pub mod report;
 
 use anyhow::Context as _;

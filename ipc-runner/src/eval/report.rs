@@ -611,11 +611,14 @@ impl EvalResult {
                 let avg = |v: &[f64]| v[1..].iter().sum::<f64>() / t as f64;
                 let worst = inside[1..].iter().copied().fold(f64::INFINITY, f64::min);
                 let above = (1..=t).filter(|&k| r.mse[k] > tr[k]).count();
+                let anees = get("nees").map_or(String::new(), |v| {
+                    format!("; ANEES {:.3} (n_x = {})", avg(v), r.mse_per_state.len())
+                });
                 let _ = writeln!(
                     s,
                     "{name}: error inside its 95 % ellipse in {:.2} % of run-instants (worst k: \
                      {:.1} %); avg MSE {:.4} vs avg tr P {:.4}; MSE(k) > tr P(k) at {above} of \
-                     {t} instants",
+                     {t} instants{anees}",
                     100.0 * avg(inside),
                     100.0 * worst,
                     r.avg_mse,
