@@ -11,7 +11,8 @@ pub enum Role {
     /// The product's own estimator or option beside the faithful one (adf, the `-mix`,
     /// `-predict`, `-silence`, `-sl` readings, `ekf-std`, the innovation gate).
     Product,
-    /// What a practitioner would run instead (kf, ikf, kf-io, ekf and the textbook filters).
+    /// What a practitioner would run instead (kf, ikf, kf-io, ekf, tobit-kf and the textbook
+    /// filters).
     Baseline,
     /// The particle filter: near-optimal and slow, the yardstick.
     Reference,
@@ -27,7 +28,9 @@ impl Role {
         match base {
             "cce" | "nn" | "fused" | "tobit-1" | "tobit-2" | "tobit-3" => Self::Paper,
             "pf" | "pf-mix" => Self::Reference,
-            "kf" | "ikf" | "kf-io" | "ekf" | "kf-indep" | "ekf-indep" => Self::Baseline,
+            "kf" | "ikf" | "kf-io" | "ekf" | "kf-indep" | "ekf-indep" | "tobit-kf" => {
+                Self::Baseline
+            }
             _ => Self::Product,
         }
     }
@@ -96,6 +99,9 @@ mod tests {
             ("fused-sl", Role::Product),
             ("kf-silence", Role::Product),
             ("fused+gate", Role::Product),
+            ("tobit-kf", Role::Baseline),
+            ("tobit-cmm", Role::Product),
+            ("tobit-cmm-silence", Role::Product),
         ] {
             assert_eq!(Role::of(n), r, "{n}");
         }
