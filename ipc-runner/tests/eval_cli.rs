@@ -222,7 +222,15 @@ fn eval_defaults_to_occlusion_and_takes_horizon_for_steps() {
 fn paired_differences_from_a_named_estimator() {
     assert_usage_error(
         &ipc_runner(&[
-            "eval", "--scenario", "linear", "--runs", "4", "--steps", "10", "--paired", "nope",
+            "eval",
+            "--scenario",
+            "linear",
+            "--runs",
+            "4",
+            "--steps",
+            "10",
+            "--paired",
+            "nope",
         ]),
         "--paired nope: not one of the estimators run",
     );
@@ -242,7 +250,11 @@ fn paired_differences_from_a_named_estimator() {
         "--json",
         json.to_str().unwrap(),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     let table = stdout
         .split("paired differences from kf")

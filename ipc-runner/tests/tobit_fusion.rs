@@ -251,7 +251,9 @@ fn central(scenario: &dyn Scenario, runs: u64, transport_loss: f64) -> Central {
         let (m, s) = mean_se(&c.run_avg[j]);
         let (a, sa) = mean_se(&c.nees[j]);
         let (i, si) = mean_se(&c.inside[j]);
-        println!("{name}: avg MSE {m:.5} ± {s:.5}, ANEES {a:.3} ± {sa:.3}, inside 95 % {i:.4} ± {si:.4}");
+        println!(
+            "{name}: avg MSE {m:.5} ± {s:.5}, ANEES {a:.3} ± {sa:.3}, inside 95 % {i:.4} ± {si:.4}"
+        );
     }
     c
 }
@@ -283,12 +285,20 @@ fn centralised_filters_at_the_information_bound() {
     for (a, b) in [(3, 2), (2, 1)] {
         let (d, s) = c.paired(a, b);
         println!("{} − {} = {d:.5} ± {s:.5} (paired)", CENTRAL[a], CENTRAL[b]);
-        assert!(d + 3.0 * s < 0.0, "{} − {} = {d} ± {s}", CENTRAL[a], CENTRAL[b]);
+        assert!(
+            d + 3.0 * s < 0.0,
+            "{} − {} = {d} ± {s}",
+            CENTRAL[a],
+            CENTRAL[b]
+        );
     }
     let (d, s) = c.paired(1, 0);
     assert!(d + 10.0 * s < 0.0, "tobit-kf − fused-predict = {d} ± {s}");
     let (a, sa) = mean_se(&c.nees[3]);
-    assert!(a + 3.0 * sa >= 1.8 && a - 3.0 * sa <= 2.2, "ANEES {a} ± {sa}");
+    assert!(
+        a + 3.0 * sa >= 1.8 && a - 3.0 * sa <= 2.2,
+        "ANEES {a} ± {sa}"
+    );
     let (i, si) = mean_se(&c.inside[3]);
     assert!(i + 3.0 * si >= 0.94, "inside 95 %: {i} ± {si}");
 }
@@ -318,6 +328,9 @@ fn the_silence_reading_filter_off_the_example() {
         println!("tobit-cmm-silence − tobit-cmm = {d:.5} ± {s:.5} (paired)");
         assert!(d - 3.0 * s <= 0.0, "{what}: {d} ± {s}");
         let (a, sa) = mean_se(&c.nees[3]);
-        assert!(a + 3.0 * sa >= 1.8 && a - 3.0 * sa <= 2.2, "{what}: ANEES {a} ± {sa}");
+        assert!(
+            a + 3.0 * sa >= 1.8 && a - 3.0 * sa <= 2.2,
+            "{what}: ANEES {a} ± {sa}"
+        );
     }
 }
