@@ -43,6 +43,7 @@ fn estimator_steps_do_not_allocate() {
     nn_tbcp_section();
     tobit_fusion_section();
     silence_section();
+    information_bound_section();
 }
 
 /// Seed 001 (issue 4): CCE, ADF and KF-IO steps on the paper's example, arrivals, dropouts
@@ -324,4 +325,92 @@ fn silence_section() {
     });
     assert!(ok);
     assert_eq!(n, 0, "{n} heap allocations in 10 000 silence-reading steps");
+}
+
+/// The centralised filters of docs/tobit-fusion.md "At the information bound": the
+/// moment-matched filter reading held silences (`tobit-cmm-silence`) and the Tobit Kalman
+/// filter, over 10 000 instants of the example's protocol, error paths included.
+fn information_bound_section() {
+    use estimator_core::filter::silence::TriggeredPackets;
+    use estimator_core::filter::{GatedStep, InnovationGate, MomentMatchedTobit, TobitKf};
+    use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
+    use estimator_core::protocol::shared_token_bucket::{
+        SharedTokenBucket, TriggeredBucketScheduler,
+    };
+    use estimator_core::protocol::trigger_knowledge::TriggerKnowledge;
+    use estimator_core::{Estimate, OnModel, Packet};
+
+    let w = 0.052 * core::f64::consts::PI;
+    let a = matrix![w.cos(), w.sin(); -w.sin(), w.cos()];
+    let b = matrix![0.16, 0.0; 0.18, 0.0];
+    let model = LinearModel::<f64, 2, 2, 2, 2>::new(
+        a,
+        b,
+        SMatrix::identity(),
+        SMatrix::identity(),
+        SMatrix::identity() * 0.05,
+        SMatrix::identity() * 0.5,
+    )
+    .unwrap();
+    let tau = vector![0.0, 0.0];
+    let trig = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)]
+        .map(|(s, l)| EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5).unwrap());
+    let bucket = SharedTokenBucket::<3>::new(10, 5, 30, [3, 3, 3]).unwrap();
+    let prior = Estimate::new(vector![5.0, 0.0], SMatrix::identity()).unwrap();
+    let knowledge = trig.map(|t| TriggerKnowledge::new(t, tau).unwrap());
+    let mut cmm = OnModel::<_, _, 2>::new(
+        [model; 3],
+        MomentMatchedTobit::new(prior, [tau; 3], knowledge, bucket, true).unwrap(),
+    );
+    let mut tkf = OnModel::<_, _, 2>::new([model; 3], TobitKf::new(prior, [tau; 3]).unwrap());
+    let gate = InnovationGate::chi2(0.99).unwrap();
+    let mut sched =
+        TriggeredBucketScheduler::new(trig.map(|t| EventTrigger::new(t, tau).unwrap()), bucket);
+    let (n, ok) = ALLOC.count(|| {
+        let mut ok = true;
+        let mut x = vector![5.0, 0.0];
+        for k in 1..=10_000usize {
+            x = a * x;
+            let s = k as f64;
+            let ys = [0.3, 0.7, 1.1].map(|p| {
+                vector![
+                    (x[0] + (p * s).sin() * 0.3).max(0.0),
+                    (x[1] + (p * s).cos() * 0.3).max(0.0)
+                ]
+            });
+            let level = sched.bucket().level();
+            let Ok(d) = sched.step(&ys) else {
+                return false;
+            };
+            let packets: [Packet<f64, 2>; 3] = [0, 1, 2].map(|m| match (d[m].sent, k % 97) {
+                (true, _) => Packet::Delivered(ys[m]),
+                (false, 0) => Packet::Lost,
+                _ => Packet::Dropped,
+            });
+            let triggered = TriggeredPackets {
+                packets,
+                level: d.iter().any(|d| d.sent).then_some(level),
+            };
+            ok &= cmm.step_gated(k, &triggered, &gate).is_ok();
+            ok &= tkf.step_gated(k, &packets, &gate).is_ok();
+            // Error paths: a NaN measurement is refused without allocating.
+            let bad = [
+                Packet::Delivered(vector![f64::NAN, 0.0]),
+                Packet::Dropped,
+                Packet::Dropped,
+            ];
+            let bad_triggered = TriggeredPackets {
+                packets: bad,
+                level: None,
+            };
+            ok &= cmm.step_gated(k + 1, &bad_triggered, &gate).is_err();
+            ok &= tkf.step_gated(k + 1, &bad, &gate).is_err();
+        }
+        ok
+    });
+    assert!(ok);
+    assert_eq!(
+        n, 0,
+        "{n} heap allocations in 10 000 centralised Tobit steps"
+    );
 }
