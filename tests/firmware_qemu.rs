@@ -126,6 +126,15 @@ const BINS: &[(&str, HostRun, usize, usize)] = &[
         56 * 1024,
         8 * 1024,
     ),
+    // The product's flagship for seed 004, `tobit-cmm-silence` (one centralised filter, no
+    // local filters): held to 40 KiB of flash (12 KB of it the stream) and 4 KiB of stack, as
+    // a regression guard.
+    (
+        "tobit-cmm",
+        || run::run_tobit_cmm(&tobit_stream(), usize::MAX),
+        40 * 1024,
+        4 * 1024,
+    ),
     (
         "kf3x2",
         || peers::run_kf3x2(&stream(), usize::MAX),
@@ -466,6 +475,89 @@ fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
 /// f32 carries 24 bits; 1e-4 relative to the state's or the bound's scale is a few hundred
 /// ulps, far below any real difference between filters.
 const TOL_TOBIT: f64 = 1e-4;
+
+/// The `tobit-cmm` firmware runs the product's flagship for seed 004 as the pipeline runs it:
+/// over the embedded stream its f32 x̂ and trace P track, instant by instant, the f64
+/// `tobit-cmm-silence` that ipc-runner builds from the `tobit-fusion` preset (through its
+/// public `Estimator` interface), and the two read the same silences as held and blocked.
+#[test]
+fn host_f32_tobit_cmm_matches_f64_from_the_preset() {
+    use channel_sim::Observation;
+    use ipc_runner::estimators::{tobit_central, EvalOptions};
+
+    let scenario = channel_sim::scenario::preset("tobit-fusion").unwrap();
+    let mut views = ipc_runner::source::build_for_scenario(
+        &[tobit_central::build],
+        &*scenario,
+        &EvalOptions::default(),
+        0,
+        0,
+    )
+    .unwrap();
+    views.retain(|v| v.name() == tobit_central::CMM_SILENCE_NAME);
+    assert_eq!(views.len(), 1);
+    let s = tobit_stream();
+    let mut f32_run = run::TobitCmm::silence().unwrap();
+    let (mut worst_x, mut worst_p) = (0.0f64, 0.0f64);
+    let mut diag = [0.0; 3];
+    for r in s.records() {
+        let obs: Vec<Observation> = r
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(m, slot)| Observation {
+                k: r.k,
+                node: m as u8,
+                delivered: slot.delivered,
+                ny: 2,
+                y: [f64::from(slot.y[0]), f64::from(slot.y[1]), 0.0, 0.0],
+                flags: slot.flags,
+                tokens: None,
+            })
+            .collect();
+        let view = &mut views[0];
+        view.step(r.k, &obs).unwrap();
+        let mut x64 = [0.0; 2];
+        view.estimate(&mut x64);
+        let mut trace64 = 0.0;
+        view.diagnostics(&mut |name, v| match name {
+            "trace_p" => trace64 = v,
+            "silence_held" => diag[0] = v,
+            "silence_blocked" => diag[1] = v,
+            "silence_unusable" => diag[2] = v,
+            _ => {}
+        });
+        let x64 = nalgebra::Vector2::from(x64);
+        let y: [Packet<f32, 2>; 3] = r
+            .nodes
+            .map(|slot| Packet::from(slot.delivered.then(|| nalgebra::Vector2::from(slot.y))));
+        f32_run.step(r.k as usize, &y).unwrap();
+        let (x32, p32) = (f32_run.estimate().state(), f32_run.estimate().covariance());
+        worst_x = worst_x.max((x32.map(f64::from) - x64).norm() / x64.norm().max(1.0));
+        worst_p = worst_p.max((f64::from(p32.trace()) - trace64).abs() / trace64);
+    }
+    let c = f32_run.filter.counts();
+    println!(
+        "tobit-cmm: f32 vs f64 tobit-cmm-silence, worst relative difference x̂ {worst_x:.2e}, \
+         trace P {worst_p:.2e}; silences held {}, blocked {}, unusable {}",
+        c.held, c.blocked, c.unusable
+    );
+    assert_eq!(
+        [c.held, c.blocked, c.unusable].map(f64::from),
+        diag,
+        "the silences read"
+    );
+    assert!(c.held > 0 && c.blocked > 0, "{c:?}");
+    assert!(worst_x <= TOL_TOBIT, "x̂ differs by {worst_x:.2e} relative");
+    assert!(
+        worst_p <= TOL_TOBIT,
+        "trace P differs by {worst_p:.2e} relative"
+    );
+    // The whole-stream driver is this very computation.
+    let full = run::run_tobit_cmm(&s, usize::MAX);
+    assert_eq!((full.errors, full.steps), (0, 200));
+    assert_eq!(&full.x()[..2], f32_run.estimate().state().as_slice());
+}
 
 /// Seed 001's model in f64, written out here independently of the firmware's `run::model`.
 fn model_f64() -> LinearModel<f64, 3, 3, 2, 2> {

@@ -7,14 +7,15 @@ use estimator_core::filter::coupled_kf::{CoupledNoiseKf, Linearisation};
 use estimator_core::filter::nn::{GainSolver, NnBoundConfig};
 use estimator_core::filter::silence::TriggeredPackets;
 use estimator_core::filter::tobit::{BoundScalars, Silence, TobitFilterConfig};
-use estimator_core::filter::MirroredFusion;
 use estimator_core::filter::{AssumedDensityFilter, CrossCoupledEstimator, KfIo, TobitFusion};
+use estimator_core::filter::{MirroredFusion, MomentMatchedTobit};
 use estimator_core::gsum::GaussSum;
 use estimator_core::papers::Seed001Example;
 use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::protocol::event_trigger::{EventTrigger, EventTriggerConfig};
 use estimator_core::protocol::shared_token_bucket::{SharedTokenBucket, TriggeredBucketScheduler};
-use estimator_core::{Estimator, OnModel, Packet, Real, Result};
+use estimator_core::protocol::trigger_knowledge::TriggerKnowledge;
+use estimator_core::{Estimate, Estimator, OnModel, Packet, Real, Result};
 use nalgebra::{matrix, vector, SMatrix, SVector};
 use std::hint::black_box;
 
@@ -260,6 +261,58 @@ pub fn tobit_silence_kernel<T: Real>(form: Silence, tag: &str) -> (String, StepF
     )
 }
 
+/// The product's centralised filter at the information bound (docs/tobit-fusion.md, "At the
+/// information bound"): one `MomentMatchedTobit` step from the fixed state of
+/// [`tobit_kernel`] (x̂ = [5 0]ᵀ, P = I, the same matrices and packets: nodes 1 and 3 deliver,
+/// node 2 silent with a token), reading the held silence (`silence`, `tobit-cmm-silence`,
+/// the firmware's `tobit-cmm`) or not (`plain`, `tobit-cmm`).
+pub fn tobit_cmm_kernel<T: Real>(reads_silence: bool, tag: &str) -> (String, StepFn) {
+    let w = 0.052 * core::f64::consts::PI;
+    let a = matrix![w.cos(), w.sin(); -w.sin(), w.cos()].map(T::lit);
+    let b = vector![0.16, 0.18];
+    let bqb = (b * b.transpose() * 0.05).map(T::lit);
+    let nodes = [(
+        SMatrix::<T, 2, 2>::identity(),
+        vector![0.5, 0.5].map(T::lit),
+    ); 3];
+    let tau = SVector::<T, 2>::zeros();
+    let knowledge = [(0.1, 0.1), (0.2, 0.2), (0.3, 0.1)].map(|(s, l)| {
+        let t = EventTriggerConfig::new_allowing_paper_violation(s, 5.0, l, 1.5)
+            .and_then(|c| c.cast::<T>())
+            .expect("valid");
+        TriggerKnowledge::new(t, tau).expect("valid")
+    });
+    let prior = Estimate::new(vector![T::lit(5.0), T::zero()], SMatrix::identity()).expect("valid");
+    let bucket = SharedTokenBucket::<3>::new(10, 5, 30, [3, 3, 3]).expect("valid");
+    let filter =
+        MomentMatchedTobit::<T, 2, 2, 3>::new(prior, [tau; 3], knowledge, bucket, reads_silence)
+            .expect("valid");
+    let y = [vector![4.8, 0.2], vector![4.9, 0.3]].map(|v| v.map(T::lit));
+    let packets = TriggeredPackets {
+        packets: [
+            Packet::Delivered(y[0]),
+            Packet::Dropped,
+            Packet::Delivered(y[1]),
+        ],
+        level: None,
+    };
+    let name = if reads_silence { "silence" } else { "plain" };
+    (
+        format!("tobit_cmm_step/{name}_l3_2x2_{tag}"),
+        Box::new(move || {
+            let mut f = black_box(filter);
+            f.step_matrices(
+                black_box(&a),
+                black_box(&bqb),
+                black_box(&nodes),
+                black_box(&packets),
+            )?;
+            black_box(f);
+            Ok(())
+        }),
+    )
+}
+
 /// Seed 004's sensor side for one instant: three event triggers sharing one token bucket,
 /// from a fixed state.
 pub fn tobit_protocol_kernel<T: Real>(tag: &str) -> (String, StepFn) {
@@ -301,6 +354,10 @@ pub fn all_kernels() -> Vec<(String, StepFn)> {
     for form in [Silence::TruncatedGaussian, Silence::PseudoMeasurement] {
         k.push(tobit_silence_kernel::<f64>(form, "f64"));
         k.push(tobit_silence_kernel::<f32>(form, "f32"));
+    }
+    for reads_silence in [true, false] {
+        k.push(tobit_cmm_kernel::<f64>(reads_silence, "f64"));
+        k.push(tobit_cmm_kernel::<f32>(reads_silence, "f32"));
     }
     k
 }

@@ -26,7 +26,8 @@
 //!   filters evaluate the one interval nearest the predicted `u` (the ADF's truncated
 //!   moments, the KF-IO's gap) and skip the others by their bound tests, whose arithmetic is
 //!   counted; the CCE scores every region (eq. 15) and sums the exponentials of the one it
-//!   chooses (eq. 17).
+//!   chooses (eq. 17); the moment-matched Tobit filter is counted for what its instant reads
+//!   ([`CmmInstant`]: observed and censored components, held silences and their boxes).
 
 use core::ops::{Add, Mul};
 
@@ -497,6 +498,130 @@ pub fn tobit2(l: usize, received: usize) -> Ops {
     tobit_local(2, true) * received + tobit_local(2, false) * (l - received) + tobit_fusion2(l)
 }
 
+/// What one instant of the centralised moment-matched Tobit filter reads, which its work
+/// depends on ([`tobit_cmm`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CmmInstant {
+    /// Delivered components above their threshold: (C1) each.
+    pub observed: usize,
+    /// Delivered components at their threshold: (C2)-(C3) each.
+    pub censored: usize,
+    /// Silences the filter reads as held: (S4)-(S6) on the silence box.
+    pub held: usize,
+    /// Axes of those boxes bounded on both sides (the others, whose ball reaches the
+    /// censoring threshold, are half-lines).
+    pub bounded: usize,
+}
+
+/// The scalar projections of one component `z = c x + v`: `g = P c`, `s = c·g + r`,
+/// `μ = c·x̂`.
+fn component_marginal(n: usize) -> Ops {
+    prod(n, n, 1) + prod(1, n, 1) + Ops::arith(0, 1, 0, 0) + prod(1, n, 1)
+}
+
+/// The moments of a standard normal below `b`: `Φ(b)`, `φ(b)`, `λ = φ/Φ`, the mean `−λ` and
+/// `1 − v = λ (λ + b)`.
+fn half_line_moments() -> Ops {
+    normal_cdf() + normal_pdf() + Ops::arith(1, 1, 1, 1)
+}
+
+/// (C1) on one observed component: `d = y − μ`, `k = g/s`, `x̂ += k d`, `P −= k gᵀ` on the
+/// upper triangle.
+fn cmm_observed(n: usize) -> Ops {
+    component_marginal(n) + Ops::arith(n + n + tri(n), n, 1 + tri(n), 1)
+}
+
+/// (C2)-(C3) on one censored component: `√s`, `1/√s`, `b = (τ − μ)/√s`, the moments below
+/// `b`, `x̂ += g (−λ/√s)`, `P −= ((1 − v)/s) g gᵀ` on the upper triangle.
+fn cmm_censored(n: usize) -> Ops {
+    let standardise = Ops {
+        sqrt: 1,
+        ..Ops::arith(1, 0, 1, 1)
+    };
+    let shift_shrink = Ops::arith(1 + 2, 0, 0, 0);
+    component_marginal(n)
+        + standardise
+        + half_line_moments()
+        + shift_shrink
+        + Ops::arith(n + n + tri(n), n, tri(n), 0)
+}
+
+/// One held silence on `ny` axes, every axis a half-line (`bounded` adds the other end): the
+/// ball's radius `η̄ (1/χ) + σ`, the box's ends `ȳ ± r̄`; `μ = C x̂`, `G = P Cᵀ`,
+/// `S = C G + R` on its upper triangle (R diagonal); per axis j `√S_jj`, `1/√S_jj`,
+/// `b = (u_j − μ_j)/√S_jj`, the truncated moments, `shift = √S_jj m`, `f = (1 − v) S_jj`,
+/// `k_x = G_j/S_jj`, `x̂ += k_x shift`, `P −= (f k_x) k_xᵀ`, and for each later axis i
+/// `k_z,i = S_ij/S_jj`, `μ_i += k_z,i shift`, `G_i −= (f k_x) k_z,i` and `S` among the later
+/// axes `−= (f k_z,i) k_z,i'`.
+fn cmm_held(n: usize, ny: usize) -> Ops {
+    let ball = Ops::arith(1, 1, 0, 0) + Ops::arith(0, ny, ny, 0);
+    let joint = prod(ny, n, 1) + prod(n, n, ny) + sym_prod(ny, n) + Ops::arith(0, ny, 0, 0);
+    let mut ops = ball + joint;
+    for j in 0..ny {
+        let later = ny - 1 - j;
+        let axis = Ops {
+            sqrt: 1,
+            ..Ops::arith(1, 0, 1, 1)
+        } + half_line_moments()
+            + Ops::arith(1 + 1 + 1 + n, 0, 0, 0)
+            + Ops::arith(n, n, 0, 0)
+            + Ops::arith(n + tri(n), 0, tri(n), 0);
+        let coupled =
+            Ops::arith(1 + 1 + n + 1, 1, n, 0) * later + Ops::arith(tri(later), 0, tri(later), 0);
+        ops = ops + axis + coupled;
+    }
+    ops
+}
+
+/// What a bounded axis of a held box adds to a half-line: the lower end standardised
+/// (`a = (ℓ_j − μ_j)/√S_jj`, its `Φ` and `φ`), and `Z = Φ(b) − Φ(a)`, `1/Z`,
+/// `m = (φ(a) − φ(b))/Z`, `1 − v = (bφ(b) − aφ(a))/Z + m²` (5 mul, 1 add, 3 sub, 1 div) in
+/// place of the half-line's `λ`, `−λ`, `λ (λ + b)` (1 mul, 1 add, 1 sub, 1 div).
+fn cmm_bounded_axis() -> Ops {
+    normal_cdf() + normal_pdf() + Ops::arith(1 + 4, 0, 1 + 2, 0)
+}
+
+/// One instant of the centralised moment-matched Tobit filter (docs/tobit-fusion.md, "At the
+/// information bound") on `n` states, `l` nodes of `ny` components each: the Kalman
+/// prediction; (C1) on every observed component, (C2)-(C3) on every censored one; every
+/// node's trigger knowledge (a node that sent: `‖ȳ − y‖`, `χ(‖ε‖ − σ)`, `η̄ ← λ η̄ + σ`; a
+/// silent one: `η̄ ← λ η̄ + σ`); and (S4)-(S6) on every held silence read. The bucket mirror
+/// is integer work, not counted.
+pub fn tobit_cmm(n: usize, ny: usize, l: usize, w: CmmInstant) -> Ops {
+    let sent = (w.observed + w.censored) / ny;
+    let delivered = Ops {
+        sqrt: 1,
+        ..Ops::arith(ny + 1 + 1, ny - 1 + 1, ny + 1, 0)
+    };
+    let silent = Ops::arith(1, 1, 0, 0);
+    kf_predict(n)
+        + cmm_observed(n) * w.observed
+        + cmm_censored(n) * w.censored
+        + delivered * sent
+        + silent * (l - sent)
+        + cmm_held(n, ny) * w.held
+        + cmm_bounded_axis() * w.bounded
+}
+
+/// [`tobit_cmm`] on seed 004's example (3 nodes, 2 states, 2 components) for what the
+/// firmware's branch code tells: `sent` nodes delivered, `censored` of them with a censored
+/// component, `held` silences read. The floor is the least work of such a step: one censored
+/// component per censored node, every held box open below on both axes (the commonest box
+/// on the example's stream, whose silence balls mostly reach τ = 0).
+pub fn tobit_cmm2(sent: usize, censored: usize, held: usize) -> Ops {
+    tobit_cmm(
+        2,
+        2,
+        3,
+        CmmInstant {
+            observed: 2 * sent - censored,
+            censored,
+            held,
+            bounded: 0,
+        },
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -574,6 +699,56 @@ mod tests {
         assert_eq!(
             of(tobit2(3, 0)),
             ([492, 195, 47, 19], [6, 6, 0, 12, 0, 0, 0])
+        );
+    }
+
+    /// The moment-matched Tobit filter's pieces on n = 2, counted by hand: an observed
+    /// component (g 4 + 2, s 2 + 2, μ 2 + 1, k 2, x̂ 2 + 2, P 3 + 3, d, 1/s); a censored one
+    /// (the same projections, √s and 1/√s, b, Φ and φ, λ, −λ, λ (λ + b), the shift and
+    /// shrink, x̂ 2 + 2, P 2 + 3 + 3); a held silence on two half-lines; a bounded axis.
+    #[test]
+    fn the_moment_matched_tobit_filter() {
+        assert_eq!(of(cmm_observed(2)), ([15, 7, 4, 1], [0; 7]));
+        assert_eq!(of(cmm_censored(2)), ([25, 8, 5, 2], [1, 1, 0, 1, 0, 0, 0]));
+        assert_eq!(of(cmm_held(2, 2)), ([63, 21, 15, 4], [2, 2, 0, 2, 0, 0, 0]));
+        assert_eq!(
+            of(cmm_bounded_axis()),
+            ([10, 0, 3, 0], [0, 1, 0, 1, 0, 0, 0])
+        );
+        // Nothing read: the prediction (18 + 12) and three silent nodes' η̄.
+        assert_eq!(of(tobit_cmm2(0, 0, 0)), ([21, 15, 0, 0], [0; 7]));
+        assert_eq!(
+            of(tobit_cmm2(0, 0, 3)),
+            ([210, 78, 45, 12], [6, 6, 0, 6, 0, 0, 0])
+        );
+        assert_eq!(
+            of(tobit_cmm2(3, 0, 0)),
+            ([120, 60, 33, 6], [3, 0, 0, 0, 0, 0, 0])
+        );
+        assert_eq!(
+            of(tobit_cmm2(3, 3, 0)),
+            ([150, 63, 36, 9], [6, 3, 0, 3, 0, 0, 0])
+        );
+        // A bounded axis adds its piece; a second censored component of a node replaces an
+        // observed one.
+        let w = CmmInstant {
+            observed: 3,
+            censored: 1,
+            held: 1,
+            bounded: 1,
+        };
+        assert_eq!(
+            tobit_cmm(2, 2, 3, w),
+            tobit_cmm2(2, 1, 1) + cmm_bounded_axis()
+        );
+        let two = CmmInstant {
+            observed: 0,
+            censored: 2,
+            ..CmmInstant::default()
+        };
+        assert_eq!(
+            tobit_cmm(2, 2, 3, two) + cmm_observed(2),
+            tobit_cmm2(1, 1, 0) + cmm_censored(2)
         );
     }
 }

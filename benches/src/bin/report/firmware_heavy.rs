@@ -1,5 +1,5 @@
-//! Part `firmware`, issue #37: the heavy estimators (CCE, ADF, KF-IO, NN, Tobit fusion)
-//! against their floor, branch by branch: the operations their equations need
+//! Part `firmware`, issue #37: the heavy estimators (CCE, ADF, KF-IO, NN, Tobit fusion, the
+//! centralised moment-matched Tobit filter) against their floor, branch by branch: the operations their equations need
 //! (`estimator_core::floor`, whose tests hold the figures), each special-function call priced
 //! at what one costs on the M4 (the per-function profile, `.ci/firmware-profile`), beside the
 //! completed steps of that branch as `.ci/firmware` counted them in both builds
@@ -7,7 +7,7 @@
 
 use crate::firmware::Csv;
 use crate::prose;
-use estimator_core::floor::{adf, cce, kf_io, nn_seed003, tobit2, Ops};
+use estimator_core::floor::{adf, cce, kf_io, nn_seed003, tobit2, tobit_cmm2, Ops};
 use std::fmt::Write as _;
 
 /// Instructions of one call on the Cortex-M4 in the speed build, the callees included
@@ -55,7 +55,9 @@ fn call_list(o: &Ops) -> String {
 }
 
 /// The firmware's dimensions: seed 001's 3 states, 2 measurements, 4 regions, 15 Gaussians;
-/// seed 003's example; seed 004's 3 nodes on 2 states.
+/// seed 003's example; seed 004's 3 nodes on 2 states. `key` is `.ci/firmware`'s: 1 for an
+/// arrival, 0 for a dropout; for `tobit` the nodes that sent; for `tobit-cmm` 100 × the nodes
+/// that sent + 10 × those of them censored + the silences held.
 fn branch(bin: &str, key: usize) -> Option<(String, Ops)> {
     let arrival = key == 1;
     let word = if arrival { "arrival" } else { "dropout" };
@@ -65,6 +67,16 @@ fn branch(bin: &str, key: usize) -> Option<(String, Ops)> {
         "kf-io" => (word.into(), kf_io(3, 4)),
         "nn" => (format!("{word} (γ_k = 1)"), nn_seed003(true, arrival)),
         "tobit" => (format!("{key} of 3 nodes sent"), tobit2(3, key)),
+        "tobit-cmm" => {
+            let (sent, censored, held) = (key / 100, key / 10 % 10, key % 10);
+            if sent > 3 || censored > sent || held + sent > 3 {
+                return None;
+            }
+            (
+                format!("{sent} of 3 sent, {censored} censored, {held} held"),
+                tobit_cmm2(sent, censored, held),
+            )
+        }
         _ => return None,
     })
 }
@@ -143,15 +155,25 @@ mod tests {
             priced(&nn_seed003(true, true)),
             900 + 8 * 51 + 2890 + 6 * 105
         );
+        // The moment-matched Tobit filter, 3 nodes sent with a censored component each:
+        // 258 operations, 6 sqrt, 3 exp, 3 erfc.
+        assert_eq!(
+            priced(&tobit_cmm2(3, 3, 0)),
+            258 + 6 * 51 + 3 * 53 + 3 * 193
+        );
     }
 
     #[test]
     fn the_table_fills() {
-        let b = Csv::parse("bin,profile,key,refused,n,min,median,max\nnn,release,1,0,34,9000,20000,28000\nnn,speed,1,0,34,4829,10296,11745\nnn,speed,1,1,34,4358,4358,7915\ntobit,speed,3,0,85,13573,14974,15415\n");
+        let b = Csv::parse("bin,profile,key,refused,n,min,median,max\nnn,release,1,0,34,9000,20000,28000\nnn,speed,1,0,34,4829,10296,11745\nnn,speed,1,1,34,4358,4358,7915\ntobit,speed,3,0,85,13573,14974,15415\ntobit-cmm,speed,330,0,43,3000,3100,3200\n");
         let mut md = String::new();
         render(&mut md, &b);
         assert!(md.contains("| `nn` | arrival (γ_k = 1) | 512 + 277 + 82 + 29 = 900 | 8 sqrt, 1 sin, 1 cos, 6 tanh | 4828 | 34 | 9000 / 20000 / 28000 | 4829 / 10296 / 11745 | 2.1 |"), "{md}");
         assert!(md.contains("| `tobit` | 3 of 3 nodes sent |"), "{md}");
+        assert!(
+            md.contains("| `tobit-cmm` | 3 of 3 sent, 3 censored, 0 held | 150 + 63 + 36 + 9 = 258 | 6 sqrt, 3 exp, 3 erfc | 1302 | 43 |"),
+            "{md}"
+        );
         assert_eq!(md.matches("| `nn` |").count(), 1, "{md}");
     }
 }

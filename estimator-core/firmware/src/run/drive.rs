@@ -70,6 +70,16 @@ pub trait Digested<const NX: usize>: Estimator<f32, NX> {
     fn censored(_y: &Vector2<f32>) -> bool {
         false
     }
+
+    /// The branch code the driver passes to the step marker for the coming step, whose nodes
+    /// delivered `y`; computed before the step, so that its count does not include it. By
+    /// default which nodes' measurements arrived and which of those were censored
+    /// ([`branch`]).
+    fn branch_code<const L: usize>(&self, y: &[Option<Vector2<f32>>; L]) -> u8 {
+        branch(y.each_ref().map(Option::is_some), |m| {
+            y[m].as_ref().is_some_and(Self::censored)
+        })
+    }
 }
 
 /// Runs the estimator's constructor in a frame of its own, and [`step_all`] the steps in
@@ -135,9 +145,7 @@ where
             }
         }
         // The branch code before the step, so that the step's count does not include it.
-        let code = branch(inst.y.each_ref().map(Option::is_some), |m| {
-            inst.y[m].as_ref().is_some_and(E::censored)
-        });
+        let code = est.branch_code(&inst.y);
         step_mark(inst.k, BEGIN);
         let stepped =
             E::Measurement::from_nodes(&inst.y).and_then(|y| est.step(inst.k as usize, &y));

@@ -33,6 +33,10 @@ pub fn step_mark(k: u32, branch: u8) {
 pub const ARRIVED: u8 = 1;
 /// Branch code bit: node `m`'s delivered measurement has a censored component (bit 3 + m).
 pub const CENSORED: u8 = 1 << 3;
+/// Branch code bit of an estimator that reads silences: node `m` did not send and the
+/// receiver's bucket mirror calls its silence held (bit 3 + m, [`CENSORED`]'s bit, which only
+/// a node that sent can have).
+pub const HELD: u8 = CENSORED;
 /// Branch code bit: the estimator refused the step (it kept its estimate).
 pub const REFUSED: u8 = 1 << 6;
 /// The code of the call just before a step (the other codes mark its end).

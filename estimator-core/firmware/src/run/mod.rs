@@ -41,8 +41,8 @@ mod vectors;
 pub use digest::{fnv1a64, Fnv1a64};
 pub use drive::{drive, Digested, FromNodes, Instant};
 pub use drivers::{
-    paper_bucket, run_adf, run_cce, run_ikf, run_kf, run_kf_io, run_nn, run_tobit,
-    run_tobit_silence, Adf, Cce, Fusion, Ikf, Kf, KfIo, Nn, Tobit, TobitSilence,
+    paper_bucket, run_adf, run_cce, run_ikf, run_kf, run_kf_io, run_nn, run_tobit, run_tobit_cmm,
+    run_tobit_silence, Adf, Cce, Cmm, Fusion, Ikf, Kf, KfIo, Nn, Tobit, TobitCmm, TobitSilence,
 };
 pub use drivers::{run_adf_lag8_counts, run_ikf_lag8_counts, AdfOn, IkfOn};
 pub use lag::{drive_lag, lateness, LateLine, LAG};
