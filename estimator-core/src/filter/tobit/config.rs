@@ -98,9 +98,10 @@ pub enum Silence {
     /// still advances by Ξ, the held ȳ stays.
     Predict,
     /// The product's option (docs/tobit-fusion.md, "Silence that speaks"): a silence the
-    /// bucket mirror calls held is the Sijs–Lazar pseudo-measurement — the set's centre
+    /// bucket mirror calls held is the Sijs–Lazar pseudo-measurement — the set's mean
     /// with `M + Σ_set` in (37), (22), (30) at θ = 0 — on the silence ball intersected with
-    /// the censoring region ([`crate::filter::silence::set::uniform_moments`]); any other
+    /// the censoring region, the atom at τ weighed by the filter's censoring model
+    /// ([`crate::filter::silence::set::uniform_moments`]); any other
     /// silence predicts only, as [`Silence::Predict`].
     PseudoMeasurement,
     /// The product's option: a held silence is the moment-matched truncated Gaussian of the

@@ -44,7 +44,7 @@ use super::gain::GainProblem;
 use crate::estimate::Estimate;
 use crate::estimator::{Estimator, OnModel};
 use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
-use crate::filter::silence::set::{uniform_moments, SilenceBox};
+use crate::filter::silence::set::{uniform_moments, CensoredPrior, SilenceBox};
 use crate::filter::silence::truncated::truncate_box;
 use crate::filter::silence::Arrival;
 use crate::linalg::{check_finite, check_spd, symmetrize};
@@ -363,7 +363,16 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         // trigger's reference).
         let pseudo = match (set, silence) {
             (Some(ball), Silence::PseudoMeasurement) => {
-                Some(uniform_moments(&ball, Some(&self.cfg.tau)))
+                // (S3') weighs the atom at τ with the filter's own censoring model (5):
+                // z ~ N(C x̂_{t|t−1}, R), x̂_{t|t−1} as `plan_with_input` predicts it.
+                let x = a * self.est.state();
+                let x_prior = gu.map_or(x, |gu| x + gu);
+                let prior = CensoredPrior {
+                    tau: self.cfg.tau,
+                    mean: c * x_prior,
+                    var: *r,
+                };
+                Some(uniform_moments(&ball, Some(&prior)))
             }
             _ => None,
         };
