@@ -29,16 +29,20 @@
 //! stream is the same as an undisturbed one. Every wait is cut into slices of at most
 //! [`STOP_SLICE`], so a stop is seen within one (docs/security.md, "Signals").
 
-use crate::backpressure::{Backpressure, Gate, Mode};
+mod checks;
+mod ports;
+mod stream;
+
+use crate::backpressure::{Backpressure, Gate};
 use crate::scenario;
 use crate::sensor_node::{Endpoint, NodeLoop};
-use crate::sim::{Simulation, MAX_NY};
-use crate::wire::{slot_of, stream_header};
-use anyhow::{bail, Context, Result};
-use estpipe_wire::{self as wire, Slot, Truth, SLOT_ABORT, SLOT_END};
-use iceoryx2::prelude::*;
-use std::sync::Arc;
+use crate::sim::Scenario;
+use crate::sim::Simulation;
+use anyhow::{bail, Result};
+use estpipe_wire::{self as wire, Truth};
+use ports::Ports;
 use std::time::Duration;
+use stream::Stream;
 
 pub use crate::slot_sender::{wait, wait_for_subscriber, Sent, SlotSender, Stop, STOP_SLICE};
 
@@ -172,7 +176,7 @@ fn stream_id() -> u64 {
 }
 
 /// Says once per subscriber that it does not read (`--unread-limit`), and counts it.
-fn report_unread(gate: &Gate, report: &mut PublisherReport, say: &impl Fn(&str)) {
+fn report_unread(gate: &Gate, report: &mut PublisherReport, say: &dyn Fn(&str)) {
     let new = gate.take_newly_unread();
     if new > 0 {
         report.unread_subscribers += new;
@@ -207,192 +211,119 @@ impl Source {
     }
 }
 
-/// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]).
+/// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]):
+/// checks, ports, the source, the wait for a subscriber, the stream, its end.
 pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
-    // The flags' parsers check these on the command line; a caller building the arguments
-    // in code gets the same refusal (issue #20: `Duration::from_secs_f64(inf)` panics).
-    for (flag, value, check) in [
-        (
-            "--rate",
-            args.rate,
-            estpipe_process::flags::rate_hz as fn(&str) -> Result<f64, String>,
-        ),
-        (
-            "--connect-timeout",
-            args.connect_timeout,
-            estpipe_process::flags::seconds,
-        ),
-        ("--linger", args.linger, estpipe_process::flags::seconds),
-        (
-            "--unread-limit",
-            args.unread_limit,
-            estpipe_process::flags::seconds,
-        ),
-    ] {
-        if let Err(e) = check(&value.to_string()) {
-            return Err(estpipe_process::flags::BadInput(format!("{flag}: {e}")).into());
-        }
-    }
+    checks::flags(args)?;
     let scenario = scenario::resolve(&args.scenario, args.config.as_deref())?;
-    let endpoints = args
-        .sensor_node
-        .iter()
-        .map(|s| Endpoint::parse(s))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| estpipe_process::flags::BadInput(format!("--sensor-node {e}")))?;
-    if !endpoints.is_empty() {
-        if args.node_timeout <= 0.0 {
-            return Err(estpipe_process::flags::BadInput(
-                "--node-timeout: must be positive".to_string(),
-            )
-            .into());
-        }
-        crate::sensor_node::config::loop_config(&*scenario)
-            .map_err(|e| estpipe_process::flags::BadInput(format!("--sensor-node: {e}")))?;
-        if endpoints.len() != scenario.nodes() {
-            return Err(estpipe_process::flags::BadInput(format!(
-                "--sensor-node: scenario {} has {} node(s), {} --sensor-node line(s) given",
-                scenario.name(),
-                scenario.nodes(),
-                endpoints.len()
-            ))
-            .into());
-        }
-    }
+    let endpoints = checks::sensor_endpoints(args, &*scenario)?;
+    let nodes = checks::nodes(args, &*scenario)?;
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
-    let nodes = u8::try_from(scenario.nodes()).context("too many nodes")?;
-    if let Some(n) = args.node {
-        if n >= nodes {
-            return Err(wire::ContractError::Refused(format!(
-                "--node {n}: scenario {} has {nodes} node(s), 0..={}",
-                scenario.name(),
-                nodes - 1
-            ))
-            .into());
-        }
-    }
-    // The nodes this process publishes, and whether it publishes the truth (node 0's).
-    let mine = |m: u8| args.node.is_none_or(|n| n == m);
-    let with_truth = mine(0);
-    let nx = scenario.nx();
     let say = |m: &str| {
         if !args.quiet {
             estpipe_process::errln!("channel-sim: {m}");
         }
     };
-
     // Before anything can wait: SIGINT/SIGTERM/SIGHUP set a flag from here on, nothing else stops.
     estpipe_process::signal::install();
-    let node = Arc::new(estpipe_process::node::create("channel-sim")?);
-    // A SIGKILLed predecessor leaves its ports registered; remove them before we claim ours.
-    let _ = node.try_cleanup_dead_nodes();
-
-    let header = stream_header(&*scenario);
-    let slots = Arc::new(wire::slot_service(&node, &args.prefix)?);
-    let truth = wire::truth_service(&node, &args.prefix)?;
-    let ready = wire::ready_event_service(&node, &args.prefix)?;
-    let gate = Gate::new();
-    gate.set_unread_limit(args.unread_limit);
-    if let Some(pid) = args.parent_pid {
-        gate.set_parent(pid);
-    }
-    let data_mode = if args.backpressure.blocks(args.rate) {
-        Mode::Block
-    } else {
-        Mode::Discard
-    };
-    gate.set_mode(data_mode);
-    // What a failed creation left in /dev/shm is removed (estpipe_process::shm_leftovers).
-    let since = std::time::SystemTime::now() - Duration::from_secs(1);
-    let publisher = slots
-        .publisher_builder()
-        .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
-        .set_backpressure_handler(gate.handler())
-        .create()
-        .map_err(|e| {
-            anyhow::anyhow!(estpipe_process::shm_leftovers::publisher_error(
-                e,
-                node.config(),
-                since,
-                &format!("{}/slots", args.prefix),
-                &format!(
-                    "are {} publishers already running with this --prefix?",
-                    wire::MAX_NODES
-                ),
-            ))
-        })?;
-    let truth_pub = if with_truth {
-        Some(truth.publisher_builder().create().map_err(|e| {
-            anyhow::anyhow!(estpipe_process::shm_leftovers::publisher_error(
-                e,
-                node.config(),
-                since,
-                &format!("{}/truth", args.prefix),
-                "is another publisher of node 0 running with this --prefix?",
-            ))
-        })?)
-    } else {
-        None
-    };
-    let send_truth = |t: Truth| -> Result<()> {
-        if let Some(p) = &truth_pub {
-            p.loan_uninit()?.write_payload(t).send()?;
-        }
-        Ok(())
-    };
-    let notifier = ready
-        .notifier_builder()
-        .default_event_id(wire::READY_EVENT)
-        .create()
-        .map_err(|e| anyhow::anyhow!("cannot notify on {}/slots-ready: {e:?}", args.prefix))?;
-
-    let sid = stream_id();
+    // The process that publishes node 0 publishes the truth.
+    let ports = Ports::open(args, &*scenario, args.node.is_none_or(|n| n == 0))?;
+    // Sensor nodes are connected and configured before the wait for a subscriber, so that a
+    // node that is not there is said at once.
+    let mut source = start_source(args, &*scenario, &endpoints, &ports.gate, &say)?;
     let period_ns = if args.rate > 0.0 {
         (1e9 / args.rate).round() as u64
     } else {
         0
     };
-    let hooks = args.test_hooks();
-    let wire_version = hooks.wire_version.unwrap_or(wire::WIRE_VERSION);
+    announce(args, &*scenario, steps, nodes, period_ns, &say);
     let mut report = PublisherReport::default();
-    let n_subs = || slots.dynamic_config().number_of_subscribers();
-    let mut sender = SlotSender::new(
-        publisher,
-        header,
-        Arc::clone(&gate),
-        Arc::clone(&node),
-        Arc::clone(&slots),
-    );
+    match wait_for_subscriber(
+        &ports.node,
+        &ports.gate,
+        || ports.subscribers(),
+        args.connect_timeout,
+    ) {
+        Ok(true) => {}
+        Ok(false) => bail!(
+            "no subscriber on {}/slots within {} s (start `ipc-runner run --prefix {}`)",
+            args.prefix,
+            args.connect_timeout,
+            args.prefix
+        ),
+        Err(Stop::Signal) => {
+            report.interrupted = true;
+            say(&format!(
+                "{} before a subscriber came",
+                ports.gate.stop_reason().unwrap_or_default()
+            ));
+            return Ok(report);
+        }
+    }
+    let (sid, nx) = (stream_id(), scenario.nx());
+    let x0 = source.sim().initial_truth();
+    ports.send_truth(Truth::new(0, sid, nx, &x0))?;
+    let hooks = args.test_hooks();
+    let mut stream = Stream::new(args, ports, report, hooks, nodes, sid, nx, period_ns, &say);
+    stream.instants(&mut source, steps)?;
+    let give_up = stream.end()?;
+    if let Source::Nodes(nodes) = &mut source {
+        nodes.finish();
+        for line in nodes.report().lines() {
+            estpipe_process::errln!("channel-sim: {line}");
+        }
+        if let Some(e) = nodes.failure() {
+            bail!("sensor node: {e}");
+        }
+    }
+    stream.linger(give_up);
+    Ok(stream.report)
+}
 
-    // Sensor nodes are connected and configured before the wait for a subscriber, so that a
-    // node that is not there is said at once.
-    let mut source = if endpoints.is_empty() {
-        Source::Simulated(scenario.start(args.seed, args.run))
+/// The simulated channel, or the sensor nodes on their serial lines.
+fn start_source(
+    args: &PublisherArgs,
+    scenario: &dyn Scenario,
+    endpoints: &[Endpoint],
+    gate: &Gate,
+    say: &dyn Fn(&str),
+) -> Result<Source> {
+    if endpoints.is_empty() {
+        return Ok(Source::Simulated(scenario.start(args.seed, args.run)));
+    }
+    // connect-timeout 0 means "wait for ever" for the subscriber; for a node's line, a day.
+    let connect = Duration::from_secs_f64(if args.connect_timeout > 0.0 {
+        args.connect_timeout
     } else {
-        // connect-timeout 0 means "wait for ever" for the subscriber; for a node's line, a day.
-        let connect = Duration::from_secs_f64(if args.connect_timeout > 0.0 {
-            args.connect_timeout
-        } else {
-            86_400.0
-        });
-        say(&format!(
-            "{} sensor node(s) on {}",
-            endpoints.len(),
-            args.sensor_node.join(", ")
-        ));
-        Source::Nodes(Box::new(
-            NodeLoop::start(
-                &*scenario,
-                args.seed,
-                args.run,
-                &endpoints,
-                connect,
-                Duration::from_secs_f64(args.node_timeout),
-                &|| gate.stop_requested(),
-            )
-            .map_err(anyhow::Error::msg)?,
-        ))
-    };
+        86_400.0
+    });
+    say(&format!(
+        "{} sensor node(s) on {}",
+        endpoints.len(),
+        args.sensor_node.join(", ")
+    ));
+    let nodes = NodeLoop::start(
+        scenario,
+        args.seed,
+        args.run,
+        endpoints,
+        connect,
+        Duration::from_secs_f64(args.node_timeout),
+        &|| gate.stop_requested(),
+    )
+    .map_err(anyhow::Error::msg)?;
+    Ok(Source::Nodes(Box::new(nodes)))
+}
+
+/// The line that says what is about to be published.
+fn announce(
+    args: &PublisherArgs,
+    scenario: &dyn Scenario,
+    steps: u32,
+    nodes: u8,
+    period_ns: u64,
+    say: &dyn Fn(&str),
+) {
     say(&format!(
         "scenario {} (seed {}, run {}), {steps} instants × {} at {} on prefix {:?}; \
          waiting for a subscriber",
@@ -410,182 +341,6 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
         },
         args.prefix
     ));
-    match wait_for_subscriber(&node, &gate, n_subs, args.connect_timeout) {
-        Ok(true) => {}
-        Ok(false) => bail!(
-            "no subscriber on {}/slots within {} s (start `ipc-runner run --prefix {}`)",
-            args.prefix,
-            args.connect_timeout,
-            args.prefix
-        ),
-        Err(Stop::Signal) => {
-            report.interrupted = true;
-            say(&format!(
-                "{} before a subscriber came",
-                gate.stop_reason().unwrap_or_default()
-            ));
-            return Ok(report);
-        }
-    }
-
-    let x0 = source.sim().initial_truth();
-    send_truth(Truth::new(0, sid, nx, &x0))?;
-
-    let t0 = wire::monotonic_ns();
-    let stream_start_ns = t0;
-    let mut last_check = t0;
-    let mut delivered_count = 0u64;
-    // Per node, the last instant whose slot was handed to the publisher: its END/ABORT
-    // marker's k and seq (docs/wire.md, Stream rules).
-    let mut sent_k = [0u32; wire::MAX_NODES];
-    'instants: for i in 1..=steps {
-        if period_ns > 0 {
-            let due = t0 + u64::from(i - 1) * period_ns;
-            let now = wire::monotonic_ns();
-            // Behind schedule (after a stop and continue) the instants due go at once.
-            if wait(&node, &gate, Duration::from_nanos(due.saturating_sub(now))).is_err() {
-                report.interrupted = true;
-                break;
-            }
-        } else if i.is_multiple_of(256) && gate.stop_requested() {
-            report.interrupted = true;
-            break;
-        }
-        let inst = source.sim().next_instant();
-        if source.failure().is_some() {
-            report.interrupted = true;
-            break;
-        }
-        let mut x = inst.truth;
-        if hooks.nan_truth_at == Some(inst.k) {
-            x[0] = f64::NAN;
-        }
-        send_truth(Truth::new(inst.k, sid, nx, &x))?;
-        let mut subscriber_gone = false;
-        for obs in inst.obs.iter().filter(|o| mine(o.node)) {
-            let mut slot = slot_of(
-                obs,
-                nodes,
-                sid,
-                wire::monotonic_ns(),
-                period_ns,
-                stream_start_ns,
-            );
-            slot.version = wire_version;
-            if obs.delivered {
-                delivered_count += 1;
-                if let Some(n) = hooks.nan_every {
-                    if n > 0 && delivered_count.is_multiple_of(n) && usize::from(obs.ny) <= MAX_NY {
-                        slot.y[0] = f64::NAN;
-                    }
-                }
-            }
-            match sender.send(slot, None)? {
-                Sent::Done => report.slots += 1,
-                // The slot's seq is used: a later subscriber sees the gap.
-                Sent::GaveUp => {
-                    report.slots += 1;
-                    subscriber_gone = true;
-                }
-                // Not sent: the ABORT marker's count ends before it.
-                Sent::Stopped => {
-                    report.interrupted = true;
-                    break 'instants;
-                }
-            }
-            sent_k[usize::from(obs.node)] = obs.k;
-        }
-        notifier.notify()?;
-        report.instants = i;
-        report_unread(&gate, &mut report, &say);
-        // A dead subscriber stays registered (and keeps its queue) until someone cleans up.
-        // After the send: the scan of the node directory (sub-millisecond) runs in the slack
-        // before the next instant is due rather than between its due time and its send.
-        let now = wire::monotonic_ns();
-        if subscriber_gone || now - last_check > 100_000_000 {
-            last_check = now;
-            let _ = node.try_cleanup_dead_nodes();
-            if n_subs() == 0 {
-                report.subscriber_losses += 1;
-                say(&format!(
-                    "subscriber lost after instant {i}; waiting for a new one"
-                ));
-                match wait_for_subscriber(&node, &gate, n_subs, args.connect_timeout) {
-                    Ok(true) => say("subscriber back, continuing"),
-                    Ok(false) => bail!("no subscriber came back within {} s", args.connect_timeout),
-                    Err(Stop::Signal) => {
-                        report.interrupted = true;
-                        break 'instants;
-                    }
-                }
-            }
-        }
-    }
-
-    let kind = if report.interrupted {
-        SLOT_ABORT
-    } else {
-        SLOT_END
-    };
-    // The marker waits for room whatever the mode (bounded by --linger): a discarded END
-    // would leave the runner waiting for its deadline.
-    gate.set_mode(Mode::Final);
-    // One deadline for the markers and the linger after them (a subscriber that never
-    // leaves kept the publisher for both, one after the other).
-    let give_up = std::time::Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));
-    for m in (0..nodes).filter(|&m| mine(m)) {
-        let marker = Slot {
-            period_ns,
-            stream_start_ns,
-            ..Slot::marker(kind, sent_k[usize::from(m)], m, nodes, sid, 0)
-        };
-        sender.send(marker, Some(give_up))?;
-    }
-    notifier.notify()?;
-    report_unread(&gate, &mut report, &say);
-    report.unread_dropped = gate.unread_drops();
-    report.discarded = sender.discarded();
-    report.resent = sender.resent();
-    if report.discarded > 0 {
-        say(&format!(
-            "{} slot(s) dropped for a subscriber whose queue was full (--backpressure discard)",
-            report.discarded
-        ));
-    }
-    say(&format!(
-        "{} after {} instants ({} slots)",
-        match gate.stop_reason() {
-            Some(why) if report.interrupted => why,
-            _ if report.interrupted => "stopped by signal".to_string(),
-            _ => "done".to_string(),
-        },
-        report.instants,
-        report.slots
-    ));
-
-    if let Source::Nodes(nodes) = &mut source {
-        nodes.finish();
-        for line in nodes.report().lines() {
-            estpipe_process::errln!("channel-sim: {line}");
-        }
-        if let Some(e) = nodes.failure() {
-            bail!("sensor node: {e}");
-        }
-    }
-
-    // Keep the data segment alive until the subscriber has read the tail and detached (a
-    // subscriber that does not read is not waited for).
-    let mut last_cleanup = std::time::Instant::now();
-    while n_subs() > gate.unread_receivers() && std::time::Instant::now() < give_up {
-        if last_cleanup.elapsed() > Duration::from_millis(100) {
-            let _ = node.try_cleanup_dead_nodes();
-            last_cleanup = std::time::Instant::now();
-        }
-        if wait(&node, &gate, Duration::from_millis(2)).is_err() {
-            break;
-        }
-    }
-    Ok(report)
 }
 
 pub use estpipe_wire::DEFAULT_STEPS;
