@@ -348,28 +348,15 @@ fn publisher_command(explicit: Option<&Path>) -> Result<Command> {
     Ok(c)
 }
 
-/// `ipc-runner demo`. Returns the exit code.
+/// `ipc-runner demo`: the scenario, the children (bridges, sensor nodes, the publisher), the
+/// runner's loop in this process, the children's end, the outputs. Returns the exit code.
 pub fn main(args: &DemoArgs) -> Result<i32> {
     if args.via == Via::Zenoh {
         crate::bridge::available()?;
     }
     // SIGINT/SIGTERM/SIGHUP set a flag from here on (the loop ends, the child is told).
     estpipe_process::signal::install();
-    let (scenario_name, scenario) = match (&args.scenario, &args.config) {
-        (Some(n), _) => (n.clone(), resolve(n, None)?),
-        (None, Some(c)) => (c.display().to_string(), resolve(DEFAULT_SCENARIO, Some(c))?),
-        (None, None) => match resolve(DEFAULT_SCENARIO, None) {
-            Ok(s) => (DEFAULT_SCENARIO.to_string(), s),
-            Err(e) => {
-                let fallback = FALLBACK_SCENARIO;
-                estpipe_process::errln!(
-                    "demo: the default scenario {DEFAULT_SCENARIO:?} is not available in this \
-                     build ({e:#}); running {fallback:?} instead"
-                );
-                (fallback.to_string(), resolve(fallback, None)?)
-            }
-        },
-    };
+    let (scenario_name, scenario) = demo_scenario(args)?;
     // Without --steps, the default horizon of `channel-sim` and `eval`.
     let steps = args.steps.unwrap_or(DEFAULT_STEPS);
     let particles = args.estimator.particle_count();
@@ -407,25 +394,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         )?),
         None => None,
     };
-    let mut cmd = publisher_command(args.channel_sim.as_deref())?;
-    if let Some(n) = &nodes {
-        for line in n.lines() {
-            cmd.args(["--sensor-node", line]);
-        }
-    }
-    if let Some(c) = &args.config {
-        cmd.arg("--config").arg(c);
-    } else {
-        cmd.arg("--scenario").arg(&scenario_name);
-    }
-    cmd.args(["--seed", &args.seed.to_string()])
-        .args(["--run", &args.run.to_string()])
-        .args(["--steps", &steps.to_string()])
-        .args(["--rate", &args.rate.to_string()])
-        .args(["--prefix", &pub_prefix])
-        .args(["--parent-pid", &std::process::id().to_string()])
-        .arg("--quiet")
-        .stdin(Stdio::null());
+    let mut cmd = publisher_args(args, &scenario_name, steps, &pub_prefix, nodes.as_ref())?;
     let child = cmd
         .spawn()
         .with_context(|| format!("cannot start the publisher {cmd:?}"))?;
@@ -435,54 +404,12 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         Some(p) => format!("the publisher {}", p.display()),
         None => "the publisher (ipc-runner channel-sim)".to_string(),
     };
-
-    let mut rargs = RunArgs::new(&scenario_name, &prefix);
-    rargs.config = args.config.clone();
-    rargs.estimator = args.estimator.clone();
-    rargs.wait = args.wait;
-    rargs.cpu = args.cpu;
-    rargs.latest_estimates = args.latest_estimates;
-    rargs.quiet = true;
-    rargs.connect_timeout = 30.0;
-    rargs.steps = steps;
-    rargs.seed = args.seed;
-    rargs.run = args.run;
-    rargs.buffer = 1024;
-    rargs.estimates_csv = Some(args.out.join("estimates.csv"));
-    rargs.slots_csv = Some(args.out.join("slots.csv"));
-    rargs.latency_csv = Some(args.out.join("latency.csv"));
-    rargs.json = Some(args.out.join("report.json"));
-    rargs.mcap = args.mcap.clone();
+    let mut rargs = runner_args(args, &scenario_name, &prefix, steps);
     let view = crate::view::View::start(&args.view)?;
     rargs.view_tap = view.tap();
+    announce(args, &scenario_name, steps, child_pid, nodes.as_ref());
 
-    if let Some(n) = &nodes {
-        estpipe_process::errln!(
-            "demo: {} sensor node(s) on QEMU mps2-an386 running {}",
-            n.lines().len(),
-            args.node_firmware.display()
-        );
-    }
-    estpipe_process::errln!(
-        "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
-         (prefix {prefix}, publisher pid {child_pid})",
-        if args.rate > 0.0 {
-            format!("{} Hz", args.rate)
-        } else {
-            "full speed".into()
-        },
-        args.seed,
-        args.run,
-        args.wait.as_str()
-    );
-    let bar = if args.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(u64::from(steps)).with_style(
-            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} instants · {msg}")
-                .expect("static template"),
-        )
-    };
+    let bar = progress_bar(args.quiet, steps);
     let mut progress = |k: u32, c: &run::assemble::Counts| {
         bar.set_position(u64::from(k));
         bar.set_message(format!(
@@ -519,78 +446,19 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         report.ending,
         run::Ending::Completed | run::Ending::PublisherStopped
     );
-    let status = match guard.0.take() {
-        Some(mut c) => Some(end_child(
-            &mut c,
-            !completed,
-            if completed { CHILD_LINGER } else { CHILD_GRACE },
-        )?),
-        None => None,
-    };
-    if let Some(s) = status {
-        if !s.success() {
-            estpipe_process::errln!("demo: {publisher} exited with {s}");
-        }
-    }
-    // The gateway ended every node's run (Finish): the emulators leave by themselves.
-    if let Some(n) = nodes.as_mut() {
-        let total = n.lines().len();
-        let clean = n.finish(CHILD_LINGER);
-        if clean < total {
-            estpipe_process::errln!(
-                "demo: {} of {total} sensor node(s) did not end cleanly",
-                total - clean
-            );
-        }
-    }
-    // The bridges leave by themselves once the stream ended and the estimates went quiet.
-    for (name, g) in &mut bridges {
-        if let Some(mut c) = g.0.take() {
-            let s = end_child(&mut c, !completed, Duration::from_secs(3))?;
-            if !s.success() {
-                estpipe_process::errln!("demo: the {name} bridge exited with {s}");
-            }
-        }
-    }
+    end_children(
+        &mut guard,
+        &publisher,
+        nodes.as_mut(),
+        &mut bridges,
+        completed,
+    )?;
     run::finish(&rargs, &report, &traj, spec.ny())?;
     let plot = args.plot_path();
     if let Err(e) = crate::plot::trajectories::plot(&traj, &plot, scenario.name()) {
         estpipe_process::errln!("demo: no plot ({e:#})");
     }
-    let lat = &report.latency;
-    let ladder = args.out.join("latency.svg");
-    if let Err(e) = crate::plot::latency::plot_ladder(
-        &format!(
-            "{scenario_name}: latency per instant, {} wait",
-            args.wait.as_str()
-        ),
-        &[
-            (
-                "slot sent → received (transport)".to_string(),
-                lat.transport,
-            ),
-            ("estimator step".to_string(), lat.step),
-            (
-                "slot sent → estimates published".to_string(),
-                lat.end_to_end,
-            ),
-        ],
-        &ladder,
-    ) {
-        estpipe_process::errln!("demo: no latency plot ({e:#})");
-    }
-    let points: Vec<_> = traj.timing.iter().map(|t| traj.latency_point(t)).collect();
-    if let Err(e) = crate::plot::trace::plot_trace(
-        &format!(
-            "{scenario_name}: latency over the run, {} wait",
-            args.wait.as_str()
-        ),
-        &points,
-        &args.out.join("latency-trace.svg"),
-    ) {
-        estpipe_process::errln!("demo: no latency trace ({e:#})");
-    }
-
+    latency_plots(args, &scenario_name, &report, &traj);
     estpipe_process::outln!("{}", report.summary());
     if args.via == Via::Zenoh {
         estpipe_process::outln!("{}", bridge_summary(&args.out));
@@ -603,4 +471,194 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     );
     view.end();
     Ok(run::exit_code(&report))
+}
+
+/// The scenario by `--scenario`, `--config`, or the default (its fallback where this build
+/// lacks it), with the name the demo shows.
+fn demo_scenario(args: &DemoArgs) -> Result<(String, Box<dyn channel_sim::Scenario>)> {
+    Ok(match (&args.scenario, &args.config) {
+        (Some(n), _) => (n.clone(), resolve(n, None)?),
+        (None, Some(c)) => (c.display().to_string(), resolve(DEFAULT_SCENARIO, Some(c))?),
+        (None, None) => match resolve(DEFAULT_SCENARIO, None) {
+            Ok(s) => (DEFAULT_SCENARIO.to_string(), s),
+            Err(e) => {
+                let fallback = FALLBACK_SCENARIO;
+                estpipe_process::errln!(
+                    "demo: the default scenario {DEFAULT_SCENARIO:?} is not available in this \
+                     build ({e:#}); running {fallback:?} instead"
+                );
+                (fallback.to_string(), resolve(fallback, None)?)
+            }
+        },
+    })
+}
+
+/// The publisher's command line: the scenario, the run, the pace, its prefix, the sensor
+/// nodes' lines, this process as its parent.
+fn publisher_args(
+    args: &DemoArgs,
+    scenario_name: &str,
+    steps: u32,
+    pub_prefix: &str,
+    nodes: Option<&crate::sensor_nodes::QemuNodes>,
+) -> Result<Command> {
+    let mut cmd = publisher_command(args.channel_sim.as_deref())?;
+    if let Some(n) = nodes {
+        for line in n.lines() {
+            cmd.args(["--sensor-node", line]);
+        }
+    }
+    if let Some(c) = &args.config {
+        cmd.arg("--config").arg(c);
+    } else {
+        cmd.arg("--scenario").arg(scenario_name);
+    }
+    cmd.args(["--seed", &args.seed.to_string()])
+        .args(["--run", &args.run.to_string()])
+        .args(["--steps", &steps.to_string()])
+        .args(["--rate", &args.rate.to_string()])
+        .args(["--prefix", pub_prefix])
+        .args(["--parent-pid", &std::process::id().to_string()])
+        .arg("--quiet")
+        .stdin(Stdio::null());
+    Ok(cmd)
+}
+
+/// What `run` would be given for the same stream, its outputs in `--out`.
+fn runner_args(args: &DemoArgs, scenario_name: &str, prefix: &str, steps: u32) -> RunArgs {
+    let mut rargs = RunArgs::new(scenario_name, prefix);
+    rargs.config = args.config.clone();
+    rargs.estimator = args.estimator.clone();
+    rargs.wait = args.wait;
+    rargs.cpu = args.cpu;
+    rargs.latest_estimates = args.latest_estimates;
+    rargs.quiet = true;
+    rargs.connect_timeout = 30.0;
+    rargs.steps = steps;
+    rargs.seed = args.seed;
+    rargs.run = args.run;
+    rargs.buffer = 1024;
+    rargs.estimates_csv = Some(args.out.join("estimates.csv"));
+    rargs.slots_csv = Some(args.out.join("slots.csv"));
+    rargs.latency_csv = Some(args.out.join("latency.csv"));
+    rargs.json = Some(args.out.join("report.json"));
+    rargs.mcap = args.mcap.clone();
+    rargs
+}
+
+/// The lines that say what the demo runs.
+fn announce(
+    args: &DemoArgs,
+    scenario_name: &str,
+    steps: u32,
+    child_pid: u32,
+    nodes: Option<&crate::sensor_nodes::QemuNodes>,
+) {
+    if let Some(n) = nodes {
+        estpipe_process::errln!(
+            "demo: {} sensor node(s) on QEMU mps2-an386 running {}",
+            n.lines().len(),
+            args.node_firmware.display()
+        );
+    }
+    estpipe_process::errln!(
+        "demo: scenario {scenario_name}, {steps} instants at {} with seed {} run {}, {} wait \
+         (prefix {}, publisher pid {child_pid})",
+        if args.rate > 0.0 {
+            format!("{} Hz", args.rate)
+        } else {
+            "full speed".into()
+        },
+        args.seed,
+        args.run,
+        args.wait.as_str(),
+        args.prefix
+    );
+}
+
+/// The instants' progress on a terminal (hidden with `--quiet`).
+fn progress_bar(quiet: bool, steps: u32) -> indicatif::ProgressBar {
+    if quiet {
+        return indicatif::ProgressBar::hidden();
+    }
+    indicatif::ProgressBar::new(u64::from(steps)).with_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} instants · {msg}")
+            .expect("static template"),
+    )
+}
+
+/// Ends the publisher (told with SIGTERM unless its stream `completed`), the sensor nodes'
+/// emulators and the bridges, saying which did not end cleanly.
+fn end_children(
+    guard: &mut ChildGuard,
+    publisher: &str,
+    nodes: Option<&mut crate::sensor_nodes::QemuNodes>,
+    bridges: &mut [(&'static str, ChildGuard)],
+    completed: bool,
+) -> Result<()> {
+    if let Some(mut c) = guard.0.take() {
+        let linger = if completed { CHILD_LINGER } else { CHILD_GRACE };
+        let s = end_child(&mut c, !completed, linger)?;
+        if !s.success() {
+            estpipe_process::errln!("demo: {publisher} exited with {s}");
+        }
+    }
+    // The gateway ended every node's run (Finish): the emulators leave by themselves.
+    if let Some(n) = nodes {
+        let total = n.lines().len();
+        let clean = n.finish(CHILD_LINGER);
+        if clean < total {
+            estpipe_process::errln!(
+                "demo: {} of {total} sensor node(s) did not end cleanly",
+                total - clean
+            );
+        }
+    }
+    // The bridges leave by themselves once the stream ended and the estimates went quiet.
+    for (name, g) in bridges {
+        if let Some(mut c) = g.0.take() {
+            let s = end_child(&mut c, !completed, Duration::from_secs(3))?;
+            if !s.success() {
+                estpipe_process::errln!("demo: the {name} bridge exited with {s}");
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `latency.svg` (percentiles per stage) and `latency-trace.svg` (over the run); a plot that
+/// cannot be drawn is said, and the rest goes on.
+fn latency_plots(
+    args: &DemoArgs,
+    scenario_name: &str,
+    report: &run::RunReport,
+    traj: &run::Trajectories,
+) {
+    let lat = &report.latency;
+    let wait = args.wait.as_str();
+    if let Err(e) = crate::plot::latency::plot_ladder(
+        &format!("{scenario_name}: latency per instant, {wait} wait"),
+        &[
+            (
+                "slot sent → received (transport)".to_string(),
+                lat.transport,
+            ),
+            ("estimator step".to_string(), lat.step),
+            (
+                "slot sent → estimates published".to_string(),
+                lat.end_to_end,
+            ),
+        ],
+        &args.out.join("latency.svg"),
+    ) {
+        estpipe_process::errln!("demo: no latency plot ({e:#})");
+    }
+    let points: Vec<_> = traj.timing.iter().map(|t| traj.latency_point(t)).collect();
+    if let Err(e) = crate::plot::trace::plot_trace(
+        &format!("{scenario_name}: latency over the run, {wait} wait"),
+        &points,
+        &args.out.join("latency-trace.svg"),
+    ) {
+        estpipe_process::errln!("demo: no latency trace ({e:#})");
+    }
 }
