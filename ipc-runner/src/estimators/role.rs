@@ -1,5 +1,5 @@
-//! Whose each estimator is: the paper's, the product's, a baseline, or the reference, for the
-//! summary tables (README.md, "What is in it", has the same split per seed).
+//! Whose each estimator is: the paper's, the product's, a baseline, the reference, or an
+//! oracle, for the summary tables (README.md, "What is in it", has the same split per seed).
 
 use std::fmt;
 
@@ -11,15 +11,22 @@ pub enum Role {
     /// The product's own estimator or option beside the faithful one (adf, the `-mix`,
     /// `-predict`, `-silence`, `-sl` readings, `ekf-std`, the innovation gate).
     Product,
-    /// What a practitioner would run instead (kf, ikf, kf-io, ekf, tobit-kf and the textbook
-    /// filters).
+    /// What a practitioner would run instead (ikf, kf-io, seed 003's kf and ekf, tobit-kf and
+    /// the textbook filters).
     Baseline,
     /// The particle filter: near-optimal and slow, the yardstick.
     Reference,
+    /// An estimator fed what no receiver has: `eval`'s full-information `kf` reads every
+    /// measurement before the channel and its protocol ([`crate::Estimator::full_information`]),
+    /// so it is a bound to read the others against, not a competitor.
+    Oracle,
 }
 
 impl Role {
-    /// The role of the estimator called `name` (with its `+gate` or `~lag` suffixes).
+    /// The role of the estimator called `name` (with its `+gate` or `~lag` suffixes) that
+    /// reads the channel's output. A name alone cannot tell an oracle: `kf` is the oracle on a
+    /// linear spec and the paper's channel-fed KF on seed 003's (estimators/nn.rs); see
+    /// [`Role::of_estimator`].
     pub fn of(name: &str) -> Self {
         let base = name.split(['+', '~']).next().unwrap_or(name);
         if base != name {
@@ -35,6 +42,18 @@ impl Role {
         }
     }
 
+    /// The role of an estimator called `name` that reads the observations before the channel
+    /// when `full_information` ([`crate::Estimator::full_information`]): an oracle whatever its
+    /// name or options, since the data it is fed is what sets it apart; otherwise
+    /// [`Role::of`].
+    pub fn of_estimator(name: &str, full_information: bool) -> Self {
+        if full_information {
+            Self::Oracle
+        } else {
+            Self::of(name)
+        }
+    }
+
     /// The word printed in the tables.
     pub fn as_str(self) -> &'static str {
         match self {
@@ -42,6 +61,7 @@ impl Role {
             Self::Product => "product",
             Self::Baseline => "baseline",
             Self::Reference => "reference",
+            Self::Oracle => "oracle",
         }
     }
 }
@@ -54,7 +74,8 @@ impl fmt::Display for Role {
 
 /// Said once under every table of MSEs.
 pub const MSE_NOTE: &str = "MSE: mean squared error of x̂ against the truth, lower is better; \
-role: the paper's estimator, the product's, a baseline or the reference (README.md)\n";
+role: the paper's estimator, the product's, a baseline, the reference, or an oracle fed what no \
+receiver has (README.md)\n";
 
 /// An MSE (or any error figure) for a table of `width` (≥ 12) columns: fixed point while it reads,
 /// scientific notation beyond 1e6 (a diverged filter would print 35 digits), and the words
@@ -104,7 +125,15 @@ mod tests {
             ("tobit-cmm-silence", Role::Product),
         ] {
             assert_eq!(Role::of(n), r, "{n}");
+            assert_eq!(Role::of_estimator(n, false), r, "{n}");
         }
+        // The full-information `kf` (and its gated variant) is the oracle; seed 003's `kf`,
+        // the paper's KF on the channel's output, stays a baseline.
+        assert_eq!(Role::of_estimator("kf", true), Role::Oracle);
+        assert_eq!(Role::of_estimator("kf+gate", true), Role::Oracle);
+        assert_eq!(Role::of_estimator("kf", false), Role::Baseline);
+        assert_eq!(Role::Oracle.as_str(), "oracle");
+        assert_eq!(format!("{:<9}|", Role::Oracle), "oracle   |");
     }
 
     #[test]

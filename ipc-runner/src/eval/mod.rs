@@ -61,6 +61,7 @@ use channel_sim::{Observation, Scenario};
 use estpipe_wire::FLAG_IPC_LOST;
 use rayon::prelude::*;
 
+use crate::estimators::role::Role;
 use crate::estimators::{build_all, EvalOptions, Factory, RunStart};
 use crate::limits::{product, Budget, Progress};
 pub use report::{ChannelSummary, EstimatorResult, EvalResult, NodeCounts, Trajectory};
@@ -199,10 +200,11 @@ pub fn evaluate_with(
         run: 0,
         initial: None,
     };
-    let names: Vec<&'static str> = build_all(factories, &spec, options, &probe)?
-        .iter()
-        .map(|e| e.name())
-        .collect();
+    let (names, roles): (Vec<&'static str>, Vec<Role>) =
+        build_all(factories, &spec, options, &probe)?
+            .iter()
+            .map(|e| (e.name(), Role::of_estimator(e.name(), e.full_information())))
+            .unzip();
     anyhow::ensure!(
         !names.is_empty(),
         "no estimator applies to scenario '{}'",
@@ -234,7 +236,7 @@ pub fn evaluate_with(
         control.progress_every,
     );
 
-    let mut acc = report::Accumulator::new(scenario, options, &names);
+    let mut acc = report::Accumulator::new(scenario, options, &names, &roles);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
         .build()

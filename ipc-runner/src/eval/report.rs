@@ -98,6 +98,9 @@ pub struct EvalResult {
 /// One estimator's results.
 #[derive(Debug, Serialize)]
 pub struct EstimatorResult {
+    /// Whose it is, for the table (not written: the JSON's entries stay what they were).
+    #[serde(skip)]
+    pub role: Role,
     /// MSE(k), k = 0..=T.
     pub mse: Vec<f64>,
     /// Mean of MSE(k) over k = 1..=T.
@@ -268,6 +271,7 @@ pub(super) struct Accumulator {
     options: EvalOptions,
     nx: usize,
     names: Vec<&'static str>,
+    roles: Vec<Role>,
     estimators: Vec<EstimatorAcc>,
     channel: Vec<NodeCounts>,
     trajectory: Option<Trajectory>,
@@ -294,6 +298,7 @@ impl Accumulator {
         scenario: &dyn Scenario,
         options: &EvalOptions,
         names: &[&'static str],
+        roles: &[Role],
     ) -> Self {
         let nx = scenario.nx();
         let len = (options.horizon as usize + 1) * nx;
@@ -302,6 +307,7 @@ impl Accumulator {
             options: options.clone(),
             nx,
             names: names.to_vec(),
+            roles: roles.to_vec(),
             estimators: names
                 .iter()
                 .map(|_| EstimatorAcc {
@@ -413,8 +419,9 @@ impl Accumulator {
         let estimators = self
             .names
             .iter()
+            .zip(self.roles)
             .zip(self.estimators)
-            .map(|(name, acc)| {
+            .map(|((name, role), acc)| {
                 let n = acc.run_avgs.len() as f64;
                 let mean_k = |k: usize, v: f64| {
                     if acc.n_k[k] == 0 {
@@ -461,6 +468,7 @@ impl Accumulator {
                     .zip(acc.run_avgs.clone())
                     .collect();
                 let result = EstimatorResult {
+                    role,
                     run_averages,
                     mse,
                     avg_mse,
@@ -593,7 +601,7 @@ impl EvalResult {
                 s,
                 "{:<w$} {:<9} {} {} {} {:>9}",
                 name,
-                Role::of(name),
+                r.role,
                 figure(r.avg_mse, 12),
                 figure(r.avg_mse_se, 12),
                 figure(r.median_run_avg, 14),

@@ -48,6 +48,34 @@ fn same_seed_gives_identical_json_whatever_the_thread_count() {
     );
 }
 
+/// The table's role column reads what an estimator is fed: the full-information `kf` of a
+/// linear spec is the oracle, while seed 003's `kf` (the paper's KF on the channel's output)
+/// stays a baseline. The JSON's entries carry no role.
+#[test]
+fn the_full_information_kf_is_the_oracle_and_seed_003s_kf_a_baseline() {
+    let role_of = |summary: &str, name: &str| -> String {
+        let line = (summary.lines())
+            .find(|l| l.split_whitespace().next() == Some(name))
+            .unwrap_or_else(|| panic!("{name} not in\n{summary}"));
+        line.split_whitespace().nth(1).unwrap().to_owned()
+    };
+    for scenario in ["linear", "tobit-fusion"] {
+        let s = preset(scenario).unwrap();
+        let r = eval_with(&*s, &options(4, 10, 5), FACTORIES, 2);
+        let table = r.summary();
+        assert_eq!(role_of(&table, "kf"), "oracle", "{scenario}");
+        assert_eq!(role_of(&table, "ikf"), "baseline", "{scenario}");
+        assert_eq!(estimator(&r, "kf").role, Role::Oracle);
+        let v: serde_json::Value = serde_json::from_str(&r.to_json()).unwrap();
+        assert!(v["estimators"]["kf"].get("role").is_none());
+    }
+    let s = preset("nn-token-bucket").unwrap();
+    let table = eval_with(&*s, &options(2, 10, 5), FACTORIES, 2).summary();
+    assert_eq!(role_of(&table, "kf"), "baseline");
+    assert_eq!(role_of(&table, "nn"), "paper");
+    assert!(table.contains("or an oracle fed what no receiver has"));
+}
+
 #[test]
 fn json_has_the_documented_shape() {
     let s = preset("linear").unwrap();
