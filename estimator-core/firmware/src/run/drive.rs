@@ -71,14 +71,12 @@ pub trait Digested<const NX: usize>: Estimator<f32, NX> {
         false
     }
 
-    /// The branch code the driver passes to the step marker for the coming step, whose nodes
-    /// delivered `y`; computed before the step, so that its count does not include it. By
-    /// default which nodes' measurements arrived and which of those were censored
-    /// ([`branch`]).
-    fn branch_code<const L: usize>(&self, y: &[Option<Vector2<f32>>; L]) -> u8 {
-        branch(y.each_ref().map(Option::is_some), |m| {
-            y[m].as_ref().is_some_and(Self::censored)
-        })
+    /// For the coming step, whose nodes delivered `y`: the branch code bits
+    /// ([`HELD`](super::mark::HELD)` << m`) of the silent nodes whose silence the estimator will
+    /// read as held, which the driver adds to the code before the step (so that the step's
+    /// count does not include them); 0 for the estimators that read no silence.
+    fn held<const L: usize>(&self, _y: &[Option<Vector2<f32>>; L]) -> u8 {
+        0
     }
 }
 
@@ -145,7 +143,9 @@ where
             }
         }
         // The branch code before the step, so that the step's count does not include it.
-        let code = est.branch_code(&inst.y);
+        let code = branch(inst.y.each_ref().map(Option::is_some), |m| {
+            inst.y[m].as_ref().is_some_and(E::censored)
+        }) | est.held(&inst.y);
         step_mark(inst.k, BEGIN);
         let stepped =
             E::Measurement::from_nodes(&inst.y).and_then(|y| est.step(inst.k as usize, &y));

@@ -4,6 +4,12 @@
 //! delivered packet read component by component (observed: the Kalman update; censored: the
 //! exact truncated moments) and every held trigger's silence read as the truncated Gaussian
 //! on its silence box.
+//!
+//! Every item here is `#[inline]`, so that it is compiled into the one binary that runs it
+//! rather than into the firmware library every binary links: otherwise the library's shared
+//! generic code (the truncated moments, the Kalman prediction) gains callers, and LLVM
+//! compiles the other Tobit binaries' steps differently (their counts would move with a
+//! binary they do not contain).
 
 use estimator_core::filter::silence::TriggeredPackets;
 use estimator_core::filter::MomentMatchedTobit;
@@ -14,7 +20,7 @@ use nalgebra::{Matrix2, Vector2};
 
 use super::super::digest::Fnv1a64;
 use super::super::drive::{drive, Digested};
-use super::super::mark::{ARRIVED, CENSORED, HELD};
+use super::super::mark::HELD;
 use super::super::models::{TobitModel, TOBIT_CHI, TOBIT_ETA0, TOBIT_LAMBDA, TOBIT_SIGMA};
 use super::super::summary::Summary;
 use super::super::vectors::{NodeStream, NODES, NY, TOBIT_NX};
@@ -43,6 +49,7 @@ impl TobitCmm {
     /// η₀) with its initial reference at τ_m as the node starts, the shared bucket at ξ₀;
     /// `reads_silence` as the product's flagship sets it (`tobit-cmm-silence`) or not
     /// (`tobit-cmm`).
+    #[inline]
     pub fn paper_example(reads_silence: bool) -> Result<Self, Error> {
         let tau = Vector2::zeros();
         let knowledge = |m: usize| {
@@ -66,6 +73,7 @@ impl TobitCmm {
     }
 
     /// The flagship, `tobit-cmm-silence`.
+    #[inline]
     pub fn silence() -> Result<Self, Error> {
         Self::paper_example(true)
     }
@@ -76,6 +84,7 @@ impl Estimator<f32, TOBIT_NX> for TobitCmm {
 
     /// The stream has no transport losses and no reported levels: the mirror runs on the
     /// transmissions alone.
+    #[inline]
     fn step(&mut self, _k: usize, y: &[Packet<f32, NY>; NODES]) -> Result<(), Error> {
         let packets = TriggeredPackets {
             packets: *y,
@@ -85,6 +94,7 @@ impl Estimator<f32, TOBIT_NX> for TobitCmm {
             .step_matrices(&self.a, &self.bqb, &self.nodes, &packets)
     }
 
+    #[inline]
     fn estimate(&self) -> &Estimate<f32, TOBIT_NX> {
         self.filter.estimate()
     }
@@ -93,14 +103,14 @@ impl Estimator<f32, TOBIT_NX> for TobitCmm {
 /// The digest covers x̂ and P, then the silence counts (held, blocked, without a usable set),
 /// which pin the mirror's reading of every silence.
 impl Digested<TOBIT_NX> for TobitCmm {
+    #[inline]
     fn censored(y: &Vector2<f32>) -> bool {
         y.iter().any(|&v| v <= 0.0)
     }
 
-    /// As the other Tobit binaries', and for a node that did not send whether the mirror will
-    /// call its silence held (a copy of the mirror stepped ahead, before the step's count
-    /// begins): the step's work depends on it ([`HELD`]).
-    fn branch_code<const L: usize>(&self, y: &[Option<Vector2<f32>>; L]) -> u8 {
+    /// The silent nodes whose silence the mirror will call held (a copy of the mirror stepped
+    /// ahead): the step's work depends on them.
+    fn held<const L: usize>(&self, y: &[Option<Vector2<f32>>; L]) -> u8 {
         let packets = TriggeredPackets::<f32, NY, NODES> {
             packets: core::array::from_fn(|m| Packet::from(y.get(m).copied().flatten())),
             level: None,
@@ -108,17 +118,15 @@ impl Digested<TOBIT_NX> for TobitCmm {
         let mut mirror = *self.filter.mirror();
         let held = mirror.step(&packets.sent(), None);
         let mut code = 0;
-        for m in 0..L.min(NODES) {
-            code |= match &y[m] {
-                Some(v) if Self::censored(v) => (ARRIVED | CENSORED) << m,
-                Some(_) => ARRIVED << m,
-                None if held[m] => HELD << m,
-                None => 0,
-            };
+        for (m, &h) in held.iter().enumerate() {
+            if h {
+                code |= HELD << m;
+            }
         }
         code
     }
 
+    #[inline]
     fn digest(&self, h: &mut Fnv1a64) {
         h.estimate(self.estimate().state(), self.estimate().covariance());
         let c = self.filter.counts();
@@ -129,6 +137,7 @@ impl Digested<TOBIT_NX> for TobitCmm {
 }
 
 /// `tobit-cmm-silence` over the three-node Tobit stream.
+#[inline]
 pub fn run_tobit_cmm(stream: &NodeStream<'_>, steps: usize) -> Summary {
     drive("tobit-cmm", stream.instants(), steps, TobitCmm::silence)
 }
