@@ -17,8 +17,9 @@ pub struct EstimatorArgs {
     #[arg(long, value_delimiter = ',')]
     pub estimators: Vec<String>,
     /// Particles of the `pf` reference filter (single-node scenarios with occlusion regions,
-    /// a preset or a TOML file, and `nn-token-bucket`; far slower per step than all the
-    /// other estimators together). Default: `pf` is not run unless `--estimators` names `pf`
+    /// a preset or a TOML file, `nn-token-bucket`, and Tobit sensors behind event triggers
+    /// sharing a token bucket such as `tobit-fusion`; far slower per step than all the other
+    /// estimators together). Default: `pf` is not run unless `--estimators` names `pf`
     /// or `pf-mix` (then 5000).
     #[arg(long)]
     pub particles: Option<usize>,

@@ -154,7 +154,10 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     let (nx, ny, nodes) = (spec.nx(), spec.ny(), spec.nodes());
     let particles = args.estimator.particle_count();
     let budget = Budget::mib(args.max_memory);
-    let pf = product(&[particles as u64, crate::eval::pf_bytes_per_particle(nx)]);
+    let pf = product(&[
+        particles as u64,
+        crate::eval::pf_bytes_per_particle_for(spec),
+    ]);
     budget.check(&format!("--particles {}", particles), pf)?;
     let factory = |horizon: u32| {
         select::estimators_with(

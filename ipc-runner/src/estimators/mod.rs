@@ -23,6 +23,7 @@ pub mod nn;
 pub mod occlusion;
 mod particles_rng;
 pub mod pf;
+pub mod pf_tobit;
 pub mod role;
 pub mod silence_kf;
 mod slots;
@@ -158,6 +159,7 @@ pub const FACTORIES: &[Factory] = &[
     nn::build,
     tobit::build,
     tobit_central::build,
+    pf_tobit::build,
     silence_kf::build,
 ];
 

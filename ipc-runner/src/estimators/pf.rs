@@ -139,7 +139,7 @@ impl PfModel {
 /// `Σ_p w_p (x_p − mean)(x_p − mean)ᵀ` into `out` (row-major, `nx = mean.len()`), with
 /// `w_p = exp(lw_p)` normalised log-weights and `x` the particles one after another. The
 /// upper triangle is summed and mirrored, so the result is exactly symmetric.
-fn weighted_covariance(x: &[f64], lw: &[f64], mean: &[f64], out: &mut [f64]) {
+pub(super) fn weighted_covariance(x: &[f64], lw: &[f64], mean: &[f64], out: &mut [f64]) {
     let nx = mean.len();
     out.fill(0.0);
     for (p, &l) in lw.iter().enumerate() {
@@ -159,7 +159,7 @@ fn weighted_covariance(x: &[f64], lw: &[f64], mean: &[f64], out: &mut [f64]) {
     }
 }
 
-fn lower_cholesky(m: &DMatrix<f64>, what: &'static str) -> Result<DMatrix<f64>, Error> {
+pub(super) fn lower_cholesky(m: &DMatrix<f64>, what: &'static str) -> Result<DMatrix<f64>, Error> {
     m.clone()
         .cholesky()
         .map(|c| c.l())

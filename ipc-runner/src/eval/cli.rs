@@ -206,7 +206,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
             &format!("--particles {particles} on {threads} thread(s)"),
             crate::limits::product(&[
                 particles as u64,
-                super::pf_bytes_per_particle(scenario.nx()),
+                super::pf_bytes_per_particle_for(&scenario.estimator_spec()),
                 threads as u64 + 1,
             ]),
         )

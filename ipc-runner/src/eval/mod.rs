@@ -122,6 +122,13 @@ pub fn pf_bytes_per_particle(nx: usize) -> u64 {
     2 * 8 * (2 * nx as u64 + 2)
 }
 
+/// Bytes per particle of the particle filters built for `spec`: seed 001's (the larger, for
+/// `pf` and `pf-mix`, [`pf_bytes_per_particle`]) or seed 004's `pf`, whose particles carry
+/// every node's trigger state beside x (`estimators::pf_tobit::bytes_per_particle`).
+pub fn pf_bytes_per_particle_for(spec: &estpipe_spec::EstimatorSpec) -> u64 {
+    pf_bytes_per_particle(spec.nx()).max(crate::estimators::pf_tobit::bytes_per_particle(spec))
+}
+
 /// What an evaluation holds in memory, in bytes: `(fixed, per_run)`. `fixed` are the
 /// reductions (per-k sums and counts of every estimator, the per-run averages the median
 /// needs, run 0's trajectories), `per_run` one run's record (squared errors and
@@ -185,16 +192,16 @@ pub fn evaluate_with(
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     // Before anything is built: the particle filters allocate their particles at once.
+    let spec = scenario.estimator_spec();
     let pf = product(&[
         options.particles as u64,
-        pf_bytes_per_particle(scenario.nx()),
+        pf_bytes_per_particle_for(&spec),
         threads as u64 + 1,
     ]);
     control.budget.check(
         &format!("--particles {} on {threads} thread(s)", options.particles),
         pf,
     )?;
-    let spec = scenario.estimator_spec();
     let probe = RunStart {
         seed: options.seed,
         run: 0,
