@@ -18,8 +18,9 @@
 use std::sync::Arc;
 
 use estimator_core::filter::silence::kalman::SilenceKf;
-use estimator_core::filter::silence::SilenceForm;
+use estimator_core::filter::silence::{SilenceCounts, SilenceForm};
 use estimator_core::filter::KalmanFilter;
+use estimator_core::protocol::bucket_mirror::MirrorCounts;
 use estimator_core::protocol::shared_token_bucket::SharedTokenBucket;
 use estimator_core::protocol::trigger_knowledge::TriggerKnowledge;
 use estimator_core::OnModel;
@@ -104,11 +105,18 @@ fn diagnostics<const NX: usize, const NY: usize, const L: usize>(
 ) {
     let f = &on.filter;
     sink("trace_p", f.estimate().covariance().trace());
-    let c = f.counts();
+    silence_counts(f.counts(), f.mirror().counts(), sink);
+}
+
+/// The cumulative silence and bucket-mirror counts of a silence-reading filter.
+pub(super) fn silence_counts(
+    c: SilenceCounts,
+    m: MirrorCounts,
+    sink: &mut dyn FnMut(&'static str, f64),
+) {
     sink("silence_held", f64::from(c.held));
     sink("silence_blocked", f64::from(c.blocked));
     sink("silence_unusable", f64::from(c.unusable));
-    let m = f.mirror().counts();
     sink("mirror_unknown", f64::from(m.unknown));
     sink("mirror_mismatches", f64::from(m.mismatches));
     sink("mirror_resyncs", f64::from(m.resyncs));

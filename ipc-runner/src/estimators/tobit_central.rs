@@ -97,7 +97,7 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
         TobitKf::new(prior, tau).map_err(named(TOBIT_KF_NAME))?,
     );
     let mut out: Vec<Box<dyn Estimator>> = vec![Box::new(
-        Adapted::<_, NX>::new(name!("tobit-kf"), on_model(kf, spec, remodel_kf))
+        Adapted::<_, NX>::new(name!("tobit-kf"), on_model(kf, spec, remodel))
             .with_nees()
             .with_gate(options.gate)?,
     )];
@@ -113,7 +113,7 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
             .map_err(|e| anyhow::anyhow!("{}: {e}", n.plain))?;
         let on = OnModel::new(model, filter);
         out.push(Box::new(
-            Adapted::<_, NX>::new(n, on_model(on, spec, remodel_cmm))
+            Adapted::<_, NX>::new(n, on_model(on, spec, remodel))
                 .with_diagnostics(diagnostics::<NX, NY, L>)
                 .with_nees()
                 .with_gate(options.gate)?,
@@ -202,25 +202,12 @@ fn moment_matched<const NX: usize, const NY: usize, const L: usize>(
     )?)
 }
 
-type KfOnNodes<const NX: usize, const NY: usize, const L: usize> =
-    OnModel<[Snapshot<NX, NY>; L], TobitKf<f64, NX, NY, L>, NY>;
 type CmmOnNodes<const NX: usize, const NY: usize, const L: usize> =
     OnModel<[Snapshot<NX, NY>; L], MomentMatchedTobit<f64, NX, NY, L>, NY>;
 
-/// The input term of instant `k` in every node's model.
-fn remodel_kf<const NX: usize, const NY: usize, const L: usize>(
-    on: &mut KfOnNodes<NX, NY, L>,
-    model: &LinearModel,
-    k: usize,
-) {
-    for m in &mut on.model {
-        m.set_input(model, k);
-    }
-}
-
-/// The input term of instant `k` in every node's model.
-fn remodel_cmm<const NX: usize, const NY: usize, const L: usize>(
-    on: &mut CmmOnNodes<NX, NY, L>,
+/// The input term of instant `k` in every node's model (either filter on the nodes' models).
+fn remodel<F, const NX: usize, const NY: usize, const L: usize>(
+    on: &mut OnModel<[Snapshot<NX, NY>; L], F, NY>,
     model: &LinearModel,
     k: usize,
 ) {
@@ -236,15 +223,7 @@ fn diagnostics<const NX: usize, const NY: usize, const L: usize>(
 ) {
     let f = &on.filter;
     sink("trace_p", f.estimate().covariance().trace());
-    let c = f.counts();
-    sink("silence_held", f64::from(c.held));
-    sink("silence_blocked", f64::from(c.blocked));
-    sink("silence_unusable", f64::from(c.unusable));
-    let m = f.mirror().counts();
-    sink("mirror_unknown", f64::from(m.unknown));
-    sink("mirror_mismatches", f64::from(m.mismatches));
-    sink("mirror_resyncs", f64::from(m.resyncs));
-    sink("mirror_refused", f64::from(m.refused));
+    super::silence_kf::silence_counts(f.counts(), f.mirror().counts(), sink);
 }
 
 #[cfg(test)]
