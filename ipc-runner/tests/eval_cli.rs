@@ -262,6 +262,9 @@ fn paired_differences_from_a_named_estimator() {
         .expect("the paired table");
     let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let avg = |n: &str| v["estimators"][n]["avg_mse"].as_f64().unwrap();
+    // Roles in the JSON as in the table: the full-information kf is the oracle.
+    assert_eq!(v["estimators"]["kf"]["role"], "oracle");
+    assert_eq!(v["estimators"]["ikf"]["role"], "baseline");
     let row = table
         .lines()
         .find(|l| l.starts_with("ikf "))

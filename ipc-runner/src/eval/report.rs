@@ -7,7 +7,7 @@
 //!   "truth_nonfinite",
 //!   ["transport_loss", "transport_loss_unmarked", "transport_delay", "lag", "loss_rate",
 //!    "gate",]   (only when set)
-//!   "estimators": { NAME: { "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
+//!   "estimators": { NAME: { "role", "mse": [MSE(k), k = 0..=T], "avg_mse", "avg_mse_se",
 //!                           "median_run_avg", "diverged_runs", "valid_runs",
 //!                           "first_error", "mse_per_state": [[MSE_i(k)]…],
 //!                           ["gate": { "tested", "rejected", "rejection_rate" },]  (`+gate`)
@@ -98,8 +98,9 @@ pub struct EvalResult {
 /// One estimator's results.
 #[derive(Debug, Serialize)]
 pub struct EstimatorResult {
-    /// Whose it is, for the table (not written: the JSON's entries stay what they were).
-    #[serde(skip)]
+    /// Whose it is: "paper", "product", "baseline", "reference" or "oracle" (README.md's
+    /// role legend), in the table and the JSON.
+    #[serde(serialize_with = "role_str")]
     pub role: Role,
     /// MSE(k), k = 0..=T.
     pub mse: Vec<f64>,
@@ -701,4 +702,9 @@ impl EvalResult {
         }
         s
     }
+}
+
+/// A role as its word in the tables.
+fn role_str<S: Serializer>(role: &Role, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(role.as_str())
 }

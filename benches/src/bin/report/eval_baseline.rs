@@ -452,8 +452,17 @@ fn compare(base: &Path, cur: &Path) -> Result<String> {
     };
     let mut same = Vec::new();
     let mut differ = Vec::new();
+    // The role of an estimator (issue 46) is not a result: the baseline's JSON has none.
+    let without_role = |v: &Value| {
+        let mut v = v.clone();
+        if let Some(o) = v.as_object_mut() {
+            o.remove("role");
+        }
+        v
+    };
     for (name, va) in a {
         let Some(vb) = b.get(name) else { continue };
+        let (va, vb) = (&without_role(va), &without_role(vb));
         if va == vb {
             same.push(format!("`{name}`"));
         } else {
