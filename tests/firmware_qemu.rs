@@ -126,7 +126,7 @@ const BINS: &[(&str, HostRun, usize, usize)] = &[
         56 * 1024,
         8 * 1024,
     ),
-    // The product's flagship for seed 004, `tobit-cmm-silence` (one centralised filter, no
+    // The product's flagship for seed 004, `tobit-cmm-held` (one centralised filter, no
     // local filters): held to 40 KiB of flash (12 KB of it the stream) and 4 KiB of stack, as
     // a regression guard.
     (
@@ -478,7 +478,7 @@ const TOL_TOBIT: f64 = 1e-4;
 
 /// The `tobit-cmm` firmware runs the product's flagship for seed 004 as the pipeline runs it:
 /// over the embedded stream its f32 x̂ and trace P track, instant by instant, the f64
-/// `tobit-cmm-silence` that ipc-runner builds from the `tobit-fusion` preset (through its
+/// `tobit-cmm-held` that ipc-runner builds from the `tobit-fusion` preset (through its
 /// public `Estimator` interface), and the two read the same silences as held and blocked.
 #[test]
 fn host_f32_tobit_cmm_matches_f64_from_the_preset() {
@@ -538,7 +538,7 @@ fn host_f32_tobit_cmm_matches_f64_from_the_preset() {
     }
     let c = f32_run.filter.counts();
     println!(
-        "tobit-cmm: f32 vs f64 tobit-cmm-silence, worst relative difference x̂ {worst_x:.2e}, \
+        "tobit-cmm: f32 vs f64 tobit-cmm-held, worst relative difference x̂ {worst_x:.2e}, \
          trace P {worst_p:.2e}; silences held {}, blocked {}, unusable {}",
         c.held, c.blocked, c.unusable
     );

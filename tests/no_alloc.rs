@@ -328,7 +328,7 @@ fn silence_section() {
 }
 
 /// The centralised filters of docs/tobit-fusion.md "At the information bound": the
-/// moment-matched filter reading held silences (`tobit-cmm-silence`) and the Tobit Kalman
+/// moment-matched filter reading held silences (`tobit-cmm-held`) and the Tobit Kalman
 /// filter, over 10 000 instants of the example's protocol, error paths included.
 fn information_bound_section() {
     use estimator_core::filter::silence::TriggeredPackets;

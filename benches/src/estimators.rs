@@ -264,7 +264,7 @@ pub fn tobit_silence_kernel<T: Real>(form: Silence, tag: &str) -> (String, StepF
 /// The product's centralised filter at the information bound (docs/tobit-fusion.md, "At the
 /// information bound"): one `MomentMatchedTobit` step from the fixed state of
 /// [`tobit_kernel`] (x̂ = [5 0]ᵀ, P = I, the same matrices and packets: nodes 1 and 3 deliver,
-/// node 2 silent with a token), reading the held silence (`silence`, `tobit-cmm-silence`,
+/// node 2 silent with a token), reading the held silence (`silence`, `tobit-cmm-held`,
 /// the firmware's `tobit-cmm`) or not (`plain`, `tobit-cmm`).
 pub fn tobit_cmm_kernel<T: Real>(reads_silence: bool, tag: &str) -> (String, StepFn) {
     let w = 0.052 * core::f64::consts::PI;

@@ -272,16 +272,16 @@ impl Central {
 /// Issue 46 on the paper's example (400 runs, seed 4004; 3 s.e. unless stated):
 /// * the moment-matched filter reading the silences reaches the information bound's region:
 ///   avg MSE ≤ 0.080 (the issue's figure for 2000 runs) within 3 s.e.;
-/// * reading the silence is worth something: `tobit-cmm-silence` < `tobit-cmm` (paired);
+/// * reading the silence is worth something: `tobit-cmm-held` < `tobit-cmm` (paired);
 /// * exact moment matching beats the practitioner's Tobit KF: `tobit-cmm` < `tobit-kf`;
 /// * the Tobit KF beats the product's best federated view by more than 10 paired s.e.;
-/// * `tobit-cmm-silence` is consistent: ANEES in [1.8, 2.2] and the fraction of run-instants
+/// * `tobit-cmm-held` is consistent: ANEES in [1.8, 2.2] and the fraction of run-instants
 ///   inside its 95 % ellipse not below 94 %, each within 3 s.e. of the per-run values.
 #[test]
 fn centralised_filters_at_the_information_bound() {
     let c = central(&*preset("tobit-fusion").unwrap(), runs(), 0.0);
     let (m, s) = mean_se(&c.run_avg[3]);
-    assert!(m - 3.0 * s <= 0.080, "tobit-cmm-silence: {m} ± {s}");
+    assert!(m - 3.0 * s <= 0.080, "tobit-cmm-held: {m} ± {s}");
     for (a, b) in [(3, 2), (2, 1)] {
         let (d, s) = c.paired(a, b);
         println!("{} − {} = {d:.5} ± {s:.5} (paired)", CENTRAL[a], CENTRAL[b]);
@@ -304,7 +304,7 @@ fn centralised_filters_at_the_information_bound() {
 }
 
 /// Issue 46 off the example: on the starved bucket and with 5 % of the slots lost in
-/// transport, `tobit-cmm-silence` stays consistent (ANEES in [1.8, 2.2] within 3 s.e.) and
+/// transport, `tobit-cmm-held` stays consistent (ANEES in [1.8, 2.2] within 3 s.e.) and
 /// is no worse than the same filter predicting on every silence (`tobit-cmm`; paired,
 /// 3 s.e.). 200 runs each.
 #[test]
@@ -325,7 +325,7 @@ fn the_silence_reading_filter_off_the_example() {
         println!("{what}:");
         let c = central(&*scenario, runs, loss);
         let (d, s) = c.paired(3, 2);
-        println!("tobit-cmm-silence − tobit-cmm = {d:.5} ± {s:.5} (paired)");
+        println!("tobit-cmm-held − tobit-cmm = {d:.5} ± {s:.5} (paired)");
         assert!(d - 3.0 * s <= 0.0, "{what}: {d} ± {s}");
         let (a, sa) = mean_se(&c.nees[3]);
         assert!(

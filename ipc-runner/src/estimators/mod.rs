@@ -200,6 +200,44 @@ pub fn build_all(
 mod tests {
     use super::*;
 
+    /// Every estimator of every preset, `-mix` and `pf` included, keeps its whole name in the
+    /// wire's estimate slot (docs/wire.md); the gated ones (`+gate`, cut on the wire when
+    /// longer) stay distinct in what a subscriber reads.
+    #[test]
+    fn every_built_in_name_fits_the_wire_name_field() {
+        let field = estpipe_wire::Estimate::none_yet(0, Default::default())
+            .name
+            .len();
+        for (preset, _) in channel_sim::scenario::presets::PRESETS {
+            let spec = crate::source::preset_spec(preset);
+            for gate in [None, Some(0.99)] {
+                let spec = Arc::new((*spec).clone().with_gate(gate).unwrap());
+                let options = EvalOptions {
+                    particles: 10,
+                    loss_rate: 0.2,
+                    ..EvalOptions::default()
+                };
+                let all = build_all(FACTORIES, &spec, &options, &RunStart::default()).unwrap();
+                let mut cut: Vec<&[u8]> = all
+                    .iter()
+                    .map(|e| &e.name().as_bytes()[..e.name().len().min(field)])
+                    .collect();
+                if gate.is_none() {
+                    let long: Vec<_> = all.iter().filter(|e| e.name().len() > field).collect();
+                    assert!(
+                        long.is_empty(),
+                        "{preset}: {:?}",
+                        long.iter().map(|e| e.name()).collect::<Vec<_>>()
+                    );
+                }
+                cut.sort();
+                let n = cut.len();
+                cut.dedup();
+                assert_eq!(cut.len(), n, "{preset}: names cut on the wire collide");
+            }
+        }
+    }
+
     /// A spec's own `gate` and `loss_rate` build the gated and `-mix` estimators as the flags
     /// do; a flag given on the command line wins over the file's value.
     #[test]

@@ -122,7 +122,7 @@ mod tests {
             ("fused+gate", Role::Product),
             ("tobit-kf", Role::Baseline),
             ("tobit-cmm", Role::Product),
-            ("tobit-cmm-silence", Role::Product),
+            ("tobit-cmm-held", Role::Product),
         ] {
             assert_eq!(Role::of(n), r, "{n}");
             assert_eq!(Role::of_estimator(n, false), r, "{n}");

@@ -1,4 +1,4 @@
-//! `tobit-kf`, `tobit-cmm` and `tobit-cmm-silence`: centralised filters of every node's
+//! `tobit-kf`, `tobit-cmm` and `tobit-cmm-held`: centralised filters of every node's
 //! censored packets that carry a covariance, beside seed 004's federated filters
 //! (docs/tobit-fusion.md, "At the information bound").
 //!
@@ -8,13 +8,13 @@
 //! * `tobit-cmm` (product): [`MomentMatchedTobit`] without the silence: the Kalman update with
 //!   every observed component and the exact moment-matched truncation with every censored one,
 //!   using the full prediction covariance; a silence is no information.
-//! * `tobit-cmm-silence` (product): the same filter reading every silence the receiver's mirror
+//! * `tobit-cmm-held` (product): the same filter reading every silence the receiver's mirror
 //!   of the shared bucket calls held, with the truncated-Gaussian update on the node's silence
 //!   box intersected with the censoring region.
 //!
 //! `tobit-kf` applies to a spec with a linear model and Tobit censoring thresholds; the two
 //! `tobit-cmm` filters also need the event-trigger stage (σ_m, χ_m, λ_m, η_{m,0}, the shared
-//! bucket), and `tobit-cmm-silence` is not built when the spec declares a loss rate (a loss
+//! bucket), and `tobit-cmm-held` is not built when the spec declares a loss rate (a loss
 //! after the trigger makes a silence ambiguous in a way the mirror cannot see). Their P is
 //! the error covariance (not a bound): diagnostics `trace_p`, and in evaluation `nees`,
 //! `inside_95`; the `tobit-cmm` filters add the cumulative `silence_held`, `silence_blocked`,
@@ -40,7 +40,7 @@ pub const TOBIT_KF_NAME: &str = "tobit-kf";
 /// The moment-matched filter, silences ignored.
 pub const CMM_NAME: &str = "tobit-cmm";
 /// The moment-matched filter reading held silences.
-pub const CMM_SILENCE_NAME: &str = "tobit-cmm-silence";
+pub const CMM_SILENCE_NAME: &str = "tobit-cmm-held";
 
 /// Builds the views that apply to `spec` (none without Tobit censoring).
 pub fn build(
@@ -84,7 +84,7 @@ pub fn build(
 }
 
 /// Every view that applies, in the order of the tables: `tobit-kf`, `tobit-cmm`,
-/// `tobit-cmm-silence`.
+/// `tobit-cmm-held`.
 fn views<const NX: usize, const NY: usize, const L: usize>(
     spec: &Arc<EstimatorSpec>,
     options: &EvalOptions,
@@ -106,7 +106,7 @@ fn views<const NX: usize, const NY: usize, const L: usize>(
     }
     let mut cmm = vec![(false, name!("tobit-cmm"))];
     if options.loss_rate <= 0.0 {
-        cmm.push((true, name!("tobit-cmm-silence")));
+        cmm.push((true, name!("tobit-cmm-held")));
     }
     for (reads_silence, n) in cmm {
         let filter = moment_matched::<NX, NY, L>(spec, prior, tau, reads_silence)
@@ -242,7 +242,7 @@ mod tests {
         };
         assert_eq!(
             names(&EvalOptions::default()),
-            ["tobit-kf", "tobit-cmm", "tobit-cmm-silence"]
+            ["tobit-kf", "tobit-cmm", "tobit-cmm-held"]
         );
         let lossy = EvalOptions {
             loss_rate: 0.1,

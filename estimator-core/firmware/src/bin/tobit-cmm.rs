@@ -1,4 +1,4 @@
-//! The product's seed 004 estimator at the information bound, `tobit-cmm-silence`: the
+//! The product's seed 004 estimator at the information bound, `tobit-cmm-held`: the
 //! centralised moment-matched Tobit filter behind the bucket mirror, reading held silences,
 //! over the embedded three-node stream.
 #![no_std]

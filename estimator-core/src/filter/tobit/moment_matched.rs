@@ -1,7 +1,7 @@
 //! The product's seed-004 estimator at the information bound: one centralised Gaussian filter
 //! that carries a covariance, reads every delivered censored packet by exact moment matching
 //! and, optionally, every held trigger's silence (docs/tobit-fusion.md, "At the information
-//! bound"; the estimators `tobit-cmm` and `tobit-cmm-silence`).
+//! bound"; the estimators `tobit-cmm` and `tobit-cmm-held`).
 //!
 //! Per instant `k ≥ 1`:
 //!
@@ -57,7 +57,7 @@ type NodeModel<T, const NX: usize, const NY: usize> = (SMatrix<T, NY, NX>, SVect
 impl<T: Real, const NX: usize, const NY: usize, const L: usize> MomentMatchedTobit<T, NX, NY, L> {
     /// The prior `(x̄₀, P₀)`, every node's censoring thresholds τ_m and trigger knowledge
     /// (η̄₀ and the initial reference), the shared bucket at ξ₀, and whether held silences are
-    /// read (`tobit-cmm-silence`) or ignored (`tobit-cmm`).
+    /// read (`tobit-cmm-held`) or ignored (`tobit-cmm`).
     pub fn new(
         prior: Estimate<T, NX>,
         tau: [SVector<T, NY>; L],

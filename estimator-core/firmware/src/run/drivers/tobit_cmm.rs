@@ -1,4 +1,4 @@
-//! The product's seed 004 estimator at the information bound, `tobit-cmm-silence`
+//! The product's seed 004 estimator at the information bound, `tobit-cmm-held`
 //! (docs/tobit-fusion.md, "At the information bound"), over the three-node Tobit stream: one
 //! centralised moment-matched filter behind the receiver's mirror of the shared bucket, every
 //! delivered packet read component by component (observed: the Kalman update; censored: the
@@ -29,7 +29,7 @@ use super::tobit_silence::paper_bucket;
 /// The moment-matched filter of the stream: (n_x, n_y) = (2, 2), three nodes.
 pub type Cmm = MomentMatchedTobit<f32, TOBIT_NX, NY, NODES>;
 
-/// `tobit-cmm-silence` as the firmware runs it: the filter and the example's matrices, stored
+/// `tobit-cmm-held` as the firmware runs it: the filter and the example's matrices, stored
 /// once in the form [`MomentMatchedTobit::step_matrices`] takes them (the model is
 /// time-invariant).
 #[derive(Clone, Debug)]
@@ -47,7 +47,7 @@ pub struct TobitCmm {
 impl TobitCmm {
     /// The example's filter: x̂₀ = [5 0]ᵀ, P₀ = I₂, τ_m = 0, every node's trigger (σ_m, χ, λ_m,
     /// η₀) with its initial reference at τ_m as the node starts, the shared bucket at ξ₀;
-    /// `reads_silence` as the product's flagship sets it (`tobit-cmm-silence`) or not
+    /// `reads_silence` as the product's flagship sets it (`tobit-cmm-held`) or not
     /// (`tobit-cmm`).
     #[inline]
     pub fn paper_example(reads_silence: bool) -> Result<Self, Error> {
@@ -72,7 +72,7 @@ impl TobitCmm {
         })
     }
 
-    /// The flagship, `tobit-cmm-silence`.
+    /// The flagship, `tobit-cmm-held`.
     #[inline]
     pub fn silence() -> Result<Self, Error> {
         Self::paper_example(true)
@@ -136,7 +136,7 @@ impl Digested<TOBIT_NX> for TobitCmm {
     }
 }
 
-/// `tobit-cmm-silence` over the three-node Tobit stream.
+/// `tobit-cmm-held` over the three-node Tobit stream.
 #[inline]
 pub fn run_tobit_cmm(stream: &NodeStream<'_>, steps: usize) -> Summary {
     drive("tobit-cmm", stream.instants(), steps, TobitCmm::silence)
