@@ -15,6 +15,16 @@ pub enum Side {
     Estimator,
 }
 
+impl Side {
+    /// The side's name, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Sensor => "sensor",
+            Side::Estimator => "estimator",
+        }
+    }
+}
+
 /// Default zenoh endpoint: the sensor side listens, the estimator side connects (loopback).
 pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
 
@@ -96,6 +106,17 @@ impl BridgeArgs {
     #[cfg(not(feature = "test-hooks"))]
     pub(crate) fn corrupt_every(&self) -> Option<u64> {
         None
+    }
+
+    /// Says `what` this side of the prefix is doing on stderr, unless `--quiet`.
+    pub(crate) fn progress(&self, what: &str) {
+        if !self.quiet {
+            estpipe_process::errln!(
+                "bridge: {} side of {}: {what}",
+                self.side.name(),
+                self.prefix
+            );
+        }
     }
 
     /// The flags' own ranges and the files they name (exit 2 on a violation, as every bad

@@ -97,6 +97,15 @@ pub struct BridgeReport {
 }
 
 impl BridgeReport {
+    /// An empty report of `side`, on `key`.
+    pub(crate) fn new(side: Side, key: String) -> Self {
+        Self {
+            side: Some(side),
+            key,
+            ..Default::default()
+        }
+    }
+
     /// Counts one refused message.
     pub fn refuse(&mut self, reason: &'static str) {
         *self.refused.entry(reason).or_default() += 1;
@@ -121,11 +130,7 @@ impl BridgeReport {
         format!(
             "{} side, key {}: {} slots, {} markers, {} truth, {} estimates forwarded; {} lost on \
              the network; refused: {refused}; {}",
-            match self.side {
-                Some(Side::Sensor) => "sensor",
-                Some(Side::Estimator) => "estimator",
-                None => "?",
-            },
+            self.side.map_or("?", Side::name),
             self.key,
             self.slots,
             self.markers,

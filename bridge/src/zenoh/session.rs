@@ -1,4 +1,5 @@
-//! Ending a zenoh session without waiting on a congested link.
+//! The zenoh session of a bridge: opened from the command line, its publishers declared
+//! alike, a put that a stop may cut short, and an end that never waits on a congested link.
 //!
 //! On a link that takes nothing (a blackholed or saturated path), zenoh's `close` waits for
 //! its own 10 s timeout, and a put under `CongestionControl::Block` waits up to the
@@ -7,11 +8,15 @@
 //! as soon as the stop comes, which ends a blocked put at once, and [`close_within`] bounds
 //! every close.
 
+use crate::args::BridgeArgs;
 use crate::stop::Stop;
+use anyhow::{anyhow, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::thread::JoinHandle;
 use std::time::Duration;
+use zenoh::pubsub::Publisher;
+use zenoh::qos::CongestionControl;
 use zenoh::{Session, Wait};
 
 /// How long a bridge waits for its session to close before it goes on (and exits).
@@ -19,6 +24,39 @@ pub(crate) const CLOSE_WAIT: Duration = Duration::from_millis(500);
 
 /// How often [`CloseOnStop`] looks at the stop request.
 const POLL: Duration = Duration::from_millis(10);
+
+/// Opens the session `args` configure.
+pub(crate) fn open(args: &BridgeArgs) -> Result<Session> {
+    zenoh::open(args.zenoh_config()?)
+        .wait()
+        .map_err(|e| anyhow!("cannot open the zenoh session: {e}"))
+}
+
+/// A publisher on `<key>/<name>`. Express, as every publisher of the bridge: a message leaves
+/// at once instead of waiting to be batched with later ones, so the link adds no wait of its own.
+pub(crate) fn publisher(
+    session: &Session,
+    key: &str,
+    name: &str,
+    congestion: CongestionControl,
+) -> Result<Publisher<'static>> {
+    session
+        .declare_publisher(format!("{key}/{name}"))
+        .congestion_control(congestion)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow!("zenoh publisher {key}/{name}: {e}"))
+}
+
+/// Puts `msg` on `z`; `Ok(false)` when it failed because a stop closed the session
+/// ([`CloseOnStop`]): the message is not sent and the caller stops.
+pub(crate) fn put(z: &Publisher<'_>, msg: &[u8], stop: &Stop, what: &str) -> Result<bool> {
+    match z.put(msg).wait() {
+        Ok(()) => Ok(true),
+        Err(_) if stop.requested() => Ok(false),
+        Err(e) => Err(anyhow!("zenoh put {what}: {e}")),
+    }
+}
 
 /// Closes `session` on a thread of its own and waits at most `wait` for it; `true` if it
 /// closed in time. A close still under way when the process exits ends with it.
