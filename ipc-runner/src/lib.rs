@@ -1,14 +1,16 @@
 //! The application layer: estimator dispatch, Monte-Carlo evaluation, the real-time loop over
 //! iceoryx2, metrics and the demo.
 
-pub mod estimator;
-
-pub use estimator::{CovarianceKind, Estimator, LateFold};
+pub use estpipe_estimators::{CovarianceKind, Estimator, LateFold};
 pub mod bridge;
 pub mod cli;
 pub mod demo;
 pub mod estimator_args;
-pub mod estimators;
+/// The estimators crate ([`estpipe_estimators`]) under the path the commands use.
+pub mod estimators {
+    pub use crate::eval::EvalOptions;
+    pub use estpipe_estimators::*;
+}
 pub mod eval;
 pub mod latency;
 pub mod limits;

@@ -89,18 +89,6 @@ pub(crate) fn preset_spec(name: &str) -> Arc<EstimatorSpec> {
         .estimator_spec()
 }
 
-/// The spec of preset `name` and its run `(seed, run)` (tests of the estimator families that
-/// need simulated instants).
-#[cfg(test)]
-pub(crate) fn preset_run(
-    name: &str,
-    seed: u64,
-    run: u64,
-) -> (Arc<EstimatorSpec>, Box<dyn channel_sim::Simulation>) {
-    let s = channel_sim::scenario::preset(name).expect("a preset");
-    (s.estimator_spec(), s.start(seed, run))
-}
-
 /// The estimators of `factories` for run `(seed, run)` of `scenario`: its spec and its
 /// instant-0 observations, as `eval` builds them.
 pub fn build_for_scenario(

@@ -199,7 +199,7 @@ def read_slots(
                         y[j] = _parse_float(get(cy[j]))
                     except ValueError as e:
                         raise bad(f"y_{j}", f"{get(cy[j])!r} ({e})") from None
-            # As the estimators read an observation (ipc-runner/src/estimators/slots.rs): a
+            # As the estimators read an observation (estimators/src/slots.rs): a
             # delivered row's measurement is used whatever its flags; an undelivered one is
             # lost when flagged lost (in the IPC or on the network), else a channel dropout.
             if delivered:

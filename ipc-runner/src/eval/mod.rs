@@ -51,6 +51,7 @@
 pub mod cli;
 pub mod delay;
 pub mod nn_bound;
+mod options;
 pub mod paired;
 pub mod report;
 
@@ -62,8 +63,9 @@ use estpipe_wire::FLAG_IPC_LOST;
 use rayon::prelude::*;
 
 use crate::estimators::role::Role;
-use crate::estimators::{build_all, EvalOptions, Factory, RunStart};
+use crate::estimators::{build_all, Factory, RunStart};
 use crate::limits::{product, Budget, Progress};
+pub use options::EvalOptions;
 pub use report::{ChannelSummary, EstimatorResult, EvalResult, NodeCounts, Trajectory};
 use std::time::Duration;
 
@@ -116,18 +118,7 @@ pub const DIAGNOSTICS_ALLOWANCE: u64 = 8;
 /// Most runs finished but not yet reduced: the results of a chunk are reduced in run order.
 const CHUNK: u64 = 256;
 
-/// Bytes a particle filter holds per particle on a scenario with `nx` states (particles,
-/// their copy while resampling, two log-weights), for both `pf` and `pf-mix`.
-pub fn pf_bytes_per_particle(nx: usize) -> u64 {
-    2 * 8 * (2 * nx as u64 + 2)
-}
-
-/// Bytes per particle of the particle filters built for `spec`: seed 001's (the larger, for
-/// `pf` and `pf-mix`, [`pf_bytes_per_particle`]) or seed 004's `pf`, whose particles carry
-/// every node's trigger state beside x (`estimators::pf_tobit::bytes_per_particle`).
-pub fn pf_bytes_per_particle_for(spec: &estpipe_spec::EstimatorSpec) -> u64 {
-    pf_bytes_per_particle(spec.nx()).max(crate::estimators::pf_tobit::bytes_per_particle(spec))
-}
+pub use crate::estimators::{pf_bytes_per_particle, pf_bytes_per_particle_for};
 
 /// What an evaluation holds in memory, in bytes: `(fixed, per_run)`. `fixed` are the
 /// reductions (per-k sums and counts of every estimator, the per-run averages the median

@@ -243,7 +243,7 @@ impl Estimator for Faulty {
 
 fn faulty(
     s: &std::sync::Arc<estpipe_spec::EstimatorSpec>,
-    _o: &EvalOptions,
+    _o: &crate::estimators::BuildOptions,
     start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     Ok(vec![Box::new(Faulty {

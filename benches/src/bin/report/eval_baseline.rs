@@ -528,7 +528,7 @@ const PARTS: &[(&str, &[&str])] = &[
         "simulation (plant, sensor, channel)",
         &["<channel_sim::scenario::composed::ComposedSimulation as channel_sim::sim::Simulation>::next_instant"],
     ),
-    ("`kf` and `ikf` steps", &["<ipc_runner::estimators::kf::NodeByNode<"]),
+    ("`kf` and `ikf` steps", &["<estpipe_estimators::kf::NodeByNode<"]),
     ("`cce` steps", &["estimator_core::filter::occlusion::cce::<impl estimator_core::estimator::Estimator<"]),
     ("`kf-io` steps", &["estimator_core::filter::occlusion::kf_io::<impl estimator_core::estimator::Estimator<"]),
     ("`adf` steps", &["estimator_core::filter::occlusion::adf::<impl estimator_core::estimator::Estimator<"]),
@@ -538,7 +538,7 @@ const PARTS: &[(&str, &[&str])] = &[
     ),
     (
         "estimators built per run",
-        &["ipc_runner::estimators::build_all"],
+        &["estpipe_estimators::registry::build_all"],
     ),
     (
         "accumulating the runs, the report and the JSON",

@@ -30,7 +30,7 @@ use nalgebra::SVector;
 use super::adapter::{name, Adapted, Name};
 use super::fed::{linear, on_model};
 use super::snapshot::{fixed, Snapshot};
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::Estimator;
 
 /// The truncated-Gaussian view's name.
@@ -41,7 +41,7 @@ pub const SL_NAME: &str = "kf-sl";
 /// Builds `kf-silence` and `kf-sl` where they apply (empty otherwise).
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     if spec.linear().is_none()

@@ -32,7 +32,7 @@ use nalgebra::SVector;
 use super::adapter::{name, Adapted};
 use super::fed::{linear, on_model};
 use super::snapshot::{fixed, Snapshot};
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::Estimator;
 
 /// The practitioner's Tobit Kalman filter.
@@ -45,7 +45,7 @@ pub const CMM_SILENCE_NAME: &str = "tobit-cmm-held";
 /// Builds the views that apply to `spec` (none without Tobit censoring).
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     if spec.linear().is_none() || spec.channel.tobit.is_none() {
@@ -87,7 +87,7 @@ pub fn build(
 /// `tobit-cmm-held`.
 fn views<const NX: usize, const NY: usize, const L: usize>(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let tau = thresholds::<NY, L>(spec)?;
     let prior = prior::<NX>(spec)?;
@@ -232,8 +232,8 @@ mod tests {
 
     #[test]
     fn builds_three_views_for_the_preset_and_none_without_censoring() {
-        let s = crate::source::preset_spec("tobit-fusion");
-        let names = |o: &EvalOptions| -> Vec<&'static str> {
+        let s = crate::presets::preset_spec("tobit-fusion");
+        let names = |o: &BuildOptions| -> Vec<&'static str> {
             build(&s, o, &RunStart::default())
                 .unwrap()
                 .iter()
@@ -241,16 +241,16 @@ mod tests {
                 .collect()
         };
         assert_eq!(
-            names(&EvalOptions::default()),
+            names(&BuildOptions::default()),
             ["tobit-kf", "tobit-cmm", "tobit-cmm-held"]
         );
-        let lossy = EvalOptions {
+        let lossy = BuildOptions {
             loss_rate: 0.1,
-            ..EvalOptions::default()
+            ..BuildOptions::default()
         };
         assert_eq!(names(&lossy), ["tobit-kf", "tobit-cmm"]);
-        let lin = crate::source::preset_spec("linear");
-        assert!(build(&lin, &EvalOptions::default(), &RunStart::default())
+        let lin = crate::presets::preset_spec("linear");
+        assert!(build(&lin, &BuildOptions::default(), &RunStart::default())
             .unwrap()
             .is_empty());
     }

@@ -11,7 +11,7 @@
 //! A packet lost in transport ([`Packet::Lost`]: lost inside the IPC, missed before join,
 //! marked lost in a slot log or by `eval --transport-loss`) is a prediction-only step for all
 //! three: a loss says nothing about the state. With `--loss-rate P` (a positive
-//! `EvalOptions::loss_rate`) the family also builds `cce-mix`, `kf-io-mix` and `adf-mix`, the
+//! `BuildOptions::loss_rate`) the family also builds `cce-mix`, `kf-io-mix` and `adf-mix`, the
 //! same filters with `with_loss_rate(P)`: for a receiver that cannot tell a loss from a
 //! dropout, every dropout is "occluded, or lost with probability P" (docs/occlusion.md,
 //! "Losses").
@@ -28,7 +28,7 @@ use nalgebra::{SMatrix, SVector};
 use super::adapter::{name, Adapted, Name};
 use super::fed::{linear, on_model};
 use super::snapshot::{fixed, Snapshot};
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::Estimator;
 
 /// Gaussian components per region used by `cce` (the paper's N = 15).
@@ -37,7 +37,7 @@ pub const CCE_COMPONENTS: usize = 15;
 /// Builds `cce`, `kf-io` and `adf` for a spec with occlusion regions (empty list otherwise).
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let Some(occ) = &spec.channel.occlusion else {
@@ -153,19 +153,19 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimators::RunStart;
-    use crate::estimators::{build_all, FACTORIES};
+    use crate::RunStart;
+    use crate::{build_all, FACTORIES};
     use estpipe_wire::{Observation, FLAG_IPC_LOST, FLAG_OCCLUDED};
 
     /// A slot lost in the IPC is a prediction for every occlusion estimator (the same as
     /// `ikf`'s), a dropout is not: from the same prior, after one instant.
     #[test]
     fn a_lost_slot_is_a_prediction_and_a_dropout_is_not() {
-        let s = crate::source::preset_spec("occlusion");
-        let options = EvalOptions {
+        let s = crate::presets::preset_spec("occlusion");
+        let options = BuildOptions {
             particles: 0,
             loss_rate: 0.2,
-            ..EvalOptions::default()
+            ..BuildOptions::default()
         };
         let after = |flags: u32| {
             let mut ests = build_all(FACTORIES, &s, &options, &RunStart::default()).unwrap();

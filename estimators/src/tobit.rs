@@ -54,7 +54,7 @@ use super::fed::{linear, on_model, Fed};
 use super::lagged::Lagged;
 use super::slots::FromSlots;
 use super::snapshot::{fixed, Snapshot};
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::{CovarianceKind, Estimator, LateFold};
 
 /// The names of the local views, node 1 first.
@@ -161,7 +161,7 @@ pub const XI_E: f64 = 2.0;
 /// Builds the views for a spec with the seed 004 channel (empty otherwise).
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let Some(parts) = Parts::of(spec) else {
@@ -414,7 +414,7 @@ fn push_views<const NX: usize, const NY: usize, const L: usize, E>(
 /// declares a loss rate — the two silence-reading ones (`…-silence`, `…-sl`).
 fn views<const NX: usize, const NY: usize, const L: usize>(
     parts: &Parts,
-    options: &EvalOptions,
+    options: &BuildOptions,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     // Without `--gate` the views take the plain step (the gate held is never asked).
     let (gate, gated) = match options.gate {
@@ -597,8 +597,8 @@ mod tests {
 
     #[test]
     fn builds_views_for_the_preset_and_none_for_others() {
-        let s = crate::source::preset_spec("tobit-fusion");
-        let v = build(&s, &EvalOptions::default(), &RunStart::default()).unwrap();
+        let s = crate::presets::preset_spec("tobit-fusion");
+        let v = build(&s, &BuildOptions::default(), &RunStart::default()).unwrap();
         let names: Vec<_> = v.iter().map(|e| e.name()).collect();
         assert_eq!(
             names,
@@ -622,22 +622,22 @@ mod tests {
             ]
         );
         // A declared loss rate makes a silence ambiguous: no silence-reading views.
-        let lossy = EvalOptions {
+        let lossy = BuildOptions {
             loss_rate: 0.1,
-            ..EvalOptions::default()
+            ..BuildOptions::default()
         };
         assert_eq!(build(&s, &lossy, &RunStart::default()).unwrap().len(), 8);
-        let lin = crate::source::preset_spec("linear");
-        assert!(build(&lin, &EvalOptions::default(), &RunStart::default())
+        let lin = crate::presets::preset_spec("linear");
+        assert!(build(&lin, &BuildOptions::default(), &RunStart::default())
             .unwrap()
             .is_empty());
     }
 
     #[test]
     fn views_step_one_shared_filter_once_per_instant() {
-        let (s, mut sim) = crate::source::preset_run("tobit-fusion", 3, 0);
+        let (s, mut sim) = crate::presets::preset_run("tobit-fusion", 3, 0);
         let parts = Parts::of(&s).unwrap();
-        let mut v = build(&s, &EvalOptions::default(), &RunStart::default()).unwrap();
+        let mut v = build(&s, &BuildOptions::default(), &RunStart::default()).unwrap();
         let mut alone = fusion_for::<2, 2, 3>(&parts, Silence::HeldMeasurement).unwrap();
         let mut predict = fusion_for::<2, 2, 3>(&parts, Silence::Predict).unwrap();
         for k in 1..=50u32 {

@@ -1,5 +1,5 @@
 use super::*;
-use crate::estimators::{build_all, FACTORIES};
+use crate::{build_all, FACTORIES};
 use estimator_core::gauss::{cdf, ln_cdf, ln_pdf};
 use estimator_core::protocol::event_trigger::EventTriggerConfig;
 use estpipe_spec::channel::TriggerParams;
@@ -7,10 +7,10 @@ use estpipe_spec::Sensor;
 use estpipe_wire::FLAG_IPC_LOST;
 use nalgebra::DMatrix;
 
-fn options(particles: usize) -> EvalOptions {
-    EvalOptions {
+fn options(particles: usize) -> BuildOptions {
+    BuildOptions {
         particles,
-        ..EvalOptions::default()
+        ..BuildOptions::default()
     }
 }
 
@@ -27,7 +27,7 @@ fn setup(particles: usize, seed: u64, run: u64) -> Setup {
 /// nothing elsewhere, with `--particles 0` or with a declared loss rate.
 #[test]
 fn builds_pf_for_seed_004_only() {
-    let s = crate::source::preset_spec("tobit-fusion");
+    let s = crate::presets::preset_spec("tobit-fusion");
     let start = RunStart::default();
     let names = |v: Vec<Box<dyn Estimator>>| v.iter().map(|e| e.name()).collect::<Vec<_>>();
     assert_eq!(names(build(&s, &options(100), &start).unwrap()), ["pf"]);
@@ -35,17 +35,17 @@ fn builds_pf_for_seed_004_only() {
         .unwrap()
         .is_empty());
     assert!(build(&s, &options(0), &start).unwrap().is_empty());
-    let lossy = EvalOptions {
+    let lossy = BuildOptions {
         loss_rate: 0.1,
         ..options(100)
     };
     assert!(build(&s, &lossy, &start).unwrap().is_empty());
     for other in ["occlusion", "linear", "nn-token-bucket"] {
-        let o = crate::source::preset_spec(other);
+        let o = crate::presets::preset_spec(other);
         assert!(build(&o, &options(100), &start).unwrap().is_empty());
         assert_eq!(bytes_per_particle(&o), 0);
     }
-    let picked = EvalOptions {
+    let picked = BuildOptions {
         estimators: vec!["pf".into()],
         ..options(100)
     };
@@ -59,7 +59,7 @@ fn builds_pf_for_seed_004_only() {
 /// memory check covers it.
 #[test]
 fn bytes_per_particle_is_what_the_filter_holds() {
-    let s = crate::source::preset_spec("tobit-fusion");
+    let s = crate::presets::preset_spec("tobit-fusion");
     let n = 1000;
     let pf = TobitPf::<3>::new(&s, &setup(n, 1, 0)).unwrap();
     let held: usize = [&pf.p, &pf.spare]
@@ -67,11 +67,11 @@ fn bytes_per_particle_is_what_the_filter_holds() {
         .map(|p| p.x.len() + p.eta.len() + p.reference.len() + p.lw.len() + p.lw_soft.len())
         .sum();
     assert_eq!((8 * held / n) as u64, bytes_per_particle(&s));
-    assert!(crate::eval::pf_bytes_per_particle_for(&s) >= bytes_per_particle(&s));
-    let occ = crate::source::preset_spec("occlusion");
+    assert!(crate::memory::pf_bytes_per_particle_for(&s) >= bytes_per_particle(&s));
+    let occ = crate::presets::preset_spec("occlusion");
     assert_eq!(
-        crate::eval::pf_bytes_per_particle_for(&occ),
-        crate::eval::pf_bytes_per_particle(occ.nx())
+        crate::memory::pf_bytes_per_particle_for(&occ),
+        crate::memory::pf_bytes_per_particle(occ.nx())
     );
 }
 
@@ -156,7 +156,7 @@ fn held_silence_likelihood_by_sampling_matches_the_closed_form() {
 /// an uncensored one.
 #[test]
 fn censored_density_is_the_tobit_likelihood() {
-    let s = crate::source::preset_spec("tobit-fusion");
+    let s = crate::presets::preset_spec("tobit-fusion");
     let node = &TobitPf::<3>::new(&s, &setup(10, 0, 0)).unwrap().nodes[1];
     let (mu, sd) = ([0.4, -0.7, 0.0, 0.0], 0.5f64.sqrt());
     let want = ln_cdf((0.0 - 0.4) / sd) + ln_pdf((1.2 + 0.7) / sd) - sd.ln();
@@ -168,7 +168,7 @@ fn censored_density_is_the_tobit_likelihood() {
 /// instant (σ = 0, η₀ = 0: η stays 0 and ‖ε‖ ≥ 0) and a bucket that never runs dry: every
 /// packet is delivered uncensored.
 fn always_delivered() -> Arc<EstimatorSpec> {
-    let mut s = (*crate::source::preset_spec("tobit-fusion")).clone();
+    let mut s = (*crate::presets::preset_spec("tobit-fusion")).clone();
     let tau = vec![vec![-1e6, -1e6]; 3];
     s.channel.tobit = Some(TobitCensoring::new(tau.clone()).unwrap());
     let p = TriggerParams {
@@ -192,7 +192,7 @@ fn always_delivered() -> Arc<EstimatorSpec> {
 #[test]
 fn pf_is_a_kalman_filter_when_every_packet_arrives_uncensored() {
     let s = always_delivered();
-    let (_, mut sim) = crate::source::preset_run("tobit-fusion", 5, 0);
+    let (_, mut sim) = crate::presets::preset_run("tobit-fusion", 5, 0);
     let mut pf = TobitPf::<3>::new(&s, &setup(20_000, 5, 0)).unwrap();
     let mut kf = super::super::kf::build(&s, &options(0), &RunStart::default())
         .unwrap()
@@ -222,7 +222,7 @@ fn pf_is_a_kalman_filter_when_every_packet_arrives_uncensored() {
 /// the densities alone, counts one collapse, and everything stays finite.
 #[test]
 fn a_collapse_is_counted_and_stays_finite() {
-    let s = crate::source::preset_spec("tobit-fusion");
+    let s = crate::presets::preset_spec("tobit-fusion");
     let mut pf = TobitPf::<3>::new(&s, &setup(500, 2, 0)).unwrap();
     let mut obs: Vec<Observation> = (0..3).map(|m| Observation::dropped(1, m, 2, 0)).collect();
     obs[0].delivered = true;
@@ -247,7 +247,7 @@ fn a_collapse_is_counted_and_stays_finite() {
 /// its draw and restarts η at λη₀ + σ.
 #[test]
 fn a_lost_packet_moves_the_reference_of_particles_that_fired() {
-    let s = crate::source::preset_spec("tobit-fusion");
+    let s = crate::presets::preset_spec("tobit-fusion");
     let mut pf = TobitPf::<3>::new(&s, &setup(400, 3, 0)).unwrap();
     let obs: Vec<Observation> = (0..3)
         .map(|m| Observation::dropped(1, m, 2, FLAG_IPC_LOST))
@@ -266,7 +266,7 @@ fn a_lost_packet_moves_the_reference_of_particles_that_fired() {
 /// stepping k = 1, a lost k = 2, then k = 3, bit for bit.
 #[test]
 fn a_missed_instant_is_stepped_as_lost() {
-    let (s, mut sim) = crate::source::preset_run("tobit-fusion", 9, 0);
+    let (s, mut sim) = crate::presets::preset_run("tobit-fusion", 9, 0);
     let (mut a, mut b) = (
         TobitPf::<3>::new(&s, &setup(300, 9, 0)).unwrap(),
         TobitPf::<3>::new(&s, &setup(300, 9, 0)).unwrap(),
@@ -319,14 +319,14 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
 /// few runs (the runs are fixed, so the test is deterministic).
 #[test]
 fn pf_is_better_than_fused_predict_on_the_preset() {
-    let opts = EvalOptions {
+    let opts = BuildOptions {
         particles: 1000,
         estimators: vec!["pf".into(), "fused-predict".into()],
-        ..EvalOptions::default()
+        ..BuildOptions::default()
     };
     let mut diff = Vec::new();
     for run in 0..8 {
-        let (s, mut sim) = crate::source::preset_run("tobit-fusion", 4004, run);
+        let (s, mut sim) = crate::presets::preset_run("tobit-fusion", 4004, run);
         let start = RunStart {
             seed: 4004,
             run,
@@ -361,7 +361,7 @@ fn variants() {
     let runs: u64 = env("PF_TOBIT_RUNS", "200").parse().unwrap();
     let seed: u64 = env("PF_TOBIT_SEED", "2026").parse().unwrap();
     let one_run = |run: u64| {
-        let (s, mut sim) = crate::source::preset_run("tobit-fusion", seed, run);
+        let (s, mut sim) = crate::presets::preset_run("tobit-fusion", seed, run);
         let ests = variants
             .iter()
             .map(|&(particles, held_samples)| {

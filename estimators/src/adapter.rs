@@ -27,7 +27,7 @@ pub(crate) struct Name {
 /// The [`Name`] of an estimator named by the literal `$n`.
 macro_rules! name {
     ($n:literal) => {
-        $crate::estimators::adapter::Name {
+        $crate::adapter::Name {
             plain: $n,
             gated: concat!($n, "+gate"),
         }

@@ -25,13 +25,13 @@ use nalgebra::SVector;
 use super::adapter::{name, Adapted, Name};
 use super::fed::{linear, on_model};
 use super::snapshot::{fixed, Snapshot};
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::Estimator;
 
 /// Builds `kf` for a spec with a linear model.
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     Ok(linear_kf(spec, name!("kf"), true, options.gate)?

@@ -74,7 +74,7 @@ use nalgebra::SMatrix;
 use super::particles_rng::{splitmix64, Rng};
 use super::pf::{lower_cholesky, weighted_covariance};
 use super::slots::FromSlots;
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::{CovarianceKind, Estimator};
 use node::{NodeModel, Seen};
 
@@ -98,7 +98,7 @@ pub fn bytes_per_particle(spec: &EstimatorSpec) -> u64 {
 /// token bucket (empty otherwise, with `--particles 0`, or with a declared loss rate).
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     if options.particles == 0 || options.loss_rate > 0.0 || bytes_per_particle(spec) == 0 {

@@ -96,7 +96,7 @@ where
 mod tests {
     use estpipe_wire::{Observation, FLAG_IPC_LOST};
 
-    use crate::estimators::{build_all, EvalOptions, RunStart, FACTORIES};
+    use crate::{build_all, BuildOptions, RunStart, FACTORIES};
     use crate::{Estimator, LateFold};
 
     /// Every estimator's estimate and covariance.
@@ -125,7 +125,7 @@ mod tests {
             ("tobit-fusion", None),
             ("tobit-fusion", Some(0.99)),
         ] {
-            let (spec, mut sim) = crate::source::preset_run(preset, 3, 1);
+            let (spec, mut sim) = crate::presets::preset_run(preset, 3, 1);
             let initial: Option<Vec<Observation>> = sim.initial_observations().map(<[_]>::to_vec);
             let start = RunStart {
                 seed: 3,
@@ -134,11 +134,11 @@ mod tests {
             };
             let nx = spec.nx();
             let build = |lag: u32| {
-                let options = EvalOptions {
+                let options = BuildOptions {
                     particles: 0,
                     gate,
                     lag,
-                    ..EvalOptions::default()
+                    ..BuildOptions::default()
                 };
                 let mut all = build_all(FACTORIES, &spec, &options, &start).unwrap();
                 all.retain(|e| !e.full_information());

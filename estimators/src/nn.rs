@@ -51,7 +51,7 @@ use nalgebra::{matrix, SMatrix, SVector};
 
 use super::adapter::{name, Adapted};
 use super::fed::fixed;
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::Estimator;
 use estpipe_spec::{EstimatorSpec, Model};
 
@@ -76,7 +76,7 @@ pub fn initial_measurement(start: &RunStart<'_>) -> Option<SVector<f64, 2>> {
 /// was sent.
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     let Model::Seed003 { w_var: w } = spec.model else {

@@ -53,7 +53,7 @@
 //! the run's start as for the others. Diagnostics: `ess` (effective sample size / N after the
 //! last sent instant's weighting, before resampling). Random numbers: xoshiro256++ seeded from `(seed, run)`, a stream of its own.
 
-use crate::estimators::particles_rng::splitmix64;
+use crate::particles_rng::splitmix64;
 use estimator_core::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
 use estimator_core::gauss::log_sum_exp;
 use estimator_core::linalg::cholesky;
@@ -63,7 +63,7 @@ use estimator_core::Error;
 use estpipe_wire::Observation;
 use nalgebra::{SMatrix, SVector};
 
-use crate::estimators::particles_rng::Rng;
+use crate::particles_rng::Rng;
 use crate::Estimator;
 
 type V2 = SVector<f64, 2>;
@@ -370,7 +370,7 @@ mod tests {
 
     /// Run `run` of the `nn-token-bucket` preset: truth x_k, observations (k = 1..=t) and y₀.
     fn simulate(seed: u64, run: u64, t: u32) -> (V3, Option<V2>, Vec<(V3, Observation)>) {
-        let (_, mut sim) = crate::source::preset_run("nn-token-bucket", seed, run);
+        let (_, mut sim) = crate::presets::preset_run("nn-token-bucket", seed, run);
         let x0 = V3::from_column_slice(&sim.initial_truth()[..3]);
         let y0 = sim.initial_observations().unwrap()[0]
             .measurement()

@@ -32,7 +32,7 @@ use estpipe_wire::{Observation, FLAGS_LOST, MAX_NX, MAX_NY};
 use nalgebra::DMatrix;
 
 use super::particles_rng::{splitmix64, Rng};
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::{CovarianceKind, Estimator};
 
 /// Default particle count.
@@ -42,7 +42,7 @@ pub const DEFAULT_PARTICLES: usize = 5000;
 /// `--particles 0`), and `pf-mix` beside it when `options.loss_rate > 0`.
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     if options.particles == 0 {
@@ -383,7 +383,7 @@ impl Estimator for ParticleFilter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimators::{build_all, FACTORIES};
+    use crate::{build_all, FACTORIES};
     use nalgebra::DVector;
 
     /// The weighted covariance against nalgebra's products on the same particles: the
@@ -424,11 +424,11 @@ mod tests {
     #[test]
     fn a_slot_lost_on_the_network_is_no_information() {
         use estpipe_wire::{FLAG_IPC_LOST, FLAG_NET_LOST};
-        let s = crate::source::preset_spec("occlusion");
-        let options = EvalOptions {
+        let s = crate::presets::preset_spec("occlusion");
+        let options = BuildOptions {
             particles: 2000,
             estimators: vec!["pf".into()],
-            ..EvalOptions::default()
+            ..BuildOptions::default()
         };
         let mut out = Vec::new();
         let start = RunStart {
@@ -457,15 +457,15 @@ mod tests {
     /// tr P; the observed gap is a few percent), and it is reported as an estimate.
     #[test]
     fn pf_covariance_is_the_kf_covariance_where_occlusion_says_nothing() {
-        let (s, mut sim) = crate::source::preset_run("occlusion", 3, 0);
+        let (s, mut sim) = crate::presets::preset_run("occlusion", 3, 0);
         let start = RunStart {
             seed: 3,
             ..RunStart::default()
         };
-        let options = EvalOptions {
+        let options = BuildOptions {
             particles: 40_000,
             estimators: vec!["ikf".into(), "pf".into()],
-            ..EvalOptions::default()
+            ..BuildOptions::default()
         };
         let mut ests = build_all(FACTORIES, &s, &options, &start).unwrap();
         let inst = sim.next_instant();

@@ -1,44 +1,9 @@
-//! The estimator registry: which estimators apply to a scenario, built fresh for every run.
-//!
-//! Each estimator family is one file with a [`Factory`]; a family returns an empty list for
-//! scenarios it does not apply to. Adding a family is one file and one line in [`FACTORIES`].
-//!
-//! The families run estimator-core's estimators through the core's one interface
-//! ([`estimator_core::Estimator`], mostly a filter paired with its model in an
-//! [`estimator_core::OnModel`]); the application's [`Estimator`] over one is `adapter`'s, the
-//! stepping from slot observations `fed`'s, the conversion of the observations into the core's
-//! measurements `slots`', of the spec's model into fixed-size matrices `snapshot`'s. `pf` is
-//! the application's own particle filter and implements [`Estimator`] directly.
-//!
-//! Every family reads only the [`EstimatorSpec`] (the model, the prior, what is known of the
-//! channel) and the run's [`RunStart`]: never a simulator. A simulated scenario produces its
-//! spec; a user writes one (`run --estimator-spec FILE`).
-
-mod adapter;
-mod fed;
-pub mod ikf;
-pub mod kf;
-mod lagged;
-pub mod nn;
-pub mod occlusion;
-mod particles_rng;
-pub mod pf;
-pub mod pf_tobit;
-pub mod role;
-pub mod silence_kf;
-mod slots;
-mod snapshot;
-pub mod tobit;
-pub mod tobit_central;
-
 use std::sync::Arc;
 
 use estpipe_spec::EstimatorSpec;
 use estpipe_wire::Observation;
 
-use crate::Estimator;
-
-pub use lagged::MAX_LAG;
+use crate::{ikf, kf, nn, occlusion, pf, pf_tobit, silence_kf, tobit, tobit_central, Estimator};
 
 /// What a run's estimators are built for beyond the spec: the seed and run index (the
 /// particle filters draw their own random streams from them) and the observations of instant
@@ -54,17 +19,12 @@ pub struct RunStart<'a> {
     pub initial: Option<&'a [Observation]>,
 }
 
-/// Options of an evaluation that estimators may need. Families add their own fields (with a
-/// default in [`Default`]) and the matching CLI flag.
+/// What the factories build beyond the spec: the options of `eval`, `run` and `replay` that
+/// choose or shape estimators. Families add their own fields (with a default in [`Default`])
+/// and the matching CLI flag.
 #[derive(Clone, Debug)]
-pub struct EvalOptions {
-    /// Number of Monte-Carlo runs.
-    pub runs: u64,
-    /// Horizon T: instants k = 1..=T are simulated.
-    pub horizon: u32,
-    /// Experiment seed.
-    pub seed: u64,
-    /// Particles of the `pf` reference filter (0 disables it).
+pub struct BuildOptions {
+    /// Particles of the `pf` reference filters (0 disables them).
     pub particles: usize,
     /// The estimators to build, by name (empty: every one that applies). [`build_all`]
     /// keeps only these; a name no family builds is not an error here (the commands check
@@ -75,42 +35,32 @@ pub struct EvalOptions {
     /// "occluded, or lost in transport with probability `p_loss`" beside the estimators that
     /// read it as occluded (docs/occlusion.md, "Losses"). 0 builds none of them.
     pub loss_rate: f64,
-    /// `eval` only: probability that a slot is lost in transport after the channel
-    /// (`--transport-loss`), independently of everything else (its own random stream, so the
-    /// channel's randomness is unchanged). 0: no transport stage.
-    pub transport_loss: f64,
-    /// `eval` only: the transport losses look like channel dropouts (`--transport-loss-unmarked`:
-    /// the receiver sees only "no packet") instead of being marked lost.
-    pub transport_loss_unmarked: bool,
     /// Probability `P` of the innovation gate (`--gate P`, docs/gate.md): every estimator
     /// with an innovation runs behind the χ² gate of `P` and is named `<name>+gate`; its
     /// diagnostics `gate_tested`, `gate_rejected` count the measurements so far. `None`: no
     /// gate, the estimators of today, bit for bit.
     pub gate: Option<f64>,
     /// `--lag L` (docs/pipeline.md, "Late packets"): the estimators keep the last
-    /// [`MAX_LAG`] instants and fold in a slot that arrives up to `L` instants late, as if it
-    /// had come on time. 0: no history, the estimators of today, bit for bit.
+    /// [`MAX_LAG`](crate::MAX_LAG) instants and fold in a slot that arrives up to `L` instants
+    /// late, as if it had come on time. 0: no history, the estimators of today, bit for bit.
     pub lag: u32,
-    /// `eval` only: the transport delays slots by whole instants (`--transport-delay`);
-    /// `None`: every slot on time.
-    pub transport_delay: Option<crate::eval::delay::Delay>,
 }
 
-impl Default for EvalOptions {
+impl Default for BuildOptions {
     fn default() -> Self {
         Self {
-            runs: 500,
-            horizon: 100,
-            seed: 0,
             particles: pf::DEFAULT_PARTICLES,
             estimators: Vec::new(),
             loss_rate: 0.0,
-            transport_loss: 0.0,
-            transport_loss_unmarked: false,
             gate: None,
             lag: 0,
-            transport_delay: None,
         }
+    }
+}
+
+impl From<&BuildOptions> for BuildOptions {
+    fn from(options: &BuildOptions) -> Self {
+        options.clone()
     }
 }
 
@@ -146,7 +96,7 @@ pub fn gate_counts(est: &dyn Estimator) -> Option<(u64, u64)> {
 /// apply). An error means the spec's parameters are unusable for this family.
 pub type Factory = fn(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>>;
 
@@ -165,14 +115,16 @@ pub const FACTORIES: &[Factory] = &[
 
 /// All estimators that apply to `spec`, from `factories` in order; only those named in
 /// `options.estimators` when it is not empty. The spec's own loss rate and gate apply where
-/// `options` sets none (a flag overrides the file).
+/// `options` sets none (a flag overrides the file). `options` is a [`BuildOptions`] or what
+/// a command turns into one (`eval`'s options).
 pub fn build_all(
     factories: &[Factory],
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: impl Into<BuildOptions>,
     start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
-    let options = &EvalOptions {
+    let options: BuildOptions = options.into();
+    let options = &BuildOptions {
         loss_rate: match options.loss_rate {
             0.0 => spec.loss_rate.unwrap_or(0.0),
             p => p,
@@ -209,13 +161,13 @@ mod tests {
             .name
             .len();
         for (preset, _) in channel_sim::scenario::presets::PRESETS {
-            let spec = crate::source::preset_spec(preset);
+            let spec = crate::presets::preset_spec(preset);
             for gate in [None, Some(0.99)] {
                 let spec = Arc::new((*spec).clone().with_gate(gate).unwrap());
-                let options = EvalOptions {
+                let options = BuildOptions {
                     particles: 10,
                     loss_rate: 0.2,
-                    ..EvalOptions::default()
+                    ..BuildOptions::default()
                 };
                 let all = build_all(FACTORIES, &spec, &options, &RunStart::default()).unwrap();
                 let mut cut: Vec<&[u8]> = all
@@ -242,7 +194,7 @@ mod tests {
     /// do; a flag given on the command line wins over the file's value.
     #[test]
     fn the_specs_gate_and_loss_rate_apply_unless_a_flag_is_given() {
-        let names = |spec: &EstimatorSpec, options: &EvalOptions| -> Vec<&'static str> {
+        let names = |spec: &EstimatorSpec, options: &BuildOptions| -> Vec<&'static str> {
             let spec = Arc::new(spec.clone());
             build_all(FACTORIES, &spec, options, &RunStart::default())
                 .unwrap()
@@ -250,11 +202,11 @@ mod tests {
                 .map(|e| e.name())
                 .collect()
         };
-        let plain = EvalOptions {
+        let plain = BuildOptions {
             particles: 0,
-            ..EvalOptions::default()
+            ..BuildOptions::default()
         };
-        let spec = (*crate::source::preset_spec("occlusion")).clone();
+        let spec = (*crate::presets::preset_spec("occlusion")).clone();
         let with = spec
             .clone()
             .with_gate(Some(0.99))
@@ -278,16 +230,16 @@ mod tests {
         );
         // The flags' values: the same names, and the estimates of the flags' gate (a 0.5 gate
         // rejects far more than the file's 0.99 on the same instants).
-        let flags = EvalOptions {
+        let flags = BuildOptions {
             gate: Some(0.5),
             loss_rate: 0.2,
             ..plain.clone()
         };
         assert_eq!(names(&spec, &flags), from_file);
-        let rejected = |spec: &EstimatorSpec, options: &EvalOptions| -> u64 {
+        let rejected = |spec: &EstimatorSpec, options: &BuildOptions| -> u64 {
             let spec = Arc::new(spec.clone());
             let mut ests = build_all(FACTORIES, &spec, options, &RunStart::default()).unwrap();
-            let (_, mut sim) = crate::source::preset_run("occlusion", 1, 0);
+            let (_, mut sim) = crate::presets::preset_run("occlusion", 1, 0);
             for _ in 0..200 {
                 let i = sim.next_instant();
                 let _ = ests[1].step(i.k, &i.obs);

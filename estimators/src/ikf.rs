@@ -14,13 +14,13 @@ use estpipe_spec::EstimatorSpec;
 
 use super::adapter::name;
 use super::kf::linear_kf;
-use super::{EvalOptions, RunStart};
+use super::{BuildOptions, RunStart};
 use crate::Estimator;
 
 /// Builds `ikf` for a spec with a linear model.
 pub fn build(
     spec: &Arc<EstimatorSpec>,
-    options: &EvalOptions,
+    options: &BuildOptions,
     _start: &RunStart<'_>,
 ) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
     Ok(linear_kf(spec, name!("ikf"), false, options.gate)?
