@@ -37,6 +37,19 @@ fn kernels_of<E>(tag: &str, est: E, y: Packet<f64, 2>) -> Vec<(String, StepFn)>
 where
     E: Estimator<f64, 3, Measurement = Packet<f64, 2>> + Clone + 'static,
 {
+    let (on_time, oldest_late) = histories(est, y);
+    let name = |event: &str| format!("late/{tag}_{event}/3x2_f64");
+    let mut out = estimator_kernels(&name, on_time.inner().clone(), y);
+    out.extend(layer_kernels(&name, &on_time, &oldest_late, y));
+    out
+}
+
+/// The two histories of instants `1..=LAG` through the layer: every packet on time, and the
+/// oldest instant's stepped without it; checked to fold what the events are meant to.
+fn histories<E>(est: E, y: Packet<f64, 2>) -> (Lagged<E>, Lagged<E>)
+where
+    E: Estimator<f64, 3, Measurement = Packet<f64, 2>> + Clone + 'static,
+{
     let k = LAG + 1;
     let mut on_time = Lagged::new(est.clone());
     let mut oldest_late = Lagged::new(est);
@@ -63,8 +76,20 @@ where
             restepped: LAG
         })
     );
-    let plain = on_time.inner().clone();
-    let name = |event: &str| format!("late/{tag}_{event}/3x2_f64");
+    (on_time, oldest_late)
+}
+
+/// `<e>_reset` and `<e>_plain`: the estimator without the layer (`plain`, after the
+/// history) put back, and then its own step at instant `LAG + 1`.
+fn estimator_kernels<E>(
+    name: &dyn Fn(&str) -> String,
+    plain: E,
+    y: Packet<f64, 2>,
+) -> Vec<(String, StepFn)>
+where
+    E: Estimator<f64, 3, Measurement = Packet<f64, 2>> + Clone + 'static,
+{
+    let k = LAG + 1;
     let mut out: Vec<(String, StepFn)> = Vec::new();
     {
         let (mut e, plain) = (plain.clone(), plain.clone());
@@ -89,6 +114,21 @@ where
             }),
         ));
     }
+    out
+}
+
+/// The `<e>_lag8_*` kernels: the layer put back from one of the histories, then its event at
+/// instant `LAG + 1` (module docs).
+fn layer_kernels<E>(
+    name: &dyn Fn(&str) -> String,
+    on_time: &Lagged<E>,
+    oldest_late: &Lagged<E>,
+    y: Packet<f64, 2>,
+) -> Vec<(String, StepFn)>
+where
+    E: Estimator<f64, 3, Measurement = Packet<f64, 2>> + Clone + 'static,
+{
+    let k = LAG + 1;
     // (event, history, packet of instant k, fold: (instant, packet))
     type Event = (&'static str, bool, Option<Packet<f64, 2>>, Option<usize>);
     let events: [Event; 5] = [
@@ -98,6 +138,7 @@ where
         ("lag8_step_fold1", true, Some(Packet::Lost), Some(k)),
         ("lag8_fold8", false, None, Some(1)),
     ];
+    let mut out: Vec<(String, StepFn)> = Vec::new();
     for (event, on, step, fold) in events {
         let history = if on {
             on_time.clone()

@@ -51,8 +51,44 @@ pub fn check(
     written: Written<'_>,
     priors: &[FromPrior<'_>],
 ) -> Result<(), SpecError> {
-    let amax = |rows: &[Vec<f64>]| rows.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
-    let vmax = |v: &[f64]| v.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let model_fields = model_fields(written);
+    let mut input = vec![0.0; model.nx()];
+    for p in priors {
+        let Err((k, what)) = follow(model, p, &mut input) else {
+            continue;
+        };
+        let mut blame = model_fields.clone();
+        blame.push((p.mean_field.into(), vmax(p.mean.as_slice())));
+        blame.push((p.cov_field.into(), amax(p.cov_rows)));
+        let (field, v) = blame
+            .iter()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .cloned()
+            .unwrap_or_default();
+        return Err(SpecError::invalid(
+            field,
+            format!(
+                "entries up to {v:e} make {what} overflow f64 by k = {k} (beyond \
+                 {MOMENT_LIMIT:e}); scale the model down"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The largest magnitude in `rows`.
+fn amax(rows: &[Vec<f64>]) -> f64 {
+    rows.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()))
+}
+
+/// The largest magnitude in `v`.
+fn vmax(v: &[f64]) -> f64 {
+    v.iter().fold(0.0_f64, |m, v| m.max(v.abs()))
+}
+
+/// Every model field as written with its largest magnitude (the input `u`: its largest over
+/// the schedule), the candidates to blame.
+fn model_fields(written: Written<'_>) -> Vec<(String, f64)> {
     let mut model_fields: Vec<(String, f64)> = vec![
         ("model.a".into(), amax(&written.model.a)),
         ("model.q".into(), amax(&written.model.q)),
@@ -78,53 +114,39 @@ pub fn check(
             model_fields.push((format!("sensors[{m}].d"), amax(d)));
         }
     }
+    model_fields
+}
+
+/// Follows the moments from prior `p` for k = 0..[`OVERFLOW_CHECK_STEPS`]; the first instant
+/// and product that leave the limit. `input` is scratch for the known input.
+fn follow(
+    model: &LinearModel,
+    p: &FromPrior<'_>,
+    input: &mut [f64],
+) -> Result<(), (usize, &'static str)> {
     let ok = |m: &[f64]| m.iter().all(|v| v.is_finite() && v.abs() <= MOMENT_LIMIT);
-    let mut input = vec![0.0; model.nx()];
-    for p in priors {
-        let mut blame = model_fields.clone();
-        blame.push((p.mean_field.into(), vmax(p.mean.as_slice())));
-        blame.push((p.cov_field.into(), amax(p.cov_rows)));
-        let fail = |k: usize, what: &str| {
-            let (field, v) = blame
-                .iter()
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .cloned()
-                .unwrap_or_default();
-            SpecError::invalid(
-                field,
-                format!(
-                    "entries up to {v:e} make {what} overflow f64 by k = {k} (beyond \
-                     {MOMENT_LIMIT:e}); scale the model down"
-                ),
-            )
-        };
-        let (mut m, mut s) = (p.mean.clone(), p.cov.clone());
-        for k in 0..=OVERFLOW_CHECK_STEPS {
-            let second = s.trace() + m.norm_squared();
-            if !(ok(m.as_slice())
-                && ok(s.as_slice())
-                && second.is_finite()
-                && second <= MOMENT_LIMIT)
-            {
-                return Err(fail(k, "the state's mean or covariance"));
-            }
-            for node in 0..model.nodes() {
-                let c = model.c(node);
-                let sy = c * &s * c.transpose() + model.measurement_cov(node);
-                if !(ok((c * &m).as_slice()) && ok(sy.as_slice())) {
-                    return Err(fail(k, "the measurement's mean or covariance"));
-                }
-            }
-            let (a, q) = (model.a(), model.process_cov());
-            if !ok(q.as_slice()) {
-                return Err(fail(k, "B Q Bᵀ"));
-            }
-            m = a * m;
-            if model.input_into(k, &mut input) {
-                m += DVector::from_column_slice(&input);
-            }
-            s = a * s * a.transpose() + q;
+    let (mut m, mut s) = (p.mean.clone(), p.cov.clone());
+    for k in 0..=OVERFLOW_CHECK_STEPS {
+        let second = s.trace() + m.norm_squared();
+        if !(ok(m.as_slice()) && ok(s.as_slice()) && second.is_finite() && second <= MOMENT_LIMIT) {
+            return Err((k, "the state's mean or covariance"));
         }
+        for node in 0..model.nodes() {
+            let c = model.c(node);
+            let sy = c * &s * c.transpose() + model.measurement_cov(node);
+            if !(ok((c * &m).as_slice()) && ok(sy.as_slice())) {
+                return Err((k, "the measurement's mean or covariance"));
+            }
+        }
+        let (a, q) = (model.a(), model.process_cov());
+        if !ok(q.as_slice()) {
+            return Err((k, "B Q Bᵀ"));
+        }
+        m = a * m;
+        if model.input_into(k, input) {
+            m += DVector::from_column_slice(input);
+        }
+        s = a * s * a.transpose() + q;
     }
     Ok(())
 }

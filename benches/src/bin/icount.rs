@@ -27,21 +27,21 @@ fn repeat<R, E>(mut f: impl FnMut() -> Result<R, E> + 'static) -> Kernel {
 }
 
 fn kernels() -> Vec<(&'static str, Kernel)> {
-    let p64 = occlusion_3x2_f64();
-    let p32 = occlusion_3x2_f32();
-    let t64 = tracking_4x2_f64();
-    let t32 = tracking_4x2_f32();
-    let a64 = AdsProblem::from_core(&p64);
-    let a32 = AdsProblem::from_core(&t32);
-    let (a64s, a32s) = (a64.clone(), a32.clone());
-    // Profiling parts of the 3x2 f64 step (not a product API): where the instructions go.
-    let pp = p64;
+    let mut out = part_kernels();
+    out.extend(kf_kernels());
+    library_kernels(&mut out);
+    out
+}
+
+/// Profiling parts of the 3x2 f64 step (not a product API): where the instructions go.
+fn part_kernels() -> Vec<(&'static str, Kernel)> {
+    let pp = occlusion_3x2_f64();
     let c = pp.model.c;
     let s = c * pp.prior.estimate().covariance() * c.transpose()
         + nalgebra::SMatrix::<f64, 2, 2>::identity();
     let s = (s + s.transpose()) * 0.5;
     let m3 = *pp.prior.estimate().covariance();
-    let mut out: Vec<(&'static str, Kernel)> = Vec::from([
+    Vec::from([
         (
             "parts/validated_cholesky_2x2",
             repeat(move || {
@@ -75,6 +75,19 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
                 f.update(&pp.model, 1, &pp.y).map(|_| f)
             }),
         ),
+    ])
+}
+
+/// The Kalman filter's and the intermittent filter's steps, ours against adskalman's.
+fn kf_kernels() -> Vec<(&'static str, Kernel)> {
+    let p64 = occlusion_3x2_f64();
+    let p32 = occlusion_3x2_f32();
+    let t64 = tracking_4x2_f64();
+    let t32 = tracking_4x2_f32();
+    let a64 = AdsProblem::from_core(&p64);
+    let a32 = AdsProblem::from_core(&t32);
+    let (a64s, a32s) = (a64.clone(), a32.clone());
+    Vec::from([
         (
             "kf/3x2_f64",
             repeat(move || cmp::ours_joseph_3x2_f64(black_box(&p64))),
@@ -125,7 +138,12 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
             "ikf_dropout/4x2_f32",
             repeat(move || black_box(&t32).ikf_dropout_step()),
         ),
-    ]);
+    ])
+}
+
+/// The kernels the library's modules name: the papers' estimators, late packets, the view's
+/// tap.
+fn library_kernels(out: &mut Vec<(&'static str, Kernel)>) {
     // The papers' estimators: the same kernels as the criterion bench `steps`.
     let est = benches::estimators::all_kernels();
     for (name, f) in est {
@@ -139,7 +157,6 @@ fn kernels() -> Vec<(&'static str, Kernel)> {
     for (name, f) in benches::view_tap::kernels() {
         out.push((Box::leak(name.into_boxed_str()), repeat(f)));
     }
-    out
 }
 
 fn main() -> ExitCode {

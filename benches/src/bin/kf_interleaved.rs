@@ -91,6 +91,20 @@ impl Pair {
 }
 
 fn run() -> Result<()> {
+    let Some((rounds, batch, json)) = parse_args()? else {
+        return Ok(());
+    };
+    let pairs = measure_all(rounds, batch);
+    if json {
+        print_json(&pairs, rounds, batch);
+    } else {
+        print_table(&pairs, rounds, batch);
+    }
+    Ok(())
+}
+
+/// `(rounds, batch, json)` from the command line; `None` after `--help`.
+fn parse_args() -> Result<Option<(u32, u32, bool)>> {
     let (mut rounds, mut batch, mut json) = (4000u32, 1000u32, false);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -109,11 +123,16 @@ fn run() -> Result<()> {
             "--json" => json = true,
             "-h" | "--help" => {
                 println!("kf_interleaved [--rounds N (4000)] [--batch B (1000)] [--json]");
-                return Ok(());
+                return Ok(None);
             }
             x => bail!("unknown argument {x:?} (try --help)"),
         }
     }
+    Ok(Some((rounds, batch, json)))
+}
+
+/// The four comparisons, `rounds` rounds of `batch` calls each side.
+fn measure_all(rounds: u32, batch: u32) -> Vec<Pair> {
     let (p64, p32) = (occlusion_3x2_f64(), tracking_4x2_f32());
     let (a64, a32) = (AdsProblem::from_core(&p64), AdsProblem::from_core(&p32));
     // The four comparisons take turns in chunks of rounds, so that each one is spread over
@@ -164,43 +183,48 @@ fn run() -> Result<()> {
         }
         done += n;
     }
-    if json {
-        let rows: Vec<serde_json::Value> = pairs
-            .iter()
-            .map(|p| {
-                serde_json::json!({
-                    "problem": p.problem,
-                    "form": p.form,
-                    "rounds": rounds,
-                    "batch": batch,
-                    "ours_median_ns": quantile(&p.t_ours, 0.5),
-                    "ads_median_ns": quantile(&p.t_ads, 0.5),
-                    "ratio_median": quantile(&p.ratio, 0.5),
-                    "ratio_p10": quantile(&p.ratio, 0.1),
-                    "ratio_p90": quantile(&p.ratio, 0.9),
-                })
+    pairs
+}
+
+/// One JSON array, a row per comparison.
+fn print_json(pairs: &[Pair], rounds: u32, batch: u32) {
+    let rows: Vec<serde_json::Value> = pairs
+        .iter()
+        .map(|p| {
+            serde_json::json!({
+                "problem": p.problem,
+                "form": p.form,
+                "rounds": rounds,
+                "batch": batch,
+                "ours_median_ns": quantile(&p.t_ours, 0.5),
+                "ads_median_ns": quantile(&p.t_ads, 0.5),
+                "ratio_median": quantile(&p.ratio, 0.5),
+                "ratio_p10": quantile(&p.ratio, 0.1),
+                "ratio_p90": quantile(&p.ratio, 0.9),
             })
-            .collect();
-        println!("{}", serde_json::Value::Array(rows));
-    } else {
+        })
+        .collect();
+    println!("{}", serde_json::Value::Array(rows));
+}
+
+/// A table, a line per comparison.
+fn print_table(pairs: &[Pair], rounds: u32, batch: u32) {
+    println!(
+        "{rounds} rounds of {batch} calls each side\n\
+         problem  form          ours ns  adskalman ns  ratio (median of rounds, p10-p90)"
+    );
+    for p in pairs {
         println!(
-            "{rounds} rounds of {batch} calls each side\n\
-             problem  form          ours ns  adskalman ns  ratio (median of rounds, p10-p90)"
+            "{:8} {:12} {:8.1} {:13.1}  {:.3} ({:.3}-{:.3})",
+            p.problem,
+            p.form,
+            quantile(&p.t_ours, 0.5),
+            quantile(&p.t_ads, 0.5),
+            quantile(&p.ratio, 0.5),
+            quantile(&p.ratio, 0.1),
+            quantile(&p.ratio, 0.9)
         );
-        for p in &pairs {
-            println!(
-                "{:8} {:12} {:8.1} {:13.1}  {:.3} ({:.3}-{:.3})",
-                p.problem,
-                p.form,
-                quantile(&p.t_ours, 0.5),
-                quantile(&p.t_ads, 0.5),
-                quantile(&p.ratio, 0.5),
-                quantile(&p.ratio, 0.1),
-                quantile(&p.ratio, 0.9)
-            );
-        }
     }
-    Ok(())
 }
 
 fn main() {

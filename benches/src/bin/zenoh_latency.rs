@@ -131,45 +131,7 @@ fn parent(o: &Opts) -> Result<serde_json::Value> {
         .stdout(Stdio::piped())
         .spawn()
         .context("cannot start the subscriber")?;
-    let run = || -> Result<u64> {
-        let t = Instant::now();
-        while !publisher
-            .matching_status()
-            .wait()
-            .map_err(|e| anyhow!("zenoh matching status: {e}"))?
-            .matching()
-        {
-            if t.elapsed() > CONNECT {
-                bail!("no subscriber within {CONNECT:?}");
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        let total = o.warmup + o.samples;
-        let t0 = Instant::now();
-        for i in 0..total {
-            if o.rate > 0.0 {
-                let due = t0 + Duration::from_secs_f64(i as f64 / o.rate);
-                let now = Instant::now();
-                if due > now {
-                    std::thread::sleep(due - now);
-                }
-            }
-            let (h, mut s) = slot(i);
-            s.send_ns = monotonic_ns();
-            publisher
-                .put(&net::encode_slot(&h, &s)[..])
-                .wait()
-                .map_err(|e| anyhow!("zenoh put: {e}"))?;
-        }
-        let mut end = END.to_vec();
-        end.extend_from_slice(&total.to_le_bytes());
-        publisher
-            .put(end)
-            .wait()
-            .map_err(|e| anyhow!("zenoh put: {e}"))?;
-        Ok(total)
-    };
-    let sent = match run() {
+    let sent = match publish(o, &publisher) {
         Ok(n) => n,
         Err(e) => {
             let _ = child.kill();
@@ -189,8 +151,55 @@ fn parent(o: &Opts) -> Result<serde_json::Value> {
     }
     drop(publisher);
     drop(session);
+    report(o, &out, sent)
+}
+
+/// Waits for the subscriber, then publishes the warm-up and the samples at the rate (`0`: as
+/// fast as they go) and the end marker with their number; returns that number.
+fn publish(o: &Opts, publisher: &zenoh::pubsub::Publisher<'_>) -> Result<u64> {
+    let t = Instant::now();
+    while !publisher
+        .matching_status()
+        .wait()
+        .map_err(|e| anyhow!("zenoh matching status: {e}"))?
+        .matching()
+    {
+        if t.elapsed() > CONNECT {
+            bail!("no subscriber within {CONNECT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let total = o.warmup + o.samples;
+    let t0 = Instant::now();
+    for i in 0..total {
+        if o.rate > 0.0 {
+            let due = t0 + Duration::from_secs_f64(i as f64 / o.rate);
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
+        let (h, mut s) = slot(i);
+        s.send_ns = monotonic_ns();
+        publisher
+            .put(&net::encode_slot(&h, &s)[..])
+            .wait()
+            .map_err(|e| anyhow!("zenoh put: {e}"))?;
+    }
+    let mut end = END.to_vec();
+    end.extend_from_slice(&total.to_le_bytes());
+    publisher
+        .put(end)
+        .wait()
+        .map_err(|e| anyhow!("zenoh put: {e}"))?;
+    Ok(total)
+}
+
+/// The subscriber's JSON (`out`), checked against the `sent` count, with the run's settings
+/// and the number lost added.
+fn report(o: &Opts, out: &str, sent: u64) -> Result<serde_json::Value> {
     let mut v: serde_json::Value =
-        serde_json::from_str(&out).context("the subscriber's JSON on its stdout")?;
+        serde_json::from_str(out).context("the subscriber's JSON on its stdout")?;
     let received = v["received"].as_u64().context("received")?;
     if v["sent"].as_u64() != Some(sent) {
         bail!("the subscriber heard of {} sent, {sent} were", v["sent"]);

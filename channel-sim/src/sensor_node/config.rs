@@ -79,92 +79,124 @@ pub fn loop_config(scenario: &dyn Scenario) -> Result<LoopConfig, String> {
         .as_any()
         .downcast_ref::<ComposedScenario>()
         .ok_or_else(|| format!("scenario {} is not a composed scenario", scenario.name()))?;
-    let mut censoring: Option<&TobitCensoring> = None;
-    let mut bucket: Option<&TokenBucketStage> = None;
-    let mut trigger: Option<&TriggeredTokenBucket> = None;
-    let order = "the node runs tobit-censoring, then token-bucket or event-trigger-token-bucket";
-    for s in composed.stages() {
-        let a = s.as_any();
-        let scheduled = bucket.is_some() || trigger.is_some();
-        if let Some(t) = a.downcast_ref::<TobitCensoring>() {
-            if censoring.is_some() || scheduled {
-                return Err(format!("stage {} out of order: {order}", s.name()));
-            }
-            censoring = Some(t);
-        } else if let Some(b) = a.downcast_ref::<TokenBucketStage>() {
-            if scheduled {
-                return Err(format!("stage {} out of order: {order}", s.name()));
-            }
-            bucket = Some(b);
-        } else if let Some(t) = a.downcast_ref::<TriggeredTokenBucket>() {
-            if scheduled {
-                return Err(format!("stage {} out of order: {order}", s.name()));
-            }
-            trigger = Some(t);
-        } else {
-            return Err(format!(
-                "scenario {}: stage {} does not run on a sensor node ({order})",
-                scenario.name(),
-                s.name()
-            ));
-        }
-    }
+    let stages = NodeStages::of(scenario, composed)?;
     let n = scenario.nodes();
-    if let Some(t) = trigger {
-        if t.nodes() != n {
-            return Err(format!(
-                "the event trigger has {} nodes, the plant {n}",
-                t.nodes()
-            ));
-        }
-    }
-    if let Some(c) = censoring {
-        if c.nodes() < n {
-            return Err(format!(
-                "censoring thresholds for {} nodes, the plant has {n}",
-                c.nodes()
-            ));
-        }
-    }
+    stages.check_nodes(n)?;
     let nodes = (0..n)
-        .map(|m| {
-            let schedule = if let Some(b) = bucket {
-                Schedule::TokenBucket {
-                    a: b.a,
-                    b: b.b,
-                    s: b.s,
-                    z0: b.z0,
-                }
-            } else if let Some(t) = trigger {
-                let c = t.trigger(m);
-                Schedule::EventTrigger {
-                    sigma: c.sigma(),
-                    chi: c.chi(),
-                    lambda: c.lambda(),
-                    eta0: c.eta0(),
-                    allow_paper_violation: c.paper_violation().is_some(),
-                    // channel-sim's stage pads the reference with 0.
-                    reference: padded(t.reference(m), 0.0),
-                    cost: t.costs()[m],
-                    nodes: n as u8,
-                }
-            } else {
-                Schedule::Always
-            };
-            NodeConfig {
-                version: LINK_VERSION,
-                node: m as u8,
-                ny: scenario.node_ny(m) as u8,
-                censor: censoring.map(|c| c.padded(m).into()),
-                schedule,
-            }
+        .map(|m| NodeConfig {
+            version: LINK_VERSION,
+            node: m as u8,
+            ny: scenario.node_ny(m) as u8,
+            censor: stages.censoring.map(|c| c.padded(m).into()),
+            schedule: stages.schedule(m, n),
         })
         .collect();
     Ok(LoopConfig {
         nodes,
-        bucket: trigger.map(bucket_of).transpose()?,
-        costs: trigger.map_or_else(|| vec![0; n], |t| t.costs().to_vec()),
+        bucket: stages.trigger.map(bucket_of).transpose()?,
+        costs: stages
+            .trigger
+            .map_or_else(|| vec![0; n], |t| t.costs().to_vec()),
     })
+}
+
+/// The channel stages a sensor node runs, each at most once, in the node's order.
+#[derive(Clone, Copy)]
+struct NodeStages<'a> {
+    censoring: Option<&'a TobitCensoring>,
+    bucket: Option<&'a TokenBucketStage>,
+    trigger: Option<&'a TriggeredTokenBucket>,
+}
+
+impl<'a> NodeStages<'a> {
+    /// The stages of `composed`, or why they cannot run on a node (a stage a node does not
+    /// run, or one out of order).
+    fn of(scenario: &dyn Scenario, composed: &'a ComposedScenario) -> Result<Self, String> {
+        let mut censoring: Option<&TobitCensoring> = None;
+        let mut bucket: Option<&TokenBucketStage> = None;
+        let mut trigger: Option<&TriggeredTokenBucket> = None;
+        let order =
+            "the node runs tobit-censoring, then token-bucket or event-trigger-token-bucket";
+        for s in composed.stages() {
+            let a = s.as_any();
+            let scheduled = bucket.is_some() || trigger.is_some();
+            if let Some(t) = a.downcast_ref::<TobitCensoring>() {
+                if censoring.is_some() || scheduled {
+                    return Err(format!("stage {} out of order: {order}", s.name()));
+                }
+                censoring = Some(t);
+            } else if let Some(b) = a.downcast_ref::<TokenBucketStage>() {
+                if scheduled {
+                    return Err(format!("stage {} out of order: {order}", s.name()));
+                }
+                bucket = Some(b);
+            } else if let Some(t) = a.downcast_ref::<TriggeredTokenBucket>() {
+                if scheduled {
+                    return Err(format!("stage {} out of order: {order}", s.name()));
+                }
+                trigger = Some(t);
+            } else {
+                return Err(format!(
+                    "scenario {}: stage {} does not run on a sensor node ({order})",
+                    scenario.name(),
+                    s.name()
+                ));
+            }
+        }
+        Ok(Self {
+            censoring,
+            bucket,
+            trigger,
+        })
+    }
+
+    /// The trigger and the censoring cover the plant's `n` nodes.
+    fn check_nodes(&self, n: usize) -> Result<(), String> {
+        if let Some(t) = self.trigger {
+            if t.nodes() != n {
+                return Err(format!(
+                    "the event trigger has {} nodes, the plant {n}",
+                    t.nodes()
+                ));
+            }
+        }
+        if let Some(c) = self.censoring {
+            if c.nodes() < n {
+                return Err(format!(
+                    "censoring thresholds for {} nodes, the plant has {n}",
+                    c.nodes()
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Node `m`'s schedule (of `n` nodes): its bucket, its trigger, or every sample.
+    fn schedule(&self, m: usize, n: usize) -> Schedule {
+        if let Some(b) = self.bucket {
+            Schedule::TokenBucket {
+                a: b.a,
+                b: b.b,
+                s: b.s,
+                z0: b.z0,
+            }
+        } else if let Some(t) = self.trigger {
+            let c = t.trigger(m);
+            Schedule::EventTrigger {
+                sigma: c.sigma(),
+                chi: c.chi(),
+                lambda: c.lambda(),
+                eta0: c.eta0(),
+                allow_paper_violation: c.paper_violation().is_some(),
+                // channel-sim's stage pads the reference with 0.
+                reference: padded(t.reference(m), 0.0),
+                cost: t.costs()[m],
+                nodes: n as u8,
+            }
+        } else {
+            Schedule::Always
+        }
+    }
 }
 
 #[cfg(test)]

@@ -40,12 +40,11 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
-use crate::estimator::{Estimator, OnModel};
-use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
+use crate::filter::noise_coupled::{NoiseCoupledKf, NoiseCoupledStep};
+use crate::linalg::check_finite;
 use crate::linalg::eig::symmetric_eigen;
-use crate::linalg::{check_finite, check_spd, symmetrize};
-use crate::packet::Packet;
+use crate::linalg::symmetrize;
 use crate::{Error, Real, Result};
 
 /// How the baseline treats the nonlinearity `f`.
@@ -60,17 +59,10 @@ pub enum Linearisation {
     Ekf,
 }
 
-/// Correlated-noise one-step predictor (KF/EKF baselines of seed 003).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CoupledNoiseKf<T: Real, const NX: usize, const NW: usize, const NY: usize> {
-    k: usize,
-    /// `x̂_{k|k−1}` with `P_{k|k−1}`.
-    est: Estimate<T, NX>,
-    w: SMatrix<T, NW, NW>,
-    y: Option<SVector<T, NY>>,
-    mode: Linearisation,
-    rank_used: u8,
-}
+/// Correlated-noise one-step predictor (KF/EKF baselines of seed 003): the shared
+/// [`NoiseCoupledKf`] with the paper's algebra, [`Linearisation`] its mode.
+pub type CoupledNoiseKf<T, const NX: usize, const NW: usize, const NY: usize> =
+    NoiseCoupledKf<T, NX, NW, NY, Linearisation>;
 
 /// A nonlinearity that is identically zero (for the plain KF).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -85,64 +77,28 @@ impl<T: Real, const N: usize> DifferentiableMap<T, N> for NoNonlinearity {
     }
 }
 
-impl<T: Real, const NX: usize, const NW: usize, const NY: usize> CoupledNoiseKf<T, NX, NW, NY> {
-    /// Starts at instant 0 from `x̂₀`, `P₀` (SPD) with noise covariance `W = E[w wᵀ]` (SPD).
-    pub fn new(
-        x0: SVector<T, NX>,
-        p0: SMatrix<T, NX, NX>,
-        w: SMatrix<T, NW, NW>,
-        mode: Linearisation,
-    ) -> Result<Self> {
-        let est = Estimate::named(x0, p0, "x̂₀", "P₀")?;
-        check_spd(&w, "W")?;
-        Ok(Self {
-            k: 0,
-            est,
-            w: symmetrize(&w),
-            y: None,
-            mode,
-            rank_used: 0,
-        })
-    }
-
-    /// Uses `y₀` (transmitted at instant 0) in the first step.
-    pub fn with_initial_measurement(mut self, y0: SVector<T, NY>) -> Result<Self> {
-        check_finite(&y0, "y₀")?;
-        self.y = Some(y0);
-        Ok(self)
-    }
-
-    /// Estimate `x̂_{k|k−1}` with the filter's own covariance `P_{k|k−1}`.
-    #[inline]
-    pub fn estimate(&self) -> &Estimate<T, NX> {
-        &self.est
-    }
-    /// Instant `k`.
-    #[inline]
-    pub fn instant(&self) -> usize {
-        self.k
-    }
-    /// Number of innovation directions used by the last update (0 without a measurement).
-    #[inline]
-    pub fn last_rank(&self) -> u8 {
-        self.rank_used
-    }
-
-    /// Advances from `k` to `k + 1` given the observation of `k + 1` (`None`: withheld). `f`
-    /// is used only in the EKF modes. On error nothing changes.
-    pub fn step<S, F>(&mut self, sys: &S, f: &F, y_next: Option<&SVector<T, NY>>) -> Result<()>
+/// The exact correlated-noise predictor (module docs): the transition by the mode, then the
+/// update through the pseudo-inverse of `S_k` with `y_k`, or the prediction alone without it.
+impl<T: Real, const NX: usize, const NW: usize, const NY: usize> NoiseCoupledStep<T, NX, NW, NY>
+    for Linearisation
+{
+    fn advance<S, F>(
+        &self,
+        sys: &S,
+        f: &F,
+        k: usize,
+        est: &Estimate<T, NX>,
+        w: &SMatrix<T, NW, NW>,
+        y: Option<&SVector<T, NY>>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, u8)>
     where
         S: CoupledNoiseSystem<T, NX, NW, NY>,
         F: DifferentiableMap<T, NX>,
     {
-        if let Some(y) = y_next {
-            check_finite(y, "measurement")?;
-        }
-        let k = self.k;
-        let (x, p) = (*self.est.state(), *self.est.covariance());
+        let (x, p) = (*est.state(), *est.covariance());
         let (a, b, c, d) = (sys.a(k), sys.b(k), sys.c(k), sys.d(k));
         check_finite(&a, "A_k")?;
-        let (trans, mean) = match self.mode {
+        let (trans, mean) = match self {
             Linearisation::None => (a, a * x),
             Linearisation::PaperJacobian => {
                 let t = a + f.jacobian(&x);
@@ -151,121 +107,69 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> CoupledNoiseKf<
             Linearisation::Ekf => (a + f.jacobian(&x), a * x + f.eval(&x)),
         };
         check_finite(&trans, "transition Jacobian")?;
-        let (x_next, p_next, rank) = match &self.y {
+        let (x_next, p_next, rank) = match y {
             None => (
                 mean,
-                trans * p * trans.transpose() + b * self.w * b.transpose(),
+                trans * p * trans.transpose() + b * *w * b.transpose(),
                 0u8,
             ),
             Some(y) => {
-                let s = symmetrize(&(c * p * c.transpose() + d * self.w * d.transpose()));
-                let g = trans * p * c.transpose() + b * self.w * d.transpose();
-                let (lam, u) = symmetric_eigen(&s, "innovation covariance")?;
-                let lmax = lam.max();
-                if !lmax.finite() {
-                    return Err(Error::NonFinite {
-                        what: "innovation covariance",
-                    });
-                }
-                if lmax <= T::zero() {
-                    return Err(Error::NotPositiveDefinite {
-                        what: "innovation covariance (all directions noise-free and certain)",
-                    });
-                }
-                let tol = T::EPS.sqrt() * lmax;
-                let mut inv = SVector::<T, NY>::zeros();
-                let mut rank = 0u8;
-                for i in 0..NY {
-                    if lam[i] > tol {
-                        inv[i] = T::one() / lam[i];
-                        rank += 1;
-                    }
-                }
-                // K = G U Λ⁺ Uᵀ (only well-determined directions).
-                let gu = g * u;
-                let mut gul = gu;
-                for j in 0..NY {
-                    let sc = inv[j];
-                    for i in 0..NX {
-                        gul[(i, j)] *= sc;
-                    }
-                }
-                let kgain = gul * u.transpose();
+                let s = symmetrize(&(c * p * c.transpose() + d * *w * d.transpose()));
+                let g = trans * p * c.transpose() + b * *w * d.transpose();
+                let (kgain, rank) = pseudo_inverse_gain(&g, &s)?;
                 let x_next = mean + kgain * (y - c * x);
                 let fa = trans - kgain * c;
                 let fb = b - kgain * d;
                 (
                     x_next,
-                    fa * p * fa.transpose() + fb * self.w * fb.transpose(),
+                    fa * p * fa.transpose() + fb * *w * fb.transpose(),
                     rank,
                 )
             }
         };
         check_finite(&x_next, "state estimate")?;
         check_finite(&p_next, "covariance")?;
-        let p_next = project_psd(&p_next)?;
-        self.k = k + 1;
-        self.est = Estimate::trusted(x_next, p_next);
-        self.y = y_next.copied();
-        self.rank_used = rank;
-        Ok(())
-    }
-
-    /// Tests the held measurement `y_{k+1}` (stored by the last step) against the
-    /// prediction `x̂_{k+1|k}`, `P_{k+1|k}` the filter now holds: `ν = y − C x̂`,
-    /// `S = C P Cᵀ + D W Dᵀ` of instant `k + 1`, the innovation the next step's update uses. A
-    /// rejected one is dropped (the next step predicts only, as for a withheld packet).
-    /// Returns whether it is kept (`false` when none is held). A singular `S` (noise-free,
-    /// certain directions; the update uses its pseudo-inverse) cannot be tested and is kept.
-    pub fn gate_held<S: CoupledNoiseSystem<T, NX, NW, NY>>(
-        &mut self,
-        sys: &S,
-        gate: &InnovationGate<T>,
-    ) -> bool {
-        let Some(y) = self.y else {
-            return false;
-        };
-        if gate.is_off() {
-            return true;
-        }
-        let k = self.k;
-        let (c, d) = (sys.c(k), sys.d(k));
-        let (x, p) = (self.est.state(), self.est.covariance());
-        let s = symmetrize(&(c * p * c.transpose() + d * self.w * d.transpose()));
-        let keep = gate.admits(&(y - c * x), &s).unwrap_or(true);
-        if !keep {
-            self.y = None;
-        }
-        keep
+        Ok((x_next, project_psd(&p_next)?, rank))
     }
 }
 
-/// The model is the system and the nonlinearity `(sys, f)`. Delivered: the update with
-/// `y_{k+1}`; dropped (withheld by the token bucket) or lost: prediction only (`K = 0`). The
-/// filter counts its instants: `k` must be [`CoupledNoiseKf::instant`] + 1.
-impl<T: Real, const NX: usize, const NW: usize, const NY: usize, S, F> Estimator<T, NX>
-    for OnModel<(S, F), CoupledNoiseKf<T, NX, NW, NY>, NY>
-where
-    S: CoupledNoiseSystem<T, NX, NW, NY>,
-    F: DifferentiableMap<T, NX>,
-{
-    type Measurement = Packet<T, NY>;
-
-    /// [`CoupledNoiseKf::step`] with the observation of instant `k`; refused with
-    /// [`Error::OutOfOrder`] unless `k` is the next instant.
-    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        let expected = self.filter.instant() + 1;
-        if k != expected {
-            return Err(Error::OutOfOrder { expected, got: k });
+/// `K = G U Λ⁺ Uᵀ` for `S = U Λ Uᵀ`, only the well-determined directions (`λ > √ε · λ_max`),
+/// and how many there are.
+fn pseudo_inverse_gain<T: Real, const NX: usize, const NY: usize>(
+    g: &SMatrix<T, NX, NY>,
+    s: &SMatrix<T, NY, NY>,
+) -> Result<(SMatrix<T, NX, NY>, u8)> {
+    let (lam, u) = symmetric_eigen(s, "innovation covariance")?;
+    let lmax = lam.max();
+    if !lmax.finite() {
+        return Err(Error::NonFinite {
+            what: "innovation covariance",
+        });
+    }
+    if lmax <= T::zero() {
+        return Err(Error::NotPositiveDefinite {
+            what: "innovation covariance (all directions noise-free and certain)",
+        });
+    }
+    let tol = T::EPS.sqrt() * lmax;
+    let mut inv = SVector::<T, NY>::zeros();
+    let mut rank = 0u8;
+    for i in 0..NY {
+        if lam[i] > tol {
+            inv[i] = T::one() / lam[i];
+            rank += 1;
         }
-        let (sys, f) = &self.model;
-        self.filter.step(sys, f, y.delivered())
     }
-
-    #[inline]
-    fn estimate(&self) -> &Estimate<T, NX> {
-        self.filter.estimate()
+    // K = G U Λ⁺ Uᵀ (only well-determined directions).
+    let gu = g * u;
+    let mut gul = gu;
+    for j in 0..NY {
+        let sc = inv[j];
+        for i in 0..NX {
+            gul[(i, j)] *= sc;
+        }
     }
+    Ok((gul * u.transpose(), rank))
 }
 
 /// Symmetrises `P` and clamps its negative eigenvalues to zero.
@@ -284,28 +188,6 @@ fn project_psd<T: Real, const N: usize>(p: &SMatrix<T, N, N>) -> Result<SMatrix<
     Ok(symmetrize(
         &(u * SMatrix::<T, N, N>::from_diagonal(&clamped) * u.transpose()),
     ))
-}
-
-/// Behind a gate (docs/gate.md): a delivered `y_k` is tested against `x̂_{k|k−1}` once the
-/// step has formed it; a rejected one is not used by the next step (as if withheld).
-impl<T: Real, const NX: usize, const NW: usize, const NY: usize, S, F> GatedStep<T, NX>
-    for OnModel<(S, F), CoupledNoiseKf<T, NX, NW, NY>, NY>
-where
-    S: CoupledNoiseSystem<T, NX, NW, NY>,
-    F: DifferentiableMap<T, NX>,
-{
-    fn step_gated(
-        &mut self,
-        k: usize,
-        y: &Packet<T, NY>,
-        gate: &InnovationGate<T>,
-    ) -> Result<GateCounts> {
-        self.step(k, y)?;
-        if y.delivered().is_none() {
-            return Ok(GateCounts::NONE);
-        }
-        Ok(GateCounts::one(self.filter.gate_held(&self.model.0, gate)))
-    }
 }
 
 #[cfg(test)]

@@ -30,7 +30,7 @@
 //! (its rows differ in `0.25 cos k ≠ 0.25`), and at `k = 0` the only `v` with `C₀ᵀ v = 0` is
 //! `[1, −1]ᵀ`, for which `Dᵀ v = 0.95`. So no regularisation is added: `S` is factorised by
 //! Cholesky, and a step whose `S` is numerically singular fails with
-//! [`Error::NotPositiveDefinite`] (the estimator unchanged) instead of being patched.
+//! [`Error::NotPositiveDefinite`](crate::Error::NotPositiveDefinite) (the estimator unchanged) instead of being patched.
 //!
 //! What the singular `R` does mean: the filter believes one combination of `y_k` is
 //! noise-free, so `P_{k|k}` loses rank in one direction at every update; the time update's
@@ -45,12 +45,10 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::estimate::Estimate;
-use crate::estimator::{Estimator, OnModel};
-use crate::filter::gate::{GateCounts, GatedStep, InnovationGate};
 use crate::filter::nn::system::{CoupledNoiseSystem, DifferentiableMap};
-use crate::linalg::{check_finite, check_spd, solve_spd_right, symmetrize};
-use crate::packet::Packet;
-use crate::{Error, Real, Result};
+use crate::filter::noise_coupled::{NoiseCoupledKf, NoiseCoupledStep};
+use crate::linalg::{check_finite, solve_spd_right, symmetrize};
+use crate::{Real, Result};
 
 /// Which textbook filter.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -64,82 +62,41 @@ pub enum IndependentMode {
 }
 
 /// Textbook KF/EKF with `B w` and `D w` taken as independent noises (seed 003's practitioner
-/// baselines). Holds `x̂_{k|k−1}` with the filter's own `P_{k|k−1}`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct IndependentNoiseKf<T: Real, const NX: usize, const NW: usize, const NY: usize> {
-    k: usize,
-    est: Estimate<T, NX>,
-    w: SMatrix<T, NW, NW>,
-    y: Option<SVector<T, NY>>,
-    mode: IndependentMode,
-}
+/// baselines): the shared [`NoiseCoupledKf`] with the textbook algebra, [`IndependentMode`]
+/// its mode. Holds `x̂_{k|k−1}` with the filter's own `P_{k|k−1}`.
+pub type IndependentNoiseKf<T, const NX: usize, const NW: usize, const NY: usize> =
+    NoiseCoupledKf<T, NX, NW, NY, IndependentMode>;
 
-impl<T: Real, const NX: usize, const NW: usize, const NY: usize> IndependentNoiseKf<T, NX, NW, NY> {
-    /// Starts at instant 0 from `x̂₀`, `P₀` (SPD) with noise covariance `W` (SPD).
-    pub fn new(
-        x0: SVector<T, NX>,
-        p0: SMatrix<T, NX, NX>,
-        w: SMatrix<T, NW, NW>,
-        mode: IndependentMode,
-    ) -> Result<Self> {
-        let est = Estimate::named(x0, p0, "x̂₀", "P₀")?;
-        check_spd(&w, "W")?;
-        Ok(Self {
-            k: 0,
-            est,
-            w: symmetrize(&w),
-            y: None,
-            mode,
-        })
-    }
-
-    /// Uses `y₀` (transmitted at instant 0) in the first step.
-    pub fn with_initial_measurement(mut self, y0: SVector<T, NY>) -> Result<Self> {
-        check_finite(&y0, "y₀")?;
-        self.y = Some(y0);
-        Ok(self)
-    }
-
-    /// Estimate `x̂_{k|k−1}` with the filter's covariance `P_{k|k−1}`.
-    #[inline]
-    pub fn estimate(&self) -> &Estimate<T, NX> {
-        &self.est
-    }
-
-    /// Instant `k`.
-    #[inline]
-    pub fn instant(&self) -> usize {
-        self.k
-    }
-
-    /// The mode.
-    #[inline]
-    pub fn mode(&self) -> IndependentMode {
-        self.mode
-    }
-
-    /// Advances from `k` to `k + 1` given the observation of `k + 1` (`None`: withheld). `f`
-    /// is used only by the EKF. On error nothing changes.
-    pub fn step<S, F>(&mut self, sys: &S, f: &F, y_next: Option<&SVector<T, NY>>) -> Result<()>
+/// The textbook step (module docs): the measurement update with the stored `y_k` (Cholesky of
+/// `S`, Joseph form), then the time update at the filtered estimate. An update uses all `NY`
+/// innovation directions.
+impl<T: Real, const NX: usize, const NW: usize, const NY: usize> NoiseCoupledStep<T, NX, NW, NY>
+    for IndependentMode
+{
+    fn advance<S, F>(
+        &self,
+        sys: &S,
+        f: &F,
+        k: usize,
+        est: &Estimate<T, NX>,
+        w: &SMatrix<T, NW, NW>,
+        y: Option<&SVector<T, NY>>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>, u8)>
     where
         S: CoupledNoiseSystem<T, NX, NW, NY>,
         F: DifferentiableMap<T, NX>,
     {
-        if let Some(y) = y_next {
-            check_finite(y, "measurement")?;
-        }
-        let k = self.k;
-        let (x, p) = (*self.est.state(), *self.est.covariance());
+        let (x, p) = (*est.state(), *est.covariance());
         let (a, b, c, d) = (sys.a(k), sys.b(k), sys.c(k), sys.d(k));
         check_finite(&a, "A_k")?;
         check_finite(&b, "B_k")?;
         check_finite(&c, "C_k")?;
         check_finite(&d, "D_k")?;
         // Measurement update with the stored y_k.
-        let (xf, pf) = match &self.y {
-            None => (x, p),
+        let (xf, pf, rank) = match y {
+            None => (x, p, 0u8),
             Some(y) => {
-                let r = symmetrize(&(d * self.w * d.transpose()));
+                let r = symmetrize(&(d * *w * d.transpose()));
                 let s = symmetrize(&(c * p * c.transpose() + r));
                 let gain = solve_spd_right(
                     &(p * c.transpose()),
@@ -150,109 +107,32 @@ impl<T: Real, const NX: usize, const NW: usize, const NY: usize> IndependentNois
                 (
                     x + gain * (y - c * x),
                     ikc * p * ikc.transpose() + gain * r * gain.transpose(),
+                    NY as u8,
                 )
             }
         };
         // Time update.
-        let (x_next, jac) = match self.mode {
+        let (x_next, jac) = match self {
             IndependentMode::Kf => (a * xf, a),
             IndependentMode::Ekf => (a * xf + f.eval(&xf), a + f.jacobian(&xf)),
         };
         check_finite(&jac, "transition Jacobian")?;
-        let p_next = symmetrize(&(jac * pf * jac.transpose() + b * self.w * b.transpose()));
+        let p_next = symmetrize(&(jac * pf * jac.transpose() + b * *w * b.transpose()));
         check_finite(&x_next, "state estimate")?;
         check_finite(&p_next, "covariance")?;
-        self.k = k + 1;
-        self.est = Estimate::trusted(x_next, p_next);
-        self.y = y_next.copied();
-        Ok(())
-    }
-
-    /// Tests the held measurement `y_{k+1}` (stored by the last step) against the
-    /// prediction `x̂_{k+1|k}`, `P_{k+1|k}` the filter now holds: `ν = y − C x̂`,
-    /// `S = C P Cᵀ + D W Dᵀ` of instant `k + 1`, the innovation the next step's update uses. A
-    /// rejected one is dropped (the next step predicts only, as for a withheld packet).
-    /// Returns whether it is kept (`false` when none is held). A singular `S` (noise-free,
-    /// certain directions; the update uses its pseudo-inverse) cannot be tested and is kept.
-    pub fn gate_held<S: CoupledNoiseSystem<T, NX, NW, NY>>(
-        &mut self,
-        sys: &S,
-        gate: &InnovationGate<T>,
-    ) -> bool {
-        let Some(y) = self.y else {
-            return false;
-        };
-        if gate.is_off() {
-            return true;
-        }
-        let k = self.k;
-        let (c, d) = (sys.c(k), sys.d(k));
-        let (x, p) = (self.est.state(), self.est.covariance());
-        let s = symmetrize(&(c * p * c.transpose() + d * self.w * d.transpose()));
-        let keep = gate.admits(&(y - c * x), &s).unwrap_or(true);
-        if !keep {
-            self.y = None;
-        }
-        keep
-    }
-}
-
-/// The model is the system and the nonlinearity `(sys, f)`. Delivered: the update with the
-/// stored measurement at the next step; dropped (withheld by the token bucket) or lost:
-/// prediction only. The filter counts its instants: `k` must be
-/// [`IndependentNoiseKf::instant`] + 1.
-impl<T: Real, const NX: usize, const NW: usize, const NY: usize, S, F> Estimator<T, NX>
-    for OnModel<(S, F), IndependentNoiseKf<T, NX, NW, NY>, NY>
-where
-    S: CoupledNoiseSystem<T, NX, NW, NY>,
-    F: DifferentiableMap<T, NX>,
-{
-    type Measurement = Packet<T, NY>;
-
-    /// [`IndependentNoiseKf::step`] with the observation of instant `k`; refused with
-    /// [`Error::OutOfOrder`] unless `k` is the next instant.
-    fn step(&mut self, k: usize, y: &Packet<T, NY>) -> Result<()> {
-        let expected = self.filter.instant() + 1;
-        if k != expected {
-            return Err(Error::OutOfOrder { expected, got: k });
-        }
-        let (sys, f) = &self.model;
-        self.filter.step(sys, f, y.delivered())
-    }
-
-    #[inline]
-    fn estimate(&self) -> &Estimate<T, NX> {
-        self.filter.estimate()
-    }
-}
-
-/// Behind a gate (docs/gate.md): a delivered `y_k` is tested against `x̂_{k|k−1}` once the
-/// step has formed it; a rejected one is not used by the next step (as if withheld).
-impl<T: Real, const NX: usize, const NW: usize, const NY: usize, S, F> GatedStep<T, NX>
-    for OnModel<(S, F), IndependentNoiseKf<T, NX, NW, NY>, NY>
-where
-    S: CoupledNoiseSystem<T, NX, NW, NY>,
-    F: DifferentiableMap<T, NX>,
-{
-    fn step_gated(
-        &mut self,
-        k: usize,
-        y: &Packet<T, NY>,
-        gate: &InnovationGate<T>,
-    ) -> Result<GateCounts> {
-        self.step(k, y)?;
-        if y.delivered().is_none() {
-            return Ok(GateCounts::NONE);
-        }
-        Ok(GateCounts::one(self.filter.gate_held(&self.model.0, gate)))
+        Ok((x_next, p_next, rank))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::estimator::{Estimator, OnModel};
     use crate::filter::coupled_kf::NoNonlinearity;
+    use crate::linalg::check_spd;
+    use crate::packet::Packet;
     use crate::papers::Seed003Example;
+    use crate::Error;
     use nalgebra::{matrix, vector};
 
     /// A linear time-invariant system with independent noises written in the coupled form:

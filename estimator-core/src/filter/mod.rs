@@ -11,7 +11,8 @@
 //! * [`nn`] (seed 003): the NN estimator under the token bucket; [`coupled_kf`] holds its
 //!   KF/EKF baselines for the same noise-coupled system (the paper's: the exact
 //!   correlated-noise predictor), [`independent_kf`] the textbook KF/EKF that treat its two
-//!   noise terms as independent.
+//!   noise terms as independent; both are the one predictor of [`noise_coupled`] with a mode
+//!   each.
 //! * [`tobit`] (seed 004): local Tobit filters of censored measurements and their fusion.
 //! * [`silence`]: what an event trigger's silence says (the product's, beside seed 004): the
 //!   silence set's updates, the Kalman filter that reads them.
@@ -22,6 +23,7 @@ pub mod independent_kf;
 pub mod intermittent;
 pub mod kalman;
 pub mod nn;
+pub mod noise_coupled;
 pub mod occlusion;
 pub mod sequential_kf;
 pub mod silence;
@@ -35,6 +37,7 @@ pub use independent_kf::IndependentNoiseKf;
 pub use intermittent::IntermittentKalmanFilter;
 pub use kalman::KalmanFilter;
 pub use nn::NnTbcpEstimator;
+pub use noise_coupled::NoiseCoupledKf;
 pub use occlusion::{AssumedDensityFilter, CrossCoupledEstimator, KfIo};
 pub use sequential_kf::SequentialKf;
 pub use silence::kalman::SilenceKf;

@@ -13,7 +13,7 @@
 //! Both require `Θ₁` symmetric positive definite, `Θ₂, Θ₃, Θ₄` symmetric positive
 //! semi-definite and `Θ̄` positive definite (in Theorem 2: `Θ₃ ≻ 0` and `Θ₂ + Θ₄ ≻ 0`).
 
-use nalgebra::SMatrix;
+use nalgebra::{SMatrix, SVector};
 
 use super::eig::symmetric_eigen;
 use super::{check_finite, cholesky, solve_spd, symmetrize};
@@ -111,39 +111,17 @@ pub fn solve_two_sided_spd<T: Real, const N: usize, const M: usize>(
 ) -> Result<SMatrix<T, N, M>> {
     check_inputs(t1, t2, t3, t4, phi)?;
     // Θ₁ = R Rᵀ; R⁻¹ Θ₃ R⁻ᵀ = U Λ Uᵀ ⇒ W = R U gives Θ₁ = W Wᵀ, Θ₃ = W Λ Wᵀ.
-    let (w_inv_phi_rows, lam, u1, r1) = {
-        let r = cholesky(t1, "Θ₁")?;
-        let l = r.l();
-        let rt3 = l.solve_lower_triangular(t3).ok_or(Error::Numerical {
-            what: "Θ₁ factor"
-        })?;
-        let m = symmetrize(&l.solve_lower_triangular(&rt3.transpose()).ok_or(
-            Error::Numerical {
-                what: "Θ₁ factor"
-            },
-        )?);
-        let (lam, u) = symmetric_eigen(&m, "R⁻¹ Θ₃ R⁻ᵀ")?;
-        // W⁻¹ Φ = Uᵀ R⁻¹ Φ.
-        let r_inv_phi = l.solve_lower_triangular(phi).ok_or(Error::Numerical {
-            what: "Θ₁ factor",
-        })?;
-        (u.transpose() * r_inv_phi, lam, u, l)
-    };
+    let (r1, lam, u1) = diagonalise_pair(t1, t3, ["Θ₁", "Θ₁ factor", "R⁻¹ Θ₃ R⁻ᵀ"])?;
+    // W⁻¹ Φ = Uᵀ R⁻¹ Φ.
+    let r_inv_phi = r1.solve_lower_triangular(phi).ok_or(Error::Numerical {
+        what: "Θ₁ factor"
+    })?;
+    let w_inv_phi_rows = u1.transpose() * r_inv_phi;
     // Θ₂ may be singular (C_k of the seed 003 example has rank 1 at k = 0) while Θ₂ + Θ₄ is
     // not: factor G = Θ₂ + Θ₄ = S Sᵀ, S⁻¹ Θ₂ S⁻ᵀ = V Σ Vᵀ, so with Z = S V: Θ₂ = Z Σ Zᵀ and
     // Θ₄ = Z (I − Σ) Zᵀ, σ_j ∈ [0, 1].
-    let g = cholesky(&(t2 + t4), "Θ₂ + Θ₄")?;
-    let s = g.l();
-    let st2 = s.solve_lower_triangular(t2).ok_or(Error::Numerical {
-        what: "Θ₂ + Θ₄ factor",
-    })?;
-    let n = symmetrize(
-        &s.solve_lower_triangular(&st2.transpose())
-            .ok_or(Error::Numerical {
-                what: "Θ₂ + Θ₄ factor",
-            })?,
-    );
-    let (sigma, v) = symmetric_eigen(&n, "S⁻¹ Θ₂ S⁻ᵀ")?;
+    let (s, sigma, v) =
+        diagonalise_pair(&(t2 + t4), t2, ["Θ₂ + Θ₄", "Θ₂ + Θ₄ factor", "S⁻¹ Θ₂ S⁻ᵀ"])?;
     // F = W⁻¹ Φ Z⁻ᵀ with Z = S V: (W⁻¹Φ) S⁻ᵀ V = ((S⁻¹ (W⁻¹Φ)ᵀ)ᵀ) V.
     let s_inv_ft = s
         .solve_lower_triangular(&w_inv_phi_rows.transpose())
@@ -151,20 +129,7 @@ pub fn solve_two_sided_spd<T: Real, const N: usize, const M: usize>(
             what: "Θ₂ + Θ₄ factor",
         })?;
     let f = s_inv_ft.transpose() * v;
-    let mut y = f;
-    for i in 0..N {
-        for j in 0..M {
-            // Y_ij (σ_j + λ_i (1 − σ_j)) = F_ij: these are the eigenvalues of Θ̄ in the new
-            // basis, positive iff Θ̄ is positive definite.
-            let d = sigma[j] + lam[i] * (T::one() - sigma[j]);
-            if !d.finite() || d <= T::EPS.sqrt() {
-                return Err(Error::NotPositiveDefinite {
-                    what: "Θ̄ = Θ₂ᵀ⊗Θ₁ + Θ₄ᵀ⊗Θ₃ (two-sided solve)",
-                });
-            }
-            y[(i, j)] = f[(i, j)] / d;
-        }
-    }
+    let y = divide_by_pair_eigenvalues(&f, &lam, &sigma)?;
     // L = W⁻ᵀ Y Z⁻¹ = R⁻ᵀ U Y Vᵀ S⁻¹.
     let uy = u1 * y * v.transpose();
     let left = r1
@@ -183,6 +148,54 @@ pub fn solve_two_sided_spd<T: Real, const N: usize, const M: usize>(
     let l = lt.transpose();
     check_finite(&l, "two-sided solve")?;
     Ok(l)
+}
+
+/// Simultaneous diagonalisation of the pair `(A, B)`, `A ≻ 0`: `A = L Lᵀ` (Cholesky) and
+/// `L⁻¹ B L⁻ᵀ = U Λ Uᵀ`, so that `W = L U` gives `A = W Wᵀ`, `B = W Λ Wᵀ`. Returns
+/// `(L, Λ, U)`; `names` are the factorisation's, the factor's solves' and the eigenproblem's.
+#[inline(always)]
+fn diagonalise_pair<T: Real, const N: usize>(
+    a: &SMatrix<T, N, N>,
+    b: &SMatrix<T, N, N>,
+    names: [&'static str; 3],
+) -> Result<(SMatrix<T, N, N>, SVector<T, N>, SMatrix<T, N, N>)> {
+    let [chol_name, factor_name, eigen_name] = names;
+    let l = cholesky(a, chol_name)?.l();
+    let lb = l
+        .solve_lower_triangular(b)
+        .ok_or(Error::Numerical { what: factor_name })?;
+    let m = symmetrize(
+        &l.solve_lower_triangular(&lb.transpose())
+            .ok_or(Error::Numerical { what: factor_name })?,
+    );
+    let (lam, u) = symmetric_eigen(&m, eigen_name)?;
+    Ok((l, lam, u))
+}
+
+/// `Y_ij = F_ij / (σ_j + λ_i (1 − σ_j))`: the two-sided equation in the pairs' common bases.
+/// The divisors are the eigenvalues of Θ̄ in that basis, positive iff Θ̄ is positive definite;
+/// one not above `√ε` is refused.
+#[inline(always)]
+fn divide_by_pair_eigenvalues<T: Real, const N: usize, const M: usize>(
+    f: &SMatrix<T, N, M>,
+    lam: &SVector<T, N>,
+    sigma: &SVector<T, M>,
+) -> Result<SMatrix<T, N, M>> {
+    let mut y = *f;
+    for i in 0..N {
+        for j in 0..M {
+            // Y_ij (σ_j + λ_i (1 − σ_j)) = F_ij: these are the eigenvalues of Θ̄ in the new
+            // basis, positive iff Θ̄ is positive definite.
+            let d = sigma[j] + lam[i] * (T::one() - sigma[j]);
+            if !d.finite() || d <= T::EPS.sqrt() {
+                return Err(Error::NotPositiveDefinite {
+                    what: "Θ̄ = Θ₂ᵀ⊗Θ₁ + Θ₄ᵀ⊗Θ₃ (two-sided solve)",
+                });
+            }
+            y[(i, j)] = f[(i, j)] / d;
+        }
+    }
+    Ok(y)
 }
 
 fn check_inputs<T: Real, const N: usize, const M: usize>(

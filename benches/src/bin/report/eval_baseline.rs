@@ -24,6 +24,57 @@ const SCENARIO: &str = "occlusion";
 const HORIZON: u32 = 100;
 
 pub fn part(o: &Opts, md: &mut String) -> Result<()> {
+    let m = measure(o)?;
+    let cmd = format!(
+        "ipc-runner eval --scenario {SCENARIO} --runs {} --horizon {HORIZON} --quiet --json FILE",
+        m.runs
+    );
+    let cg_cmd = format!(
+        "valgrind --tool=callgrind ipc-runner eval --scenario {SCENARIO} --runs {} \
+         --horizon {HORIZON} --quiet --threads 1",
+        m.cg_runs
+    );
+    prose::push(md, &intro(m.reps, &cmd, &cg_cmd));
+    write_table(md, &m);
+    write_ratios(md, &m);
+    write_breakdown(md, &m);
+    write_time_split(md, &m);
+    Ok(())
+}
+
+/// What the part measures of the two binaries (index 0 the baseline, 1 this build).
+struct Measured {
+    /// Runs of the timed command, its repetitions, runs of the callgrind command.
+    runs: u64,
+    reps: usize,
+    cg_runs: u64,
+    /// (CPU s, wall s) of every repetition.
+    cpu: [Vec<(f64, f64)>; 2],
+    /// Whether the JSON files agree (the sentence).
+    same: String,
+    /// Instructions of the whole process, and of the runs alone, twice each.
+    ir: [[u64; 2]; 2],
+    runs_ir: [[u64; 2]; 2],
+    /// This build's instructions by part.
+    split: Vec<(String, u64)>,
+    /// This build's CPU time by part (samples, shares).
+    time_split: Result<(u64, Vec<(String, f64)>)>,
+}
+
+impl Measured {
+    /// The median CPU s (`f = |c| c.0`) or wall s (`|c| c.1`) of binary `which`.
+    fn median_of(&self, which: usize, f: fn(&(f64, f64)) -> f64) -> f64 {
+        median(self.cpu[which].iter().map(f).collect())
+    }
+    /// Run-steps of the callgrind command.
+    fn cg_run_steps(&self) -> f64 {
+        (self.cg_runs * HORIZON as u64) as f64
+    }
+}
+
+/// Builds the baseline, then times both binaries alternately, compares their JSON, counts
+/// their instructions under callgrind and profiles this build.
+fn measure(o: &Opts) -> Result<Measured> {
     let base = baseline_binary(o)?;
     let cur = o.target.join("release/ipc-runner");
     if !cur.exists() {
@@ -71,45 +122,59 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
     ));
     let time_split = cpu_profile(&cur, runs, &tmp);
     let _ = std::fs::remove_dir_all(&tmp);
+    Ok(Measured {
+        runs,
+        reps,
+        cg_runs,
+        cpu,
+        same,
+        ir,
+        runs_ir,
+        split,
+        time_split,
+    })
+}
 
-    let cmd = format!(
-        "ipc-runner eval --scenario {SCENARIO} --runs {runs} --horizon {HORIZON} --quiet --json FILE"
-    );
-    let cg_cmd = format!(
-        "valgrind --tool=callgrind ipc-runner eval --scenario {SCENARIO} --runs {cg_runs} \
-         --horizon {HORIZON} --quiet --threads 1"
-    );
-    prose::push(md, &intro(reps, &cmd, &cg_cmd));
+/// The table: each binary's CPU time per repetition, medians and instruction counts.
+fn write_table(md: &mut String, m: &Measured) {
     md.push_str(
         "| binary | CPU s (user + sys) of each repetition | median CPU s | median wall s | \
          instructions | again | of which the runs | again | same twice |\n\
          |---|---|---:|---:|---:|---:|---:|---:|---|\n",
     );
-    let med = |v: &[(f64, f64)], f: fn(&(f64, f64)) -> f64| median(v.iter().map(f).collect());
     for which in 0..2 {
-        let reps: Vec<String> = cpu[which].iter().map(|c| format!("{:.2}", c.0)).collect();
+        let reps: Vec<String> = m.cpu[which].iter().map(|c| format!("{:.2}", c.0)).collect();
         let _ = writeln!(
             md,
             "| {} | {} | {:.2} | {:.2} | {} | {} | {} | {} | {} |",
             label(which),
             reps.join(", "),
-            med(&cpu[which], |c| c.0),
-            med(&cpu[which], |c| c.1),
-            ir[which][0],
-            ir[which][1],
-            runs_ir[which][0],
-            runs_ir[which][1],
-            if runs_ir[which][0] == runs_ir[which][1] {
+            m.median_of(which, |c| c.0),
+            m.median_of(which, |c| c.1),
+            m.ir[which][0],
+            m.ir[which][1],
+            m.runs_ir[which][0],
+            m.runs_ir[which][1],
+            if m.runs_ir[which][0] == m.runs_ir[which][1] {
                 "yes (the runs)"
             } else {
                 "**no**"
             }
         );
     }
-    let cpu_ratio = med(&cpu[0], |c| c.0) / med(&cpu[1], |c| c.0);
-    let per_rep: Vec<f64> = cpu[0].iter().zip(&cpu[1]).map(|(b, c)| b.0 / c.0).collect();
-    let ir_ratio = ir[0][0] as f64 / ir[1][0] as f64;
-    let runs_ratio = runs_ir[0][0] as f64 / runs_ir[1][0] as f64;
+}
+
+/// The ratios against the target (≥ 4×) and whether the JSON files agree.
+fn write_ratios(md: &mut String, m: &Measured) {
+    let cg_runs = m.cg_runs;
+    let cpu_ratio = m.median_of(0, |c| c.0) / m.median_of(1, |c| c.0);
+    let per_rep: Vec<f64> = m.cpu[0]
+        .iter()
+        .zip(&m.cpu[1])
+        .map(|(b, c)| b.0 / c.0)
+        .collect();
+    let ir_ratio = m.ir[0][0] as f64 / m.ir[1][0] as f64;
+    let runs_ratio = m.runs_ir[0][0] as f64 / m.runs_ir[1][0] as f64;
     let verdict = |r: f64| if r >= 4.0 { "met" } else { "**missed**" };
     let _ = writeln!(
         md,
@@ -126,67 +191,75 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", "),
         verdict(cpu_ratio),
-        ir[0][0] as f64 / (cg_runs * HORIZON as u64) as f64,
-        ir[1][0] as f64 / (cg_runs * HORIZON as u64) as f64,
+        m.ir[0][0] as f64 / m.cg_run_steps(),
+        m.ir[1][0] as f64 / m.cg_run_steps(),
         verdict(ir_ratio),
     );
-    let _ = writeln!(md, "{same}\n");
+    let _ = writeln!(md, "{}\n", m.same);
+}
+
+/// Where this build's instructions go (the callgrind run, inclusive costs).
+fn write_breakdown(md: &mut String, m: &Measured) {
     md.push_str("Where this build's instructions go (the callgrind run above, inclusive costs):\n\n| part | instructions | share | per run-step |\n|---|---:|---:|---:|\n");
-    let total = ir[1][0] as f64;
-    for (name, v) in &split {
+    let total = m.ir[1][0] as f64;
+    for (name, v) in &m.split {
         let _ = writeln!(
             md,
             "| {name} | {v} | {:.1} % | {:.0} |",
             100.0 * *v as f64 / total,
-            *v as f64 / (cg_runs * HORIZON as u64) as f64
+            *v as f64 / m.cg_run_steps()
         );
     }
     md.push('\n');
-    let cur_cpu = med(&cpu[1], |c| c.0);
-    let base_cpu = med(&cpu[0], |c| c.0);
-    match time_split {
-        Ok((samples, rows)) => {
-            let _ = writeln!(
-                md,
-                "Where this build's CPU time goes: `perf record -e cpu-clock -F {PERF_HZ}` of \
-                 the command with `--runs {runs} --threads 1`, {samples} samples, each \
-                 function's own time (not what it calls; what the compiler inlined counts \
-                 where it was inlined), grouped. Sampled, so statistical: a share s is known \
-                 to ±2·√(s(1 − s)/{samples}) (under 2 points here). Instructions are not \
-                 time: a chain of dependent divisions costs their latency, and the continued \
-                 fractions of `ln Q` are such chains.\n\n\
-                 | part | share of the CPU time |\n|---|---:|"
-            );
-            for (name, share) in &rows {
-                let _ = writeln!(md, "| {name} | {:.1} % |", 100.0 * share);
-            }
-            let special = rows.first().map_or(0.0, |r| r.1);
-            let rest_cpu = cur_cpu * (1.0 - special);
-            let _ = writeln!(
-                md,
-                "\nWhat this leaves for the target: the special functions alone take {:.2} CPU \
-                 s here; at this cost (the bit-identical JSON needs the same `erfc`, `exp`, \
-                 `ln` and continued fractions on the same arguments), the command could at \
-                 best be {:.1}× faster than `{BASELINE}`, with everything else free. 4× \
-                 ({:.2} CPU s) leaves {:.2} CPU s for everything else, which takes {:.2} \
-                 now: {:.0} % of it would have to go. Within the special functions, only \
-                 work that cannot change a bit can go: terms proved not to count, as the \
-                 interval sums already skip, and latency hidden by evaluating independent \
-                 arguments side by side, as `gauss::side_by_side` does for the gaps of one \
-                 `kf-io` step; more of it needs several runs' steps side by side.\n",
-                cur_cpu * special,
-                base_cpu / (cur_cpu * special),
-                base_cpu / 4.0,
-                (base_cpu / 4.0 - cur_cpu * special).max(0.0),
-                rest_cpu,
-                100.0 * (1.0 - (base_cpu / 4.0 - cur_cpu * special).max(0.0) / rest_cpu),
-            );
-        }
+}
+
+/// Where this build's CPU time goes (perf), and what that leaves for the target.
+fn write_time_split(md: &mut String, m: &Measured) {
+    let runs = m.runs;
+    let cur_cpu = m.median_of(1, |c| c.0);
+    let base_cpu = m.median_of(0, |c| c.0);
+    let (samples, rows) = match &m.time_split {
+        Ok(split) => split,
         Err(e) => {
             let _ = writeln!(md, "Where the CPU time goes: not measured ({e:#}).\n");
+            return;
         }
+    };
+    let _ = writeln!(
+        md,
+        "Where this build's CPU time goes: `perf record -e cpu-clock -F {PERF_HZ}` of \
+         the command with `--runs {runs} --threads 1`, {samples} samples, each \
+         function's own time (not what it calls; what the compiler inlined counts \
+         where it was inlined), grouped. Sampled, so statistical: a share s is known \
+         to ±2·√(s(1 − s)/{samples}) (under 2 points here). Instructions are not \
+         time: a chain of dependent divisions costs their latency, and the continued \
+         fractions of `ln Q` are such chains.\n\n\
+         | part | share of the CPU time |\n|---|---:|"
+    );
+    for (name, share) in rows {
+        let _ = writeln!(md, "| {name} | {:.1} % |", 100.0 * share);
     }
-    Ok(())
+    let special = rows.first().map_or(0.0, |r| r.1);
+    let rest_cpu = cur_cpu * (1.0 - special);
+    let _ = writeln!(
+        md,
+        "\nWhat this leaves for the target: the special functions alone take {:.2} CPU \
+         s here; at this cost (the bit-identical JSON needs the same `erfc`, `exp`, \
+         `ln` and continued fractions on the same arguments), the command could at \
+         best be {:.1}× faster than `{BASELINE}`, with everything else free. 4× \
+         ({:.2} CPU s) leaves {:.2} CPU s for everything else, which takes {:.2} \
+         now: {:.0} % of it would have to go. Within the special functions, only \
+         work that cannot change a bit can go: terms proved not to count, as the \
+         interval sums already skip, and latency hidden by evaluating independent \
+         arguments side by side, as `gauss::side_by_side` does for the gaps of one \
+         `kf-io` step; more of it needs several runs' steps side by side.\n",
+        cur_cpu * special,
+        base_cpu / (cur_cpu * special),
+        base_cpu / 4.0,
+        (base_cpu / 4.0 - cur_cpu * special).max(0.0),
+        rest_cpu,
+        100.0 * (1.0 - (base_cpu / 4.0 - cur_cpu * special).max(0.0) / rest_cpu),
+    );
 }
 
 /// Sampling rate of [`cpu_profile`].

@@ -15,6 +15,7 @@ use crate::prose;
 use anyhow::{anyhow, bail, Context, Result};
 use std::fmt::Write as _;
 use std::io::{BufRead, BufReader, Read, Write};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -32,6 +33,41 @@ struct Run {
 pub fn part(o: &Opts, md: &mut String) -> Result<()> {
     let (pairs, steps) = if o.quick { (4, 1000) } else { (30, 3000) };
     prose::push(md, &intro(pairs, steps));
+    let rows = run_pairs(o, pairs, steps)?;
+    write_pairs(md, pairs, &rows);
+    let (n, per) = tap_per_instant(o)?;
+    let (ln, reps, per_instant) = loop_per_instant(o)?;
+    prose::push(
+        md,
+        &prose::fill(
+            include_str!("prose/view_loop.md"),
+            &[
+                ("n", &ln),
+                ("reps", &reps),
+                ("rate", &LOOP_RATE),
+                ("scenario", &demo_scenario()),
+                ("table", &loop_table(&per_instant)),
+            ],
+        ),
+    );
+    prose::push(
+        md,
+        &prose::fill(
+            include_str!("prose/view_icount.md"),
+            &[
+                ("n", &n),
+                ("off", &format!("{:.1}", per[0].1)),
+                ("on", &format!("{:.1}", per[1].1)),
+                ("diff", &format!("{:.1}", per[1].1 - per[0].1)),
+            ],
+        ),
+    );
+    Ok(())
+}
+
+/// `pairs` pairs of runs of `steps` instants, one without a view and one with a page, the
+/// order alternating; each pair as (without, with).
+fn run_pairs(o: &Opts, pairs: usize, steps: u32) -> Result<Vec<(Run, Run)>> {
     let mut rows = Vec::new();
     for i in 0..pairs {
         // Alternating order: a trend over the part cancels instead of favouring one side.
@@ -47,6 +83,11 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         ));
         rows.push((off, on));
     }
+    Ok(rows)
+}
+
+/// The pairs' table: the median p50s, the ratios' median and spread, the p99s and the bytes.
+fn write_pairs(md: &mut String, pairs: usize, rows: &[(Run, Run)]) {
     let mut ratios: Vec<f64> = rows.iter().map(|(off, on)| on.p50 / off.p50).collect();
     ratios.sort_by(f64::total_cmp);
     let q = |p: f64| quantile(&ratios, p);
@@ -75,7 +116,11 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         median(&|r| r.1.p99),
         bytes / 1e3
     );
-    // The tap's instructions per instant, (I(2N) − I(N)) / N as part `icount` counts.
+}
+
+/// The tap's instructions per instant, (I(2N) − I(N)) / N as part `icount` counts, without
+/// and with a view; and N.
+fn tap_per_instant(o: &Opts) -> Result<(u64, Vec<(&'static str, f64)>)> {
     let bin = o.target.join("release/icount");
     let n: u64 = if o.quick { 2000 } else { 20_000 };
     let mut per = Vec::new();
@@ -85,10 +130,17 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
         let b = callgrind_ir(&bin, k, 2 * n)?;
         per.push((k, b.saturating_sub(a) as f64 / n as f64));
     }
-    // The loop, instant by instant, with and without a page: the demo's main thread under
-    // callgrind, three functions' inclusive counts, (I(2N) − I(N)) / N, `reps` runs each.
+    Ok((n, per))
+}
+
+/// [view off/on][function] → the per-instant figures of the runs.
+type PerInstant = Vec<Vec<Vec<f64>>>;
+
+/// The loop, instant by instant, with and without a page: the demo's main thread under
+/// callgrind, three functions' inclusive counts, (I(2N) − I(N)) / N, `reps` runs each.
+/// Returns N, `reps` and the figures.
+fn loop_per_instant(o: &Opts) -> Result<(u32, usize, PerInstant)> {
     let (ln, reps) = if o.quick { (500, 1) } else { (2000, 2) };
-    // [view off/on][function] → the per-instant figures of the runs.
     let mut per_instant = vec![vec![Vec::new(); LOOP_FUNCTIONS.len()]; 2];
     for r in 0..reps {
         for (i, view) in [false, true].into_iter().enumerate() {
@@ -102,6 +154,12 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
             }
         }
     }
+    Ok((ln, reps, per_instant))
+}
+
+/// The loop's table: each function's instructions per instant without and with a page (the
+/// runs' span) and the ratio of their means.
+fn loop_table(per_instant: &PerInstant) -> String {
     let span = |v: &[f64]| {
         if v.is_empty() {
             return "–".to_string();
@@ -135,32 +193,7 @@ pub fn part(o: &Opts, md: &mut String) -> Result<()> {
             span(on)
         );
     }
-    prose::push(
-        md,
-        &prose::fill(
-            include_str!("prose/view_loop.md"),
-            &[
-                ("n", &ln),
-                ("reps", &reps),
-                ("rate", &LOOP_RATE),
-                ("scenario", &demo_scenario()),
-                ("table", &table),
-            ],
-        ),
-    );
-    prose::push(
-        md,
-        &prose::fill(
-            include_str!("prose/view_icount.md"),
-            &[
-                ("n", &n),
-                ("off", &format!("{:.1}", per[0].1)),
-                ("on", &format!("{:.1}", per[1].1)),
-                ("diff", &format!("{:.1}", per[1].1 - per[0].1)),
-            ],
-        ),
-    );
-    Ok(())
+    table
 }
 
 fn intro(pairs: usize, steps: u32) -> String {
@@ -210,7 +243,6 @@ const LOOP_FUNCTIONS: [(&str, &str); 3] = [
 /// `demo --wait block` of `steps` instants under callgrind, with a view and a page reading it
 /// when `view`; `None` where callgrind saw no such function (inlined).
 fn loop_ir(o: &Opts, view: bool, steps: u32, rep: usize) -> Result<[Option<u64>; 3]> {
-    let bin = o.target.join("release/ipc-runner");
     let tag = format!(
         "{}-{rep}-{steps}-{}",
         std::process::id(),
@@ -218,6 +250,35 @@ fn loop_ir(o: &Opts, view: bool, steps: u32, rep: usize) -> Result<[Option<u64>;
     );
     let dir = std::env::temp_dir().join(format!("benches-report-viewloop-{tag}"));
     std::fs::create_dir_all(&dir)?;
+    let mut child = loop_command(o, view, steps, &tag, &dir)
+        .spawn()
+        .context("valgrind ipc-runner demo")?;
+    let err = child.stderr.take().expect("piped");
+    let page = std::thread::spawn(move || page_reading_all(err));
+    let status = child.wait().context("valgrind ipc-runner demo")?;
+    page.join()
+        .map_err(|_| anyhow!("the page's thread panicked"))??;
+    if !status.success() {
+        bail!("valgrind ipc-runner demo (view: {view}, {steps} instants) failed ({status})");
+    }
+    // --separate-threads: one file per thread, `-01` the main thread, which runs the loop.
+    let out = Command::new("callgrind_annotate")
+        .args(["--inclusive=yes", "--threshold=100"])
+        .arg(dir.join("cg.out-01"))
+        .output()
+        .context("callgrind_annotate (valgrind)")?;
+    let _ = std::fs::remove_dir_all(&dir);
+    if !out.status.success() {
+        bail!("callgrind_annotate failed");
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    Ok(LOOP_FUNCTIONS.map(|(name, _)| inclusive(&text, name)))
+}
+
+/// The `demo --wait block` of [`loop_ir`] under callgrind (collecting in the loop's drain,
+/// one file per thread in `dir`), with a view when `view`; stderr piped for the view's address.
+fn loop_command(o: &Opts, view: bool, steps: u32, tag: &str, dir: &Path) -> Command {
+    let bin = o.target.join("release/ipc-runner");
     let mut cmd = Command::new("timeout");
     cmd.arg("600")
         .arg("valgrind")
@@ -248,47 +309,31 @@ fn loop_ir(o: &Opts, view: bool, steps: u32, rep: usize) -> Result<[Option<u64>;
     if view {
         cmd.args(["--view", "--view-addr", "127.0.0.1:0"]);
     }
-    let mut child = cmd.spawn().context("valgrind ipc-runner demo")?;
-    let err = child.stderr.take().expect("piped");
-    let page = std::thread::spawn(move || -> Result<()> {
-        let mut lines = BufReader::new(err).lines();
-        let mut s = None;
-        for l in lines.by_ref() {
-            let l = l?;
-            if let Some(a) = l.strip_prefix("view: http://") {
-                s = Some(page_connect(a.trim_end_matches('/'))?);
-                break;
-            }
+    cmd
+}
+
+/// The page of [`loop_ir`]: reads the demo's stderr until the view says where it is (none
+/// without a view), then reads the view until it closes, draining the rest of stderr.
+fn page_reading_all(err: std::process::ChildStderr) -> Result<()> {
+    let mut lines = BufReader::new(err).lines();
+    let mut s = None;
+    for l in lines.by_ref() {
+        let l = l?;
+        if let Some(a) = l.strip_prefix("view: http://") {
+            s = Some(page_connect(a.trim_end_matches('/'))?);
+            break;
         }
-        let Some(mut s) = s else { return Ok(()) };
-        let drain = std::thread::spawn(move || lines.for_each(drop));
-        let mut buf = vec![0u8; 1 << 16];
-        while let Ok(k) = s.read(&mut buf) {
-            if k == 0 {
-                break;
-            }
+    }
+    let Some(mut s) = s else { return Ok(()) };
+    let drain = std::thread::spawn(move || lines.for_each(drop));
+    let mut buf = vec![0u8; 1 << 16];
+    while let Ok(k) = s.read(&mut buf) {
+        if k == 0 {
+            break;
         }
-        let _ = drain.join();
-        Ok(())
-    });
-    let status = child.wait().context("valgrind ipc-runner demo")?;
-    page.join()
-        .map_err(|_| anyhow!("the page's thread panicked"))??;
-    if !status.success() {
-        bail!("valgrind ipc-runner demo (view: {view}, {steps} instants) failed ({status})");
     }
-    // --separate-threads: one file per thread, `-01` the main thread, which runs the loop.
-    let out = Command::new("callgrind_annotate")
-        .args(["--inclusive=yes", "--threshold=100"])
-        .arg(dir.join("cg.out-01"))
-        .output()
-        .context("callgrind_annotate (valgrind)")?;
-    let _ = std::fs::remove_dir_all(&dir);
-    if !out.status.success() {
-        bail!("callgrind_annotate failed");
-    }
-    let text = String::from_utf8_lossy(&out.stdout);
-    Ok(LOOP_FUNCTIONS.map(|(name, _)| inclusive(&text, name)))
+    let _ = drain.join();
+    Ok(())
 }
 
 /// The count of the first line of `callgrind_annotate` output whose function ends in `name`
@@ -318,59 +363,21 @@ fn page_connect(addr: &str) -> Result<std::net::TcpStream> {
 
 /// One `demo` of `steps` instants at [`RATE`], with a view and a reading page when `view`.
 fn run(o: &Opts, view: bool, steps: u32, pair: usize) -> Result<Run> {
-    let bin = o.target.join("release/ipc-runner");
     let tag = format!(
         "{}-{pair}-{}",
         std::process::id(),
         if view { "on" } else { "off" }
     );
     let out = std::env::temp_dir().join(format!("benches-report-view-{tag}"));
-    let mut cmd = Command::new("timeout");
-    cmd.arg("300")
-        .arg(&bin)
-        .args(["demo", "--quiet", "--wait", "spin", "--scenario"])
-        .arg(demo_scenario())
-        .args(["--rate", &RATE.to_string(), "--steps", &steps.to_string()])
-        .args(["--prefix", &format!("benches-report-view-{tag}")])
-        .arg("--out")
-        .arg(&out)
-        .env("IOX2_LOG_LEVEL", "Error")
-        .stdout(Stdio::null());
-    if view {
-        cmd.args(["--view", "--view-addr", "127.0.0.1:0"])
-            .stderr(Stdio::piped());
-    } else {
-        cmd.stderr(Stdio::null());
-    }
-    let mut child = cmd.spawn().context("ipc-runner demo")?;
+    let mut child = run_command(o, view, steps, &tag, &out)
+        .spawn()
+        .context("ipc-runner demo")?;
     // The page: it connects as soon as the view says where it is, and reads every byte until
     // the process ends.
-    let page = child.stderr.take().map(|err| {
-        std::thread::spawn(move || -> Result<u64> {
-            let mut lines = BufReader::new(err).lines();
-            let addr = loop {
-                let l = lines
-                    .next()
-                    .ok_or_else(|| anyhow!("the demo ended before its view"))??;
-                if let Some(a) = l.strip_prefix("view: http://") {
-                    break a.trim_end_matches('/').to_string();
-                }
-            };
-            // The rest of stderr is drained so that the demo never blocks on it.
-            let drain = std::thread::spawn(move || lines.for_each(drop));
-            let mut s = page_connect(&addr)?;
-            let mut buf = vec![0u8; 1 << 16];
-            let mut n = 0u64;
-            loop {
-                match s.read(&mut buf) {
-                    Ok(0) | Err(_) => break,
-                    Ok(k) => n += k as u64,
-                }
-            }
-            let _ = drain.join();
-            Ok(n)
-        })
-    });
+    let page = child
+        .stderr
+        .take()
+        .map(|err| std::thread::spawn(move || page_counting_bytes(err)));
     let status = child.wait().context("ipc-runner demo")?;
     let page_bytes = match page {
         Some(t) => Some(
@@ -379,20 +386,11 @@ fn run(o: &Opts, view: bool, steps: u32, pair: usize) -> Result<Run> {
         ),
         None => None,
     };
-    let read = || -> Result<(f64, f64)> {
-        if !status.success() {
-            bail!("ipc-runner demo (view: {view}) failed ({status})");
-        }
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("report.json"))?)?;
-        let e = &r["latency"]["end_to_end"];
-        let f = |k: &str| {
-            e[k].as_f64()
-                .ok_or_else(|| anyhow!("report.json: no latency.end_to_end.{k}"))
-        };
-        Ok((f("p50_us")?, f("p99_us")?))
+    let res = if status.success() {
+        end_to_end_latency(&out)
+    } else {
+        Err(anyhow!("ipc-runner demo (view: {view}) failed ({status})"))
     };
-    let res = read();
     let _ = std::fs::remove_dir_all(&out);
     let (p50, p99) = res?;
     Ok(Run {
@@ -400,6 +398,70 @@ fn run(o: &Opts, view: bool, steps: u32, pair: usize) -> Result<Run> {
         p99,
         page_bytes,
     })
+}
+
+/// The `demo --wait spin` of [`run`], writing to `out`; with a view (stderr piped for its
+/// address) when `view`.
+fn run_command(o: &Opts, view: bool, steps: u32, tag: &str, out: &Path) -> Command {
+    let bin = o.target.join("release/ipc-runner");
+    let mut cmd = Command::new("timeout");
+    cmd.arg("300")
+        .arg(&bin)
+        .args(["demo", "--quiet", "--wait", "spin", "--scenario"])
+        .arg(demo_scenario())
+        .args(["--rate", &RATE.to_string(), "--steps", &steps.to_string()])
+        .args(["--prefix", &format!("benches-report-view-{tag}")])
+        .arg("--out")
+        .arg(out)
+        .env("IOX2_LOG_LEVEL", "Error")
+        .stdout(Stdio::null());
+    if view {
+        cmd.args(["--view", "--view-addr", "127.0.0.1:0"])
+            .stderr(Stdio::piped());
+    } else {
+        cmd.stderr(Stdio::null());
+    }
+    cmd
+}
+
+/// The page of [`run`]: waits for the view's address on the demo's stderr, then reads every
+/// byte of the view until the process ends (the rest of stderr drained so that the demo never
+/// blocks on it); the bytes read.
+fn page_counting_bytes(err: std::process::ChildStderr) -> Result<u64> {
+    let mut lines = BufReader::new(err).lines();
+    let addr = loop {
+        let l = lines
+            .next()
+            .ok_or_else(|| anyhow!("the demo ended before its view"))??;
+        if let Some(a) = l.strip_prefix("view: http://") {
+            break a.trim_end_matches('/').to_string();
+        }
+    };
+    // The rest of stderr is drained so that the demo never blocks on it.
+    let drain = std::thread::spawn(move || lines.for_each(drop));
+    let mut s = page_connect(&addr)?;
+    let mut buf = vec![0u8; 1 << 16];
+    let mut n = 0u64;
+    loop {
+        match s.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(k) => n += k as u64,
+        }
+    }
+    let _ = drain.join();
+    Ok(n)
+}
+
+/// The end-to-end p50 and p99 (µs) of the run's `report.json` in `out`.
+fn end_to_end_latency(out: &Path) -> Result<(f64, f64)> {
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json"))?)?;
+    let e = &r["latency"]["end_to_end"];
+    let f = |k: &str| {
+        e[k].as_f64()
+            .ok_or_else(|| anyhow!("report.json: no latency.end_to_end.{k}"))
+    };
+    Ok((f("p50_us")?, f("p99_us")?))
 }
 
 #[cfg(test)]

@@ -173,63 +173,9 @@ where
     for inst in instants {
         let k = inst.k as usize;
         last = k;
-        s.steps += 1;
-        for y in &inst.y {
-            if y.is_some() {
-                s.arrivals += 1;
-            } else {
-                s.dropouts += 1;
-            }
-        }
-        let late = lateness(k, n, LAG);
-        let code = if late.is_some() {
-            0
-        } else {
-            branch(inst.y.each_ref().map(Option::is_some), |m| {
-                inst.y[m].as_ref().is_some_and(E::censored)
-            })
-        };
-        let y = E::Measurement::from_nodes(&inst.y);
-        let now = match (y, late) {
-            (Ok(y), Some(l)) if LAG > 0 => {
-                pending[k % LAG] = Some((k, l, y));
-                Ok(E::Measurement::lost())
-            }
-            (y, _) => y,
-        };
-        step_mark(inst.k, BEGIN);
-        let stepped = now.and_then(|y| step(lag, k, &y));
-        step_mark(
-            inst.k,
-            if stepped.is_err() {
-                code | REFUSED
-            } else {
-                code
-            },
-        );
-        if stepped.is_err() {
-            s.error(inst.k);
-        }
-        // The late packets arriving now, oldest first.
-        for back in (0..LAG).rev() {
-            let Some(j) = k.checked_sub(back) else {
-                continue;
-            };
-            let slot = &mut pending[j % LAG];
-            let due = matches!(slot, Some((pj, l, _)) if *pj == j && j + *l - 1 == k);
-            if !due {
-                continue;
-            }
-            let Some((_, l, y)) = slot.take() else {
-                continue;
-            };
-            step_mark(inst.k, BEGIN);
-            let folded = fold_in(lag, j, &y);
-            step_mark(inst.k, fold_code(l, folded.is_err()));
-            if folded.is_err() {
-                s.error(inst.k);
-            }
-        }
+        tally(s, &inst);
+        step_now::<L, NX, LAG, E>(s, lag, &mut pending, &inst, n);
+        fold_due::<NX, LAG, E>(s, lag, &mut pending, k, inst.k);
         // Instant k − LAG + 1 is settled: none of its packets can arrive any more.
         if let Some(j) = (k + 1).checked_sub(LAG.max(1)).filter(|&j| j >= 1) {
             digest_after::<NX, _, _, LAG>(&mut h, lag, j);
@@ -240,4 +186,96 @@ where
         digest_after::<NX, _, _, LAG>(&mut h, lag, j);
     }
     h.0
+}
+
+/// Counts the instant's step and, node by node, its arrivals and dropouts.
+#[inline(always)]
+fn tally<const L: usize>(s: &mut Summary, inst: &Instant<L>) {
+    s.steps += 1;
+    for y in &inst.y {
+        if y.is_some() {
+            s.arrivals += 1;
+        } else {
+            s.dropouts += 1;
+        }
+    }
+}
+
+/// The instant's own step, marked around: a packet that will arrive late is parked in
+/// `pending` and the step sees it lost (with the code of nothing arrived).
+#[inline(always)]
+fn step_now<const L: usize, const NX: usize, const LAG: usize, E>(
+    s: &mut Summary,
+    lag: &mut FixedLag<E, E::Measurement, LAG>,
+    pending: &mut [Option<(usize, usize, E::Measurement)>; LAG],
+    inst: &Instant<L>,
+    n: usize,
+) where
+    E: Digested<NX> + Clone,
+    E::Measurement: FromNodes<L> + Revise + LostMeasurement + Clone,
+{
+    let k = inst.k as usize;
+    let late = lateness(k, n, LAG);
+    let code = if late.is_some() {
+        0
+    } else {
+        branch(inst.y.each_ref().map(Option::is_some), |m| {
+            inst.y[m].as_ref().is_some_and(E::censored)
+        })
+    };
+    let y = E::Measurement::from_nodes(&inst.y);
+    let now = match (y, late) {
+        (Ok(y), Some(l)) if LAG > 0 => {
+            pending[k % LAG] = Some((k, l, y));
+            Ok(E::Measurement::lost())
+        }
+        (y, _) => y,
+    };
+    step_mark(inst.k, BEGIN);
+    let stepped = now.and_then(|y| step(lag, k, &y));
+    step_mark(
+        inst.k,
+        if stepped.is_err() {
+            code | REFUSED
+        } else {
+            code
+        },
+    );
+    if stepped.is_err() {
+        s.error(inst.k);
+    }
+}
+
+/// The late packets arriving after instant `k` was stepped, oldest first, each folded in and
+/// marked around (`mark_k` is the instant as the markers carry it).
+#[inline(always)]
+fn fold_due<const NX: usize, const LAG: usize, E>(
+    s: &mut Summary,
+    lag: &mut FixedLag<E, E::Measurement, LAG>,
+    pending: &mut [Option<(usize, usize, E::Measurement)>; LAG],
+    k: usize,
+    mark_k: u32,
+) where
+    E: Estimator<f32, NX> + Clone,
+    E::Measurement: Revise + LostMeasurement + Clone,
+{
+    for back in (0..LAG).rev() {
+        let Some(j) = k.checked_sub(back) else {
+            continue;
+        };
+        let slot = &mut pending[j % LAG];
+        let due = matches!(slot, Some((pj, l, _)) if *pj == j && j + *l - 1 == k);
+        if !due {
+            continue;
+        }
+        let Some((_, l, y)) = slot.take() else {
+            continue;
+        };
+        step_mark(mark_k, BEGIN);
+        let folded = fold_in(lag, j, &y);
+        step_mark(mark_k, fold_code(l, folded.is_err()));
+        if folded.is_err() {
+            s.error(mark_k);
+        }
+    }
 }

@@ -139,7 +139,8 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         &self.occ
     }
 
-    /// Algorithm 1 (dropout branch) and Algorithm 2 steps 5-6 on the prediction.
+    /// Algorithm 1 (dropout branch) and Algorithm 2 steps 5-6 on the prediction: the
+    /// components' weights (15), the region they choose (17), the update in it (21).
     #[allow(clippy::type_complexity)]
     fn region_update(
         &self,
@@ -150,10 +151,43 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
         let pet = pp * e.transpose();
         let epe = e * pet;
         let ex = e * xp;
-        let half = T::lit(0.5);
         let mut lnw = [[T::zero(); N]; S];
         let mut top = [T::zero(); S];
         let mut factors = [None; S];
+        self.component_weights(&epe, &ex, &mut lnw, &mut top, &mut factors)?;
+        let mut lw = [-T::one() / T::zero(); S];
+        let mut expw = [T::zero(); N];
+        let (best, best_sum) = choose_region(&lnw, &top, &mut lw, &mut expw);
+        // The "lost" hypothesis (with_loss_rate) against the best region: the prediction is
+        // the posterior of a loss.
+        if self.lost_score > lw[best] {
+            return Ok((*xp, *pp, 0, lw));
+        }
+        let i = best;
+        // K_i = P⁻ Eᵀ S_i⁻¹, with the factor of the weights above.
+        let f = factors[i].ok_or(Error::Numerical {
+            what: "no factor for the chosen region",
+        })?;
+        let gain = f.solve_right(&pet);
+        let (x, p) = self.update_in_region(i, &gain, &expw, best_sum, &ex, xp, pp);
+        check_finite(&x, "updated state")?;
+        check_finite(&p, "updated covariance")?;
+        Ok((x, p, i + 1, lw))
+    }
+
+    /// eq. (15): `ln ω_{ik}^s` of every region's components (`lnw`), each region's largest
+    /// (`top`), and the factor of `E P⁻ Eᵀ + Σ_i` per region (`factors`: its gain is formed
+    /// with it). Written in place, in the caller's frame: the firmware's step stays one frame.
+    #[inline(always)]
+    fn component_weights(
+        &self,
+        epe: &SMatrix<T, NE, NE>,
+        ex: &SVector<T, NE>,
+        lnw: &mut [[T; N]; S],
+        top: &mut [T; S],
+        factors: &mut [Option<SmallLdl<T, NE>>; S],
+    ) -> Result<()> {
+        let half = T::lit(0.5);
         for i in 0..S {
             // ln ω_{ik}^s = ln|R_i| + ln N(ũ^s; E x̂⁻, E P⁻ Eᵀ + Σ_i)   (eq. 15)
             let f = SmallLdl::new(&(epe + self.sigma[i]), "E P Eᵀ + Σ")?;
@@ -173,48 +207,24 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             }
             factors[i] = Some(f);
         }
-        // eq. (17): ĥ = argmax over regions 1..=S of ln Σ_s ω^s (first on ties), log-sum-exp
-        // with the largest term factored out. A region whose largest term plus ln N is below
-        // the best score so far cannot win and is not summed (its score is reported as −∞).
-        let ln_n = T::lit(libm::log(N as f64));
-        let mut first = 0usize;
-        for i in 1..S {
-            if top[i] > top[first] {
-                first = i;
-            }
-        }
-        let mut lw = [-T::one() / T::zero(); S];
-        let mut expw = [T::zero(); N];
-        let mut best = first;
-        let mut best_sum = T::zero();
-        for i in core::iter::once(first).chain((0..S).filter(|&i| i != first)) {
-            if i != first && top[i] + ln_n < lw[best] {
-                continue;
-            }
-            let mut sum = T::zero();
-            let mut e_i = [T::zero(); N];
-            for s in 0..N {
-                e_i[s] = (lnw[i][s] - top[i]).exp();
-                sum += e_i[s];
-            }
-            lw[i] = top[i] + sum.ln();
-            if i == first || lw[i] > lw[best] || (lw[i] == lw[best] && i < best) {
-                best = i;
-                best_sum = sum;
-                expw = e_i;
-            }
-        }
-        // The "lost" hypothesis (with_loss_rate) against the best region: the prediction is
-        // the posterior of a loss.
-        if self.lost_score > lw[best] {
-            return Ok((*xp, *pp, 0, lw));
-        }
-        let i = best;
-        // K_i = P⁻ Eᵀ S_i⁻¹, with the factor of the weights above.
-        let f = factors[i].ok_or(Error::Numerical {
-            what: "no factor for the chosen region",
-        })?;
-        let gain = f.solve_right(&pet);
+        Ok(())
+    }
+
+    /// eq. (21) in region `i` with its gain `K_i`: the α-weighted mean and covariance of the
+    /// component means, `x = x̂⁻ + K_i (ū − E x̂⁻)` and
+    /// `Θ = (I − K E) P⁻ (I − K E)ᵀ + K Σ_i Kᵀ` (Joseph form) plus `K C_u Kᵀ`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn update_in_region(
+        &self,
+        i: usize,
+        gain: &SMatrix<T, NX, NE>,
+        expw: &[T; N],
+        best_sum: T,
+        ex: &SVector<T, NE>,
+        xp: &SVector<T, NX>,
+        pp: &SMatrix<T, NX, NX>,
+    ) -> (SVector<T, NX>, SMatrix<T, NX, NX>) {
         // α-weighted mean and covariance of the component means (eq. 21).
         let mut ubar = SVector::<T, NE>::zeros();
         let mut alpha = [T::zero(); N];
@@ -227,15 +237,54 @@ impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>
             let du = self.means[i][s] - ubar;
             cu += du * du.transpose() * alpha[s];
         }
-        let x = xp + small::mul_vec(&gain, &(ubar - ex));
+        let x = xp + small::mul_vec(gain, &(ubar - ex));
         // Θ = (I − K E) P⁻ (I − K E)ᵀ + K Σ_i Kᵀ (Joseph form), plus K C_u Kᵀ of (21).
-        let i_ke = SMatrix::<T, NX, NX>::identity() - small::mul(&gain, e);
-        let k_sig_cu = small::congruence(&gain, &(self.sigma[i] + cu));
+        let i_ke = SMatrix::<T, NX, NX>::identity() - small::mul(gain, &self.occ.e);
+        let k_sig_cu = small::congruence(gain, &(self.sigma[i] + cu));
         let p = small::congruence_add(&i_ke, pp, &k_sig_cu);
-        check_finite(&x, "updated state")?;
-        check_finite(&p, "updated covariance")?;
-        Ok((x, p, i + 1, lw))
+        (x, p)
     }
+}
+
+/// eq. (17): ĥ = argmax over regions 1..=S of ln Σ_s ω^s (first on ties), log-sum-exp with the
+/// largest term factored out. A region whose largest term plus ln N is below the best score so
+/// far cannot win and is not summed (its score is left at −∞). Returns the chosen region and
+/// its sum of `exp(ln ω^s − top)`; writes those terms to `expw` and every region's score to
+/// `lw` (which start at 0 and −∞).
+#[inline(always)]
+fn choose_region<T: Real, const S: usize, const N: usize>(
+    lnw: &[[T; N]; S],
+    top: &[T; S],
+    lw: &mut [T; S],
+    expw: &mut [T; N],
+) -> (usize, T) {
+    let ln_n = T::lit(libm::log(N as f64));
+    let mut first = 0usize;
+    for i in 1..S {
+        if top[i] > top[first] {
+            first = i;
+        }
+    }
+    let mut best = first;
+    let mut best_sum = T::zero();
+    for i in core::iter::once(first).chain((0..S).filter(|&i| i != first)) {
+        if i != first && top[i] + ln_n < lw[best] {
+            continue;
+        }
+        let mut sum = T::zero();
+        let mut e_i = [T::zero(); N];
+        for s in 0..N {
+            e_i[s] = (lnw[i][s] - top[i]).exp();
+            sum += e_i[s];
+        }
+        lw[i] = top[i] + sum.ln();
+        if i == first || lw[i] > lw[best] || (lw[i] == lw[best] && i < best) {
+            best = i;
+            best_sum = sum;
+            *expw = e_i;
+        }
+    }
+    (best, best_sum)
 }
 
 impl<T: Real, const NX: usize, const NE: usize, const S: usize, const N: usize>

@@ -51,7 +51,7 @@ use crate::linalg::{check_finite, check_spd, symmetrize};
 use crate::model::LinearSystem;
 use crate::packet::Packet;
 use crate::protocol::tobit::TobitStats;
-use crate::protocol::trigger_knowledge::TriggerKnowledge;
+use crate::protocol::trigger_knowledge::{SilenceBall, TriggerKnowledge};
 use crate::{Error, Real, Result};
 
 /// Everything one local step computes before the gain: the quantities of (23), (29), (30).
@@ -215,10 +215,8 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         };
         let p_prior = symmetrize(&(a * p * a.transpose() + bqb));
         check_finite(&p_prior, "predicted bound")?;
-        let tau = self.cfg.tau;
-        let stats = TobitStats::new(&(c * x_prior), &tau, r)?;
+        let stats = TobitStats::new(&(c * x_prior), &self.cfg.tau, r)?;
         let kap = self.cfg.scalars.kappas();
-        let k = |i: usize| kap.0[i - 1];
         let e14 = self.cfg.scalars.eps(14);
         let one = T::one();
         let omega1 = symmetrize(
@@ -226,7 +224,41 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         );
         let omega2 = self.y_held * self.y_held.transpose();
         let xi = self.cfg.xi(self.g);
+        let (qc, m) = self.bound_terms(c, &stats, theta, &omega1, &omega2, xi, &kap)?;
+        Ok(LocalStepPlan {
+            x_prior,
+            stats,
+            theta,
+            y_bar,
+            xi,
+            kappas: kap,
+            omega1,
+            omega2,
+            problem: GainProblem {
+                kappa1: kap.0[0],
+                p_prior,
+                qc,
+                m,
+            },
+        })
+    }
 
+    /// Q̄ C and the M of (30) (module docs) at θ, from the Tobit statistics, Ω₁, Ω₂ and Ξ(Ḡ).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn bound_terms(
+        &self,
+        c: &SMatrix<T, NY, NX>,
+        stats: &TobitStats<T, NY>,
+        theta: T,
+        omega1: &SMatrix<T, NX, NX>,
+        omega2: &SMatrix<T, NY, NY>,
+        xi: T,
+        kap: &Kappas<T>,
+    ) -> Result<(SMatrix<T, NY, NX>, SMatrix<T, NY, NY>)> {
+        let tau = self.cfg.tau;
+        let k = |i: usize| kap.0[i - 1];
+        let one = T::one();
         let qbar = SMatrix::<T, NY, NY>::from_diagonal(&stats.rho);
         let qc = qbar * c;
         let v = qbar * stats.lambda.component_mul(&stats.sqrt_r);
@@ -260,22 +292,7 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
         m += i_q_tau * i_q_tau.transpose() * (u * k(7));
         let m = symmetrize(&m);
         check_finite(&m, "bound terms")?;
-        Ok(LocalStepPlan {
-            x_prior,
-            stats,
-            theta,
-            y_bar,
-            xi,
-            kappas: kap,
-            omega1,
-            omega2,
-            problem: GainProblem {
-                kappa1: k(1),
-                p_prior,
-                qc,
-                m,
-            },
-        })
+        Ok((qc, m))
     }
 
     /// One instant with explicit matrices (see [`TobitFilter::plan`]): gain (37), estimate
@@ -342,26 +359,73 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
             Arrival::Received(y) => Some(y),
             _ => None,
         };
-        let silence = self.cfg.silence;
         let mut knowledge = self.knowledge;
-        let set = if silence.reads_set() {
-            let ball = match arrival {
-                Arrival::Held => knowledge.silence_set(),
-                _ => None,
-            };
-            match arrival {
-                Arrival::Received(y) => knowledge.delivered(y)?,
-                Arrival::Held | Arrival::Blocked => knowledge.silent(),
-                Arrival::Lost => knowledge.lost(),
-            }
-            ball
-        } else {
-            None
+        let set = self.read_arrival(&mut knowledge, arrival)?;
+        let pseudo = self.pseudo_measurement(set, a, gu, c, r);
+        let measured = match &pseudo {
+            Some((mean, _)) => Some(mean),
+            None => received,
         };
-        // (S3), (S7): with the pseudo-measurement option a silence's set gives its centre as
-        // a measurement at θ = 0 and its covariance added to M; the held ȳ stays (it is the
-        // trigger's reference).
-        let pseudo = match (set, silence) {
+        let mut plan = self.plan_with_input(a, bqb, gu, c, r, measured)?;
+        self.add_pseudo_variance(&mut plan, pseudo.as_ref());
+        let (x, p) = self.estimate_and_bound(&plan, received, set, pseudo.as_ref(), c, r)?;
+        check_finite(&x, "local estimate")?;
+        match bound_check {
+            BoundCheck::Here => check_spd(&p, "local bound")?,
+            // Finite all the same: the caller's factorisation must see what this one would.
+            BoundCheck::ByCaller => check_finite(&p, "local bound")?,
+        }
+        let g = plan.xi;
+        if !g.finite() {
+            return Err(Error::NonFinite { what: "G bar" });
+        }
+        if received.is_none() {
+            plan.theta = T::one();
+        }
+        self.est = Estimate::trusted(x, p);
+        self.y_held = plan.y_bar;
+        self.g = g;
+        self.last_theta = plan.theta;
+        self.knowledge = knowledge;
+        Ok(())
+    }
+
+    /// Advances the receiver's knowledge of the trigger past this arrival (committed with the
+    /// step) and returns the silence set a held silence offers: only with a silence-reading
+    /// option (otherwise the knowledge stays as it is and there is no set).
+    #[inline(always)]
+    fn read_arrival(
+        &self,
+        knowledge: &mut TriggerKnowledge<T, NY>,
+        arrival: Arrival<'_, T, NY>,
+    ) -> Result<Option<SilenceBall<T, NY>>> {
+        if !self.cfg.silence.reads_set() {
+            return Ok(None);
+        }
+        let ball = match arrival {
+            Arrival::Held => knowledge.silence_set(),
+            _ => None,
+        };
+        match arrival {
+            Arrival::Received(y) => knowledge.delivered(y)?,
+            Arrival::Held | Arrival::Blocked => knowledge.silent(),
+            Arrival::Lost => knowledge.lost(),
+        }
+        Ok(ball)
+    }
+
+    /// (S3), (S7): with the pseudo-measurement option a silence's set gives its centre as a
+    /// measurement at θ = 0 and its covariance added to M (the mean and per-axis variance).
+    #[inline(always)]
+    fn pseudo_measurement(
+        &self,
+        set: Option<SilenceBall<T, NY>>,
+        a: &SMatrix<T, NX, NX>,
+        gu: Option<&SVector<T, NX>>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+    ) -> Option<(SVector<T, NY>, SVector<T, NY>)> {
+        match (set, self.cfg.silence) {
             (Some(ball), Silence::PseudoMeasurement) => {
                 // (S3') weighs the atom at τ with the filter's own censoring model (5):
                 // z ~ N(C x̂_{t|t−1}, R), x̂_{t|t−1} as `plan_with_input` predicts it.
@@ -375,19 +439,39 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
                 Some(uniform_moments(&ball, Some(&prior)))
             }
             _ => None,
-        };
-        let measured = match &pseudo {
-            Some((mean, _)) => Some(mean),
-            None => received,
-        };
-        let mut plan = self.plan_with_input(a, bqb, gu, c, r, measured)?;
-        if let Some((_, var)) = &pseudo {
+        }
+    }
+
+    /// (S7): a pseudo-measurement's variance added to M's diagonal; the held ȳ stays (it is
+    /// the trigger's reference).
+    #[inline(always)]
+    fn add_pseudo_variance(
+        &self,
+        plan: &mut LocalStepPlan<T, NX, NY>,
+        pseudo: Option<&(SVector<T, NY>, SVector<T, NY>)>,
+    ) {
+        if let Some((_, var)) = pseudo {
             for j in 0..NY {
                 plan.problem.m[(j, j)] += var[j];
             }
             plan.y_bar = self.y_held;
         }
-        let (x, p) = match (received, set, silence, &pseudo) {
+    }
+
+    /// x̂_{t|t} and its bound by the silence option and what arrived: the update (37), (22),
+    /// (30) on ȳ or on the pseudo-measurement, the truncated Gaussian of the silence box, or
+    /// the prediction (21), (29).
+    #[inline(always)]
+    fn estimate_and_bound(
+        &self,
+        plan: &LocalStepPlan<T, NX, NY>,
+        received: Option<&SVector<T, NY>>,
+        set: Option<SilenceBall<T, NY>>,
+        pseudo: Option<&(SVector<T, NY>, SVector<T, NY>)>,
+        c: &SMatrix<T, NY, NX>,
+        r: &SVector<T, NY>,
+    ) -> Result<(SVector<T, NX>, SMatrix<T, NX, NX>)> {
+        Ok(match (received, set, self.cfg.silence, pseudo) {
             (None, Some(_), Silence::PseudoMeasurement, Some((mean, _))) => {
                 let k = plan.problem.gain()?;
                 (
@@ -414,26 +498,7 @@ impl<T: Real, const NX: usize, const NY: usize> TobitFilter<T, NX, NY> {
                     plan.problem.bound(&k),
                 )
             }
-        };
-        check_finite(&x, "local estimate")?;
-        match bound_check {
-            BoundCheck::Here => check_spd(&p, "local bound")?,
-            // Finite all the same: the caller's factorisation must see what this one would.
-            BoundCheck::ByCaller => check_finite(&p, "local bound")?,
-        }
-        let g = plan.xi;
-        if !g.finite() {
-            return Err(Error::NonFinite { what: "G bar" });
-        }
-        if received.is_none() {
-            plan.theta = T::one();
-        }
-        self.est = Estimate::trusted(x, p);
-        self.y_held = plan.y_bar;
-        self.g = g;
-        self.last_theta = plan.theta;
-        self.knowledge = knowledge;
-        Ok(())
+        })
     }
 
     /// Whether `gate` admits the received `y` (docs/gate.md): the NIS of the innovation of
