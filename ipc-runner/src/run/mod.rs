@@ -37,16 +37,17 @@
 //! SIGINT/SIGTERM/SIGHUP stop the loop; any other signal is a wake-up (docs/security.md, "Signals").
 //!
 //! The parts, one file each: `args` ([`RunArgs`]), `slot_loop` (the loop, [`run_loop`]),
-//! `instant` (one instant's work), `publish`, `truth` (the evaluation beside the loop),
-//! `wait`, `restart` (which restarts are believed), `report` ([`RunReport`], the output
-//! files, the exit code), `trajectories` ([`Trajectories`]); and the public [`assemble`]
-//! (slots → instants), [`select`] (estimators by name) and [`system`] (CPU pinning, memory
-//! locking).
+//! `instant` (one instant's work), `lane` (one estimator's state and counts), `publish`,
+//! `truth` (the evaluation beside the loop), `wait`, `restart` (which restarts are believed),
+//! `report` ([`RunReport`], the output files, the exit code), `trajectories`
+//! ([`Trajectories`]); and the public [`assemble`] (slots → instants), [`select`]
+//! (estimators by name) and [`system`] (CPU pinning, memory locking).
 
 mod args;
 pub mod assemble;
 mod deadline;
 mod instant;
+mod lane;
 mod publish;
 mod report;
 mod restart;

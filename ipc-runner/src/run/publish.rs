@@ -108,7 +108,7 @@ impl Publisher {
     }
 
     /// Publishes estimator `e`'s `msg` (only called when [`Publisher::is_on`]). A failure is
-    /// kept for [`Publisher::take_error`]: the loop is inside the assembler's callback here.
+    /// kept for [`Publisher::take_error`], which the loop asks once the slot's instants are out.
     #[inline]
     pub(super) fn send(&mut self, t: &Transport, e: usize, msg: Estimate) {
         self.published += 1;

@@ -1,7 +1,7 @@
-//! The loop over slots: drain the slot queue (every received slot goes through the
-//! [`Assembler`]; each instant it completes is handed to [`Runner::on_instant`]), follow a
-//! restarted publisher, and when nothing is pending check the data deadline and wait
-//! ([`super::wait`]).
+//! The loop over slots: drain the slot queue (every received slot is pushed into the
+//! [`Assembler`], then each instant it made ready is taken and handed to
+//! [`Runner::on_instant`], in order), follow a restarted publisher, and when nothing is
+//! pending check the data deadline and wait ([`super::wait`]).
 
 use crate::latency::Latency;
 use crate::transport::Transport;
@@ -79,19 +79,7 @@ pub fn run_loop(
     let machine = Machine::set_up(args);
     let t = Transport::open(&args.prefix, args.buffer, args.wait != WaitMode::Spin)?;
     let runner = Runner::new(&t, args, make()?, nx, nodes)?;
-    if !(args.instant_deadline_ms >= 0.0 && args.instant_deadline_ms.is_finite()) {
-        return Err(wire::ContractError::Refused(format!(
-            "--instant-deadline-ms must be a number ≥ 0 (0 = for ever), got {}",
-            args.instant_deadline_ms
-        ))
-        .into());
-    }
-    let limits = Limits {
-        max_gap: args.max_gap,
-        instant_deadline_ns: (args.instant_deadline_ms * 1e6) as u64,
-        lag: args.estimator.lag,
-    };
-    let mut asm = Assembler::new(&expected, limits);
+    let mut asm = Assembler::new(&expected, limits(args)?);
     asm.set_subscribed_ns(t.subscribed_ns);
     let mut lp = Loop {
         args,
@@ -115,78 +103,13 @@ pub fn run_loop(
     // reads, and no other signal ends the run (docs/security.md, "Signals"). Earlier, a
     // signal takes its default action (the process ends without a report, as nothing ran).
     estpipe_process::signal::install();
-    lp.say(&format!(
-        "waiting for channel-sim (or any publisher) on prefix {:?} ({} wait; {})",
-        args.prefix,
-        args.wait.as_str(),
-        if args.connect_timeout > 0.0 {
-            format!(
-                "giving up after --connect-timeout {} s",
-                args.connect_timeout
-            )
-        } else {
-            "no timeout: Ctrl-C stops, --connect-timeout S gives up after S s".to_string()
-        }
-    ));
+    lp.say_waiting();
     let waitset = wait::waitset(args.wait, &t)?;
     let mut waiter = Waiter::new(&t, waitset.as_ref())?;
-    let max_wait_ns = if hooks.peer.is_some() {
-        PEER_CHECK_NS
-    } else {
-        MAX_WAIT_NS
-    };
 
     // A failure once instants were processed ends the run with its report (report.rs): what
     // the run computed is not lost. Before the first instant there is nothing to report.
-    let mut failure: Option<anyhow::Error> = None;
-    let ending = loop {
-        match lp.drain(&mut hooks) {
-            Ok(Some(ending)) => break ending,
-            Ok(None) => {}
-            Err(e) => {
-                failure = Some(e);
-                break Ending::Failed;
-            }
-        }
-        // Nothing pending: check the deadline, then wait.
-        let Some(now) = waiter.now() else {
-            break Ending::Interrupted;
-        };
-        lp.update_connections(now);
-        if let Some(why) = lp.peer_gone(&mut hooks, now) {
-            // Whatever the publisher sent before it ended is still queued: that first.
-            if let Some(ending) = lp.drain(&mut hooks)? {
-                break ending;
-            }
-            if lp.asm.counts.received == 0 {
-                bail!("{why} before it sent a slot");
-            }
-            lp.say_always(&format!("publisher lost: {why}"));
-            lp.publisher_losses += 1;
-            lp.flush();
-            break Ending::PublisherLost;
-        }
-        lp.expire(now);
-        let due = lp.deadline.due();
-        if now > due {
-            match lp.missed(now) {
-                Some(ending) => break ending,
-                None => continue,
-            }
-        }
-        let due = lp.asm.next_expiry().map_or(due, |t| t.min(due));
-        // No stream yet (or a lost one awaited): spinning would burn a core for as long as
-        // the publisher takes to come, so every wait mode sleeps then.
-        let idle = lp.deadline.idle_since(now);
-        match waiter.wait(due.saturating_sub(now).min(max_wait_ns), idle) {
-            Ok(Woke::Ready) => {}
-            Ok(Woke::Signal) => break Ending::Interrupted,
-            Err(e) => {
-                failure = Some(e);
-                break Ending::Failed;
-            }
-        }
-    };
+    let (ending, mut failure) = lp.run(&mut hooks, &mut waiter)?;
     if matches!(ending, Ending::Interrupted | Ending::Failed) {
         lp.flush();
     }
@@ -203,6 +126,22 @@ pub fn run_loop(
     // default.
     report.scenario = spec.name.clone();
     Ok((report, traj))
+}
+
+/// How far the assembler follows a stream, as `args` asks.
+fn limits(args: &RunArgs) -> Result<Limits> {
+    if !(args.instant_deadline_ms >= 0.0 && args.instant_deadline_ms.is_finite()) {
+        return Err(wire::ContractError::Refused(format!(
+            "--instant-deadline-ms must be a number ≥ 0 (0 = for ever), got {}",
+            args.instant_deadline_ms
+        ))
+        .into());
+    }
+    Ok(Limits {
+        max_gap: args.max_gap,
+        instant_deadline_ns: (args.instant_deadline_ms * 1e6) as u64,
+        lag: args.estimator.lag,
+    })
 }
 
 /// The loop's state between slots.
@@ -272,6 +211,86 @@ impl Loop<'_> {
         estpipe_process::errln!("ipc-runner: {m}");
     }
 
+    /// Says what the loop waits for, and how long.
+    fn say_waiting(&self) {
+        let args = self.args;
+        self.say(&format!(
+            "waiting for channel-sim (or any publisher) on prefix {:?} ({} wait; {})",
+            args.prefix,
+            args.wait.as_str(),
+            if args.connect_timeout > 0.0 {
+                format!(
+                    "giving up after --connect-timeout {} s",
+                    args.connect_timeout
+                )
+            } else {
+                "no timeout: Ctrl-C stops, --connect-timeout S gives up after S s".to_string()
+            }
+        ));
+    }
+
+    /// Drains, checks the deadlines and waits until the run ends: how it ended, and the
+    /// failure that ended it (`Ending::Failed`).
+    fn run(
+        &mut self,
+        hooks: &mut Hooks<'_>,
+        waiter: &mut Waiter<'_>,
+    ) -> Result<(Ending, Option<anyhow::Error>)> {
+        let max_wait_ns = if hooks.peer.is_some() {
+            PEER_CHECK_NS
+        } else {
+            MAX_WAIT_NS
+        };
+        let ending = loop {
+            match self.drain(hooks) {
+                Ok(Some(ending)) => break ending,
+                Ok(None) => {}
+                Err(e) => return Ok((Ending::Failed, Some(e))),
+            }
+            // Nothing pending: check the deadline, then wait.
+            let Some(now) = waiter.now() else {
+                break Ending::Interrupted;
+            };
+            self.update_connections(now);
+            if let Some(why) = self.peer_gone(hooks, now) {
+                break self.peer_lost(hooks, &why)?;
+            }
+            self.expire(now);
+            let due = self.deadline.due();
+            if now > due {
+                match self.missed(now) {
+                    Some(ending) => break ending,
+                    None => continue,
+                }
+            }
+            let due = self.asm.next_expiry().map_or(due, |t| t.min(due));
+            // No stream yet (or a lost one awaited): spinning would burn a core for as long as
+            // the publisher takes to come, so every wait mode sleeps then.
+            let idle = self.deadline.idle_since(now);
+            match waiter.wait(due.saturating_sub(now).min(max_wait_ns), idle) {
+                Ok(Woke::Ready) => {}
+                Ok(Woke::Signal) => break Ending::Interrupted,
+                Err(e) => return Ok((Ending::Failed, Some(e))),
+            }
+        };
+        Ok((ending, None))
+    }
+
+    /// [`Hooks::peer`] said the publisher process ended (`why`).
+    fn peer_lost(&mut self, hooks: &mut Hooks<'_>, why: &str) -> Result<Ending> {
+        // Whatever the publisher sent before it ended is still queued: that first.
+        if let Some(ending) = self.drain(hooks)? {
+            return Ok(ending);
+        }
+        if self.asm.counts.received == 0 {
+            bail!("{why} before it sent a slot");
+        }
+        self.say_always(&format!("publisher lost: {why}"));
+        self.publisher_losses += 1;
+        self.flush();
+        Ok(Ending::PublisherLost)
+    }
+
     /// Handles every slot that is there; `Some` when the stream ended.
     #[inline]
     fn drain(&mut self, hooks: &mut Hooks<'_>) -> Result<Option<Ending>> {
@@ -287,111 +306,146 @@ impl Loop<'_> {
                 Err(e) => bail!("receive failed: {e:?}"),
             };
             let recv_ns = wire::monotonic_ns();
-            let slot = sample.payload();
-            let header = sample.user_header();
-            let m = usize::from(slot.node);
             let origin = sample.origin().value();
-            if m < MAX_NODES && self.relay.origin[m] != Some(origin) {
-                self.new_origin(m, origin, slot.stream_id);
-            }
-            // Before any estimator has stepped, a stream of another shape or model is refused
-            // (exit 2), never fed to estimators built for this one; later such a slot is
-            // counted and skipped (docs/wire.md, What the runner does with a bad slot).
-            if self.asm.counts.instants == 0
-                && self.asm.counts.received == 0
-                && !assemble::same_stream_shape(header, &self.expected)
-            {
-                header.check(&self.expected)?;
-            }
-            // Whatever it carries, a slot shows the publisher alive.
-            if let Some(silence) = self.deadline.data(recv_ns) {
-                self.stall_ended(silence);
-            }
-            self.runner.slot.send_ns = assemble::usable_send_ns(slot, recv_ns).unwrap_or(0);
-            self.runner.slot.recv_ns = recv_ns;
-            // Estimates and truth belong to node 0's stream (its process publishes the truth).
-            self.runner.slot.stream_id = self.asm.stream_of(0).unwrap_or(slot.stream_id);
-            let (t, runner) = (self.t, &mut self.runner);
-            let mut pushed = self
-                .asm
-                .push(slot, header, recv_ns, &mut |k, obs: &[Observation]| {
-                    runner.on_instant(t, k, obs);
-                });
-            if pushed == Pushed::NewStream
-                && !self.owners.believe(
-                    m,
-                    self.asm.stream_of(slot.node),
-                    origin,
-                    t,
-                    recv_ns,
-                    self.deadline.period_ns + self.deadline.deadline_ns,
-                )
-            {
-                pushed = self.asm.refuse_restart();
-            }
-            if pushed == Pushed::NewStream {
-                self.new_stream()?;
-                self.runner.slot.stream_id = self.asm.stream_of(0).unwrap_or(slot.stream_id);
-                let runner = &mut self.runner;
-                pushed = self
-                    .asm
-                    .push(slot, header, recv_ns, &mut |k, obs: &[Observation]| {
-                        runner.on_instant(t, k, obs);
-                    });
-            }
-            self.owners.note(
-                m,
-                self.asm.stream_of(slot.node),
-                slot.stream_id,
-                origin,
-                recv_ns,
-            );
-            if let Some(r) = self.asm.take_first_seen() {
-                self.warn(r, slot);
-            }
-            if pushed == Pushed::Late {
-                let mut obs = [Observation::dropped(0, 0, 0, 0); MAX_NODES];
-                if let Some((k, nodes)) = self.asm.take_late(&mut obs) {
-                    self.runner.on_late(k, &obs[..nodes]);
-                }
-            }
-            if pushed == Pushed::Data {
-                // A period beyond the bound is not used for the data deadline.
-                if slot.period_ns <= assemble::MAX_PERIOD_NS {
-                    self.deadline.period_ns = slot.period_ns;
-                }
-                // After the instant this slot may have completed was published.
-                if self.runner.slot.send_ns != 0 {
-                    Latency::record(&mut self.runner.latency.transport, slot.send_ns, recv_ns);
-                }
-            }
+            let pushed = self.take(sample.payload(), sample.user_header(), origin, recv_ns)?;
             drop(sample);
-            if let Some(e) = self.runner.out.take_error() {
-                return Err(e);
-            }
-            if let Some(us) = self.args.slow_consumer_us() {
-                std::thread::sleep(Duration::from_micros(us));
-            }
-            self.allocs
-                .after_slot(&self.asm.counts, self.runner.out.published);
-            match pushed {
-                Pushed::End | Pushed::Abort => {
-                    self.allocs.at_end = self.allocs.probe.map(|p| p());
-                    return Ok(Some(if pushed == Pushed::End {
-                        Ending::Completed
-                    } else {
-                        Ending::PublisherStopped
-                    }));
-                }
-                _ => {}
-            }
-            if let Some(p) = hooks.progress.as_mut() {
-                if recv_ns - self.last_progress > PROGRESS_EVERY_NS {
-                    self.last_progress = recv_ns;
-                    p(self.runner.last_k, &self.asm.counts);
-                }
+            if let Some(ending) = self.after_slot(pushed, recv_ns, hooks)? {
+                return Ok(Some(ending));
             }
         }
+    }
+
+    /// One slot, received at `recv_ns` from publisher `origin`, in place: pushed into the
+    /// assembler, every instant it completed stepped and published, a late slot folded in.
+    #[inline]
+    fn take(
+        &mut self,
+        slot: &wire::Slot,
+        header: &StreamHeader,
+        origin: u128,
+        recv_ns: u64,
+    ) -> Result<Pushed> {
+        let m = usize::from(slot.node);
+        if m < MAX_NODES && self.relay.origin[m] != Some(origin) {
+            self.new_origin(m, origin, slot.stream_id);
+        }
+        // Before any estimator has stepped, a stream of another shape or model is refused
+        // (exit 2), never fed to estimators built for this one; later such a slot is
+        // counted and skipped (docs/wire.md, What the runner does with a bad slot).
+        if self.asm.counts.instants == 0
+            && self.asm.counts.received == 0
+            && !assemble::same_stream_shape(header, &self.expected)
+        {
+            header.check(&self.expected)?;
+        }
+        // Whatever it carries, a slot shows the publisher alive.
+        if let Some(silence) = self.deadline.data(recv_ns) {
+            self.stall_ended(silence);
+        }
+        let mut pushed = self.asm.push_slot(slot, header, recv_ns);
+        if pushed == Pushed::NewStream {
+            pushed = self.restart(slot, header, origin, recv_ns)?;
+        }
+        self.hand_on_ready();
+        let stream = self.asm.stream_of(slot.node);
+        self.owners.note(m, stream, slot.stream_id, origin, recv_ns);
+        if let Some(r) = self.asm.take_first_seen() {
+            self.warn(r, slot);
+        }
+        match pushed {
+            Pushed::Late => self.fold_late(),
+            Pushed::Data => self.data_slot(slot, recv_ns),
+            _ => {}
+        }
+        Ok(pushed)
+    }
+
+    /// Steps and publishes every instant the assembler has ready, in order.
+    #[inline]
+    fn hand_on_ready(&mut self) {
+        while let Some(instant) = self.asm.next_ready() {
+            self.runner.on_instant(self.t, &instant);
+        }
+    }
+
+    /// The slot starts a new stream of its node: believed (the publisher restarted), a new
+    /// session with fresh estimators, the slot pushed again; not believed (another
+    /// publisher's, while the stream's own is alive), counted and skipped.
+    fn restart(
+        &mut self,
+        slot: &wire::Slot,
+        header: &StreamHeader,
+        origin: u128,
+        recv_ns: u64,
+    ) -> Result<Pushed> {
+        if !self.owners.believe(
+            usize::from(slot.node),
+            self.asm.stream_of(slot.node),
+            origin,
+            self.t,
+            recv_ns,
+            self.deadline.period_ns + self.deadline.deadline_ns,
+        ) {
+            return Ok(self.asm.refuse_restart());
+        }
+        self.new_stream()?;
+        Ok(self.asm.push_slot(slot, header, recv_ns))
+    }
+
+    /// A late slot within `--lag`: every estimator folds it into its history.
+    fn fold_late(&mut self) {
+        let mut obs = [Observation::dropped(0, 0, 0, 0); MAX_NODES];
+        if let Some((k, nodes)) = self.asm.take_late(&mut obs) {
+            self.runner.on_late(k, &obs[..nodes]);
+        }
+    }
+
+    /// An accepted data slot: its period paces the data deadline, its send time gives a
+    /// transport latency.
+    #[inline]
+    fn data_slot(&mut self, slot: &wire::Slot, recv_ns: u64) {
+        // A period beyond the bound is not used for the data deadline.
+        if slot.period_ns <= assemble::MAX_PERIOD_NS {
+            self.deadline.period_ns = slot.period_ns;
+        }
+        // After the instant this slot may have completed was published.
+        if assemble::usable_send_ns(slot, recv_ns).is_some() {
+            Latency::record(&mut self.runner.latency.transport, slot.send_ns, recv_ns);
+        }
+    }
+
+    /// After a slot was handled and its sample released: a publishing failure, the
+    /// `--slow-consumer` pause, the allocation count, the end of the stream, progress.
+    #[inline]
+    fn after_slot(
+        &mut self,
+        pushed: Pushed,
+        recv_ns: u64,
+        hooks: &mut Hooks<'_>,
+    ) -> Result<Option<Ending>> {
+        if let Some(e) = self.runner.out.take_error() {
+            return Err(e);
+        }
+        if let Some(us) = self.args.slow_consumer_us() {
+            std::thread::sleep(Duration::from_micros(us));
+        }
+        self.allocs
+            .after_slot(&self.asm.counts, self.runner.out.published);
+        if matches!(pushed, Pushed::End | Pushed::Abort) {
+            self.allocs.at_end = self.allocs.probe.map(|p| p());
+            return Ok(Some(if pushed == Pushed::End {
+                Ending::Completed
+            } else {
+                Ending::PublisherStopped
+            }));
+        }
+        if let Some(p) = hooks.progress.as_mut() {
+            if recv_ns - self.last_progress > PROGRESS_EVERY_NS {
+                self.last_progress = recv_ns;
+                p(self.runner.last_k, &self.asm.counts);
+            }
+        }
+        Ok(None)
     }
 
     /// Says once per reason that slots are being counted and skipped (or a field ignored).
@@ -409,19 +463,15 @@ impl Loop<'_> {
     /// Hands on every pending instant without its missing slots (the publishers are gone, or
     /// the run ends).
     fn flush(&mut self) {
-        let (t, runner) = (self.t, &mut self.runner);
-        self.asm.flush(&mut |k, obs: &[Observation]| {
-            runner.on_instant(t, k, obs);
-        });
+        self.asm.flush();
+        self.hand_on_ready();
     }
 
     /// Hands on the pending instants whose deadline passed (paced mode).
     #[inline]
     fn expire(&mut self, now: u64) {
-        let (t, runner) = (self.t, &mut self.runner);
-        self.asm.expire(now, &mut |k, obs: &[Observation]| {
-            runner.on_instant(t, k, obs);
-        });
+        self.asm.expire_due(now);
+        self.hand_on_ready();
     }
 
     /// While idle, at most every [`UPDATE_CONNECTIONS_NS`]: hands a subscriber that connected
@@ -440,7 +490,7 @@ impl Loop<'_> {
         let old = self.asm.stream_of(0);
         self.asm.reset();
         self.runner.session += 1;
-        self.runner.estimators = (self.make)()?;
+        self.runner.renew((self.make)()?)?;
         self.say(&format!(
             "new stream from channel-sim (restarted; was {old:x?}): session {} with fresh estimators",
             self.runner.session
@@ -497,13 +547,12 @@ impl Loop<'_> {
     /// SIGSTOP, a debugger, an overloaded machine): the loop waits on and looks again every
     /// `--deadline-ms`.
     fn missed(&mut self, now: u64) -> Option<Ending> {
-        let args = self.args;
         let Some(t_last) = self.deadline.last_data_ns else {
             // The run's only line about why it failed: said also under --quiet.
             estpipe_process::errln!(
                 "ipc-runner: no data from channel-sim on prefix {:?} within {} s",
-                args.prefix,
-                args.connect_timeout
+                self.args.prefix,
+                self.args.connect_timeout
             );
             return Some(Ending::PublisherLost);
         };
@@ -511,7 +560,7 @@ impl Loop<'_> {
         if self.t.slot_sub.has_samples().unwrap_or(false) {
             return None;
         }
-        let cleaned = self.t.node.try_cleanup_dead_nodes();
+        let cleaned = self.t.node.try_cleanup_dead_nodes().cleanups;
         let publishers = self.t.publishers();
         let silence_ns = now - t_last;
         let over_limit = self.deadline.stall_ns > 0 && silence_ns > self.deadline.stall_ns;
@@ -520,34 +569,57 @@ impl Loop<'_> {
         if relay_gone && !over_limit {
             if !self.relay.gone_said {
                 self.relay.gone_said = true;
-                self.say(&format!(
-                    "publisher gone: no slot for {:.1} ms after instant {}, and the bridge that \
-                     forwarded the stream is gone (cleaned up {} dead node(s)); waiting for a \
-                     bridge to come back with it (lost after --stall-limit {} s)",
-                    silence_ns as f64 / 1e6,
-                    self.runner.last_k,
-                    cleaned.cleanups,
-                    args.stall_limit
-                ));
+                self.say_relay_gone(silence_ns, cleaned);
             }
-            self.deadline.recheck_ns = Some(now + self.deadline.deadline_ns.max(1_000_000));
-            return None;
-        }
-        if publishers > 0 && !over_limit {
+        } else if publishers > 0 && !over_limit {
             if self.deadline.recheck_ns.is_none() {
-                self.say(&format!(
-                    "publisher stalled: no slot for {:.1} ms after instant {} (deadline {} ms \
-                     past the expected slot), but its node is alive; waiting (lost after \
-                     --stall-limit {} s)",
-                    silence_ns as f64 / 1e6,
-                    self.runner.last_k,
-                    args.deadline_ms,
-                    args.stall_limit
-                ));
+                self.say_stalled(silence_ns);
             }
-            self.deadline.recheck_ns = Some(now + self.deadline.deadline_ns.max(1_000_000));
-            return None;
+        } else {
+            return self.lost(now, silence_ns, publishers, relay_gone, cleaned);
         }
+        self.deadline.recheck_ns = Some(now + self.deadline.deadline_ns.max(1_000_000));
+        None
+    }
+
+    /// No slot for `silence_ns`, and the bridge that forwarded the stream is gone.
+    fn say_relay_gone(&self, silence_ns: u64, cleaned: u64) {
+        self.say(&format!(
+            "publisher gone: no slot for {:.1} ms after instant {}, and the bridge that \
+             forwarded the stream is gone (cleaned up {} dead node(s)); waiting for a \
+             bridge to come back with it (lost after --stall-limit {} s)",
+            silence_ns as f64 / 1e6,
+            self.runner.last_k,
+            cleaned,
+            self.args.stall_limit
+        ));
+    }
+
+    /// No slot for `silence_ns`, but the publisher's node is alive.
+    fn say_stalled(&self, silence_ns: u64) {
+        self.say(&format!(
+            "publisher stalled: no slot for {:.1} ms after instant {} (deadline {} ms \
+             past the expected slot), but its node is alive; waiting (lost after \
+             --stall-limit {} s)",
+            silence_ns as f64 / 1e6,
+            self.runner.last_k,
+            self.args.deadline_ms,
+            self.args.stall_limit
+        ));
+    }
+
+    /// The publisher is lost after `silence_ns` without a slot (`publishers` still
+    /// registered, `cleaned` dead nodes cleaned up): the end of the run, or with
+    /// `--wait-for-restart` a wait for a new one.
+    fn lost(
+        &mut self,
+        now: u64,
+        silence_ns: u64,
+        publishers: usize,
+        relay_gone: bool,
+        cleaned: u64,
+    ) -> Option<Ending> {
+        let args = self.args;
         if self.deadline.recheck_ns.take().is_some() {
             self.stalls.record(silence_ns);
         }
@@ -568,11 +640,11 @@ impl Loop<'_> {
         };
         let lost = format!(
             "publisher lost: no slot for {:.1} ms after instant {} (deadline {} ms past the \
-             expected slot); cleaned up {} dead node(s), {publishers} publisher(s) remain{why}",
+             expected slot); cleaned up {cleaned} dead node(s), {publishers} publisher(s) \
+             remain{why}",
             silence_ns as f64 / 1e6,
             self.runner.last_k,
             args.deadline_ms,
-            cleaned.cleanups,
         );
         if !args.wait_for_restart {
             self.say_always(&lost);

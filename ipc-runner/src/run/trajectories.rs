@@ -82,15 +82,14 @@ impl Trajectories {
     }
 
     /// Records instant `k` of `session`: its `timing`, `truth` (NaN when missing), every
-    /// estimator's estimate and variances (first `nx` values of each in `xhat`, `var`) and
+    /// estimator's estimate and variances (first `nx` values of each pair in `estimates`) and
     /// every node's slot (`obs`, in node order; a node missing from it was lost).
-    pub(super) fn record(
+    pub(super) fn record<'a>(
         &mut self,
         (session, k): (u32, u32),
         timing: [u64; 3],
         truth: Option<&[f64; MAX_NX]>,
-        xhat: &[[f64; MAX_NX]],
-        var: &[[f64; MAX_NX]],
+        estimates: impl Iterator<Item = (&'a [f64; MAX_NX], &'a [f64; MAX_NX])>,
         obs: &[Observation],
     ) {
         let nx = self.nx;
@@ -99,10 +98,8 @@ impl Trajectories {
         for j in 0..nx {
             self.truth.push(truth.map_or(f64::NAN, |x| x[j]));
         }
-        for x in xhat {
+        for (x, v) in estimates {
             self.estimates.extend_from_slice(&x[..nx]);
-        }
-        for v in var {
             self.var.extend_from_slice(&v[..nx]);
         }
         for n in 0..self.nodes {

@@ -1,5 +1,6 @@
 //! The evaluation beside the loop, never inside an estimator: channel-sim's truth messages
-//! kept in a ring by instant, and every estimator's squared error against them.
+//! kept in a ring by instant (every estimator's squared error against them is its
+//! [`Lane`](super::lane::Lane)'s).
 
 use crate::transport::Transport;
 use estpipe_wire::MAX_NX;
@@ -8,14 +9,11 @@ use estpipe_wire::WIRE_VERSION;
 /// Instants of truth kept: the truth of k must still be there when k's estimates are out.
 const TRUTH_RING: usize = 1024;
 
-/// Truth by instant and the errors against it.
+/// Truth by instant, and the truths that were missing or not usable.
 pub(super) struct Scores {
     truth_k: Box<[u32; TRUTH_RING]>,
     truth_x: Box<[[f64; MAX_NX]; TRUTH_RING]>,
     truth_stream: u64,
-    /// Per estimator: the sum of ‖x_k − x̂_k‖² and the instants in it.
-    pub(super) sq_err: Vec<f64>,
-    pub(super) err_n: Vec<u64>,
     /// Processed instants whose truth was missing.
     pub(super) truth_missing: u64,
     /// Received truths with a non-finite component (not scored).
@@ -23,14 +21,12 @@ pub(super) struct Scores {
 }
 
 impl Scores {
-    /// For `n_est` estimators.
-    pub(super) fn new(n_est: usize) -> Self {
+    /// No truth yet.
+    pub(super) fn new() -> Self {
         Self {
             truth_k: Box::new([u32::MAX; TRUTH_RING]),
             truth_x: Box::new([[0.0; MAX_NX]; TRUTH_RING]),
             truth_stream: 0,
-            sq_err: vec![0.0; n_est],
-            err_n: vec![0; n_est],
             truth_missing: 0,
             truth_nonfinite: 0,
         }
@@ -62,27 +58,14 @@ impl Scores {
         truth
     }
 
-    /// Adds the squared errors of the estimates `xhat` (first `nx` values each) against
-    /// `truth`. A truth with a non-finite component (a publisher's bug, or a plant that
-    /// overflowed) is no sample: counted and left out, so it cannot turn every MSE into NaN.
-    pub(super) fn score(&mut self, truth: &[f64; MAX_NX], xhat: &[[f64; MAX_NX]], nx: usize) {
+    /// Whether `truth` (its first `nx` values) can score the estimates. A truth with a
+    /// non-finite component (a publisher's bug, or a plant that overflowed) is no sample:
+    /// counted and left out, so it cannot turn every MSE into NaN.
+    pub(super) fn usable(&mut self, truth: &[f64; MAX_NX], nx: usize) -> bool {
         if truth[..nx].iter().any(|v| !v.is_finite()) {
             self.truth_nonfinite += 1;
-            return;
+            return false;
         }
-        for (e, xhat) in xhat.iter().enumerate() {
-            let d: f64 = (0..nx).map(|j| (truth[j] - xhat[j]).powi(2)).sum();
-            self.sq_err[e] += d;
-            self.err_n[e] += 1;
-        }
-    }
-
-    /// Mean squared error of estimator `e` (NaN before its first scored instant).
-    pub(super) fn mse(&self, e: usize) -> f64 {
-        if self.err_n[e] > 0 {
-            self.sq_err[e] / self.err_n[e] as f64
-        } else {
-            f64::NAN
-        }
+        true
     }
 }

@@ -26,9 +26,10 @@ fn run(a: &mut Assembler, h: &StreamHeader, slots: &[Slot]) -> (Out, Vec<Pushed>
     let mut out = Vec::new();
     let mut pushed = Vec::new();
     for s in slots {
-        pushed.push(a.push(s, h, 1000, &mut |k, o: &[Observation]| {
-            out.push((k, o.to_vec()))
-        }));
+        pushed.push(a.push_slot(s, h, 1000));
+        while let Some(i) = a.next_ready() {
+            out.push((i.k, i.obs.to_vec()));
+        }
     }
     (out, pushed)
 }
@@ -324,4 +325,77 @@ fn blocking_streams_never_lose_by_deadline_but_overrun_the_window() {
     assert_eq!(n, 2);
     assert_eq!(a.counts.lost_overrun, 2);
     assert_eq!(a.counts.lost_deadline, 0);
+}
+
+#[test]
+fn an_instant_carries_the_times_of_the_slot_pushed_last() {
+    let h = header(2, &[1, 1]);
+    let lim = Limits {
+        max_gap: 10,
+        instant_deadline_ns: 500,
+        lag: 0,
+    };
+    let mut a = Assembler::new(&h, lim);
+    let mut s0 = slot(1, 0, 2, 7);
+    s0.period_ns = 1000;
+    s0.send_ns = 900;
+    assert_eq!(a.push_slot(&s0, &h, 1000), Pushed::Data);
+    assert!(a.next_ready().is_none());
+    // Node 1's slot completes instant 1: the instant carries its times.
+    let mut s1 = slot(1, 1, 2, 8);
+    s1.period_ns = 1000;
+    s1.send_ns = 1100;
+    assert_eq!(a.push_slot(&s1, &h, 1200), Pushed::Data);
+    let i = a.next_ready().unwrap();
+    let times = SlotTimes {
+        send_ns: 1100,
+        recv_ns: 1200,
+        stream_id: 7,
+    };
+    assert_eq!((i.k, i.obs.len(), i.slot), (1, 2, times));
+    assert!(a.next_ready().is_none());
+    // Instant 2 given up by its deadline: the last slot's times; a send time after the
+    // receipt is none.
+    let mut s2 = slot(2, 0, 2, 7);
+    s2.period_ns = 1000;
+    s2.send_ns = 5000;
+    assert_eq!(a.push_slot(&s2, &h, 2000), Pushed::Data);
+    assert!(a.next_ready().is_none());
+    a.expire_due(2500);
+    let i = a.next_ready().unwrap();
+    assert_eq!(i.k, 2);
+    assert_eq!(i.slot.send_ns, 0);
+    assert_eq!(i.slot.recv_ns, 2000);
+    assert!(a.next_ready().is_none());
+}
+
+#[test]
+fn a_jump_past_the_window_hands_on_every_instant_in_order_before_it_is_placed() {
+    // One node far ahead: the window's oldest instants are handed on first, then the slot
+    // takes the place of one of them in the ring.
+    let h = header(2, &[1, 1]);
+    let lim = Limits {
+        max_gap: 2 * WINDOW as u32,
+        instant_deadline_ns: 0,
+        lag: 0,
+    };
+    let mut a = Assembler::new(&h, lim);
+    let (out, _) = run(
+        &mut a,
+        &h,
+        &[slot(1, 0, 2, 1), slot(1, 1, 2, 1), slot(2, 1, 2, 1)],
+    );
+    assert_eq!(ks(&out), [1]);
+    let far = WINDOW as u32 + 5;
+    let (out, p) = run(&mut a, &h, &[slot(far, 1, 2, 1)]);
+    assert_eq!(p, [Pushed::Data]);
+    assert_eq!(ks(&out), (2..=5).collect::<Vec<_>>());
+    // Instant 2 kept node 1's slot; node 0's was overrun.
+    assert_eq!(out[0].1[1].flags, 0);
+    assert_eq!(out[0].1[0].flags, FLAG_IPC_LOST);
+    let (out, _) = run(&mut a, &h, &[slot(far, 0, 2, 1)]);
+    assert_eq!(out.len(), WINDOW);
+    assert_eq!(out.last().unwrap().0, far);
+    assert_eq!(out.last().unwrap().1[1].k, far);
+    assert_eq!(a.counts.instants, u64::from(far));
 }

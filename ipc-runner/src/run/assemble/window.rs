@@ -1,35 +1,89 @@
-//! The window's side of the [`Assembler`]: slots put into their instant, gaps filled with
-//! losses, and instants handed on in order once every node's slot is known (arrived, lost,
-//! overrun or past its deadline), or given up on at the end of a stream.
+//! The assembler's window: the pending instants `base ..= base + WINDOW − 1` in a ring
+//! allocated once, which of every node's slots is known for each, and the front instant
+//! handed on. What a missing slot counts as is the [`Assembler`](super::Assembler)'s
+//! business; the window only knows which slots are there.
 
-use super::*;
+use estpipe_wire::{Observation, FLAG_IPC_LOST, MAX_NODES};
 
-impl Assembler {
-    /// Node `m`'s slots of instants `next_k..k` (those still pending) were lost in the IPC,
-    /// or on the network if the node's relay changed since its last slot
-    /// ([`Assembler::relay_changed`]).
-    pub(super) fn fill_gap(&mut self, m: usize, k: u64, recv_ns: u64) {
-        let net = self.relay_gap & (1 << m) != 0;
-        self.relay_gap &= !(1 << m);
-        let flags = if net {
-            FLAG_IPC_LOST | FLAG_NET_LOST
-        } else {
-            FLAG_IPC_LOST
+use super::WINDOW;
+
+/// One pending instant.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    /// Bit m: node m's slot is known.
+    known: u16,
+    /// When the instant's first slot became known (its deadline runs from here).
+    first_ns: u64,
+    obs: [Observation; MAX_NODES],
+}
+
+/// [`WINDOW`] pending instants from `base` on; nothing allocated after [`Window::new`].
+#[derive(Debug)]
+pub(super) struct Window {
+    nodes: usize,
+    ny: [u8; MAX_NODES],
+    /// The next instant to hand on.
+    base: u64,
+    ring: Box<[Pending]>,
+    /// An instant handed on that never was in the ring ([`Window::lost_instant`]).
+    spare: [Observation; MAX_NODES],
+}
+
+impl Window {
+    /// For `nodes` nodes with `ny[n]` measurements each; starts at instant 1.
+    pub(super) fn new(nodes: usize, ny: [u8; MAX_NODES]) -> Self {
+        let none = [Observation::dropped(0, 0, 0, 0); MAX_NODES];
+        let empty = Pending {
+            known: 0,
+            first_ns: 0,
+            obs: none,
         };
-        let from = self.node[m].next_k.max(self.base);
-        for j in from..k {
-            if self.ring[(j as usize) % WINDOW].known & (1 << m) == 0 {
-                if net {
-                    self.counts.lost_on_network += 1;
-                } else {
-                    self.counts.lost_in_ipc += 1;
-                }
-                let o = Observation::dropped(j as u32, m as u8, self.ny[m], flags);
-                self.set(j, m, o, recv_ns);
-            }
+        Self {
+            nodes,
+            ny,
+            base: 1,
+            ring: vec![empty; WINDOW].into_boxed_slice(),
+            spare: none,
         }
     }
 
+    /// Drops every pending instant; the window starts again at instant 1.
+    pub(super) fn clear(&mut self) {
+        for p in self.ring.iter_mut() {
+            p.known = 0;
+        }
+        self.base = 1;
+    }
+
+    /// The next instant to hand on (every earlier one was).
+    #[inline]
+    pub(super) fn base(&self) -> u64 {
+        self.base
+    }
+
+    /// The window starts at instant `first` (a stream joined mid-way); nothing is pending.
+    pub(super) fn start_at(&mut self, first: u64) {
+        self.base = first;
+    }
+
+    /// The last instant that fits.
+    #[inline]
+    pub(super) fn top(&self) -> u64 {
+        self.base + WINDOW as u64 - 1
+    }
+
+    #[inline]
+    fn at(&self, j: u64) -> &Pending {
+        &self.ring[(j as usize) % WINDOW]
+    }
+
+    /// Whether node `m`'s slot of pending instant `j` is known.
+    #[inline]
+    pub(super) fn is_known(&self, j: u64, m: usize) -> bool {
+        self.at(j).known & (1 << m) != 0
+    }
+
+    /// Node `m`'s slot of instant `k` (which fits) is `o`, known at `recv_ns`.
     #[inline]
     pub(super) fn set(&mut self, k: u64, m: usize, o: Observation, recv_ns: u64) {
         let p = &mut self.ring[(k as usize) % WINDOW];
@@ -40,134 +94,42 @@ impl Assembler {
         p.obs[m] = o;
     }
 
-    /// Makes instant `k` fit the window, handing on the oldest instants without their
-    /// missing slots; `false` if that would take more than `bound` instants.
-    pub(super) fn make_room(
-        &mut self,
-        k: u64,
-        m: usize,
-        bound: u64,
-        emit: &mut impl FnMut(u32, &[Observation]),
-    ) -> bool {
-        let top = self.base + WINDOW as u64 - 1;
-        if k <= top {
-            return true;
-        }
-        if k - top > bound {
-            return false;
-        }
-        for _ in 0..k - top {
-            self.give_up_for(GiveUp::Overrun, Some(m), emit);
-            self.advance(emit);
-        }
-        true
-    }
-
-    /// Whether node `n`'s slot of instant `j` is known to be absent after its END/ABORT.
+    /// Bit n: node n's slot of the front instant (`base`) is known.
     #[inline]
-    pub(super) fn ended_before(&self, n: usize, j: u64) -> bool {
-        self.node[n].end.is_some_and(|e| j > e.0)
+    pub(super) fn front_known(&self) -> u16 {
+        self.at(self.base).known
     }
 
-    /// Hands on the complete instants at the front of the window.
-    pub(super) fn advance(&mut self, emit: &mut impl FnMut(u32, &[Observation])) {
-        loop {
-            let j = self.base;
-            let known = self.ring[(j as usize) % WINDOW].known;
-            if known == 0 {
-                return;
-            }
-            if known != self.all
-                && (0..usize::from(self.nodes))
-                    .any(|n| known & (1 << n) == 0 && !self.ended_before(n, j))
-            {
-                return;
-            }
-            self.hand_on(emit);
-        }
+    /// When the front instant's first slot became known, if any is.
+    #[inline]
+    pub(super) fn front_first_ns(&self) -> Option<u64> {
+        let p = self.at(self.base);
+        (p.known != 0).then_some(p.first_ns)
     }
 
-    /// Hands on instant `base`: every node's slot not known is lost (after its END, or for
-    /// `why`).
-    pub(super) fn give_up(&mut self, why: GiveUp, emit: &mut impl FnMut(u32, &[Observation])) {
-        self.give_up_for(why, None, emit);
-    }
-
-    pub(super) fn give_up_for(
-        &mut self,
-        why: GiveUp,
-        gap_of: Option<usize>,
-        emit: &mut impl FnMut(u32, &[Observation]),
-    ) {
+    /// Hands on the front instant: every node's slot not known becomes lost (no
+    /// measurement, `FLAG_IPC_LOST`); the window moves on by one.
+    #[inline]
+    pub(super) fn hand_on(&mut self) -> (u32, &[Observation]) {
         let j = self.base;
-        for n in 0..usize::from(self.nodes) {
-            if self.ring[(j as usize) % WINDOW].known & (1 << n) != 0 {
-                continue;
-            }
-            if self.ended_before(n, j) {
-                self.counts.lost_after_end += 1;
-            } else if gap_of == Some(n) && j >= self.node[n].next_k {
-                // The node whose slot made room: this is a gap of its own sequence.
-                if self.relay_gap & (1 << n) != 0 {
-                    self.counts.lost_on_network += 1;
-                } else {
-                    self.counts.lost_in_ipc += 1;
-                }
-            } else {
-                match why {
-                    GiveUp::Deadline => self.counts.lost_deadline += 1,
-                    GiveUp::Overrun => self.counts.lost_overrun += 1,
-                }
-            }
-            let p = &mut self.ring[(j as usize) % WINDOW];
-            p.obs[n] = Observation::dropped(j as u32, n as u8, self.ny[n], FLAG_IPC_LOST);
-            p.known |= 1 << n;
-        }
-        self.hand_on(emit);
-    }
-
-    /// Emits instant `base` (every node's slot known) and moves on.
-    pub(super) fn hand_on(&mut self, emit: &mut impl FnMut(u32, &[Observation])) {
-        let j = self.base;
-        let nodes = usize::from(self.nodes);
-        for n in 0..nodes {
-            if self.ring[(j as usize) % WINDOW].known & (1 << n) == 0 {
-                // After its END: lost, known only now that the instant is handed on.
-                self.counts.lost_after_end += 1;
-                self.ring[(j as usize) % WINDOW].obs[n] =
-                    Observation::dropped(j as u32, n as u8, self.ny[n], FLAG_IPC_LOST);
-            }
-        }
-        let p = &mut self.ring[(j as usize) % WINDOW];
-        p.known = 0;
-        self.counts.instants += 1;
         self.base = j + 1;
-        emit(j as u32, &p.obs[..nodes]);
-    }
-
-    /// Hands on every pending instant without the slots that have not come (counted as lost
-    /// by the deadline): the publishers are gone or the run ends, and what arrived is still
-    /// stepped.
-    pub fn flush(&mut self, emit: &mut impl FnMut(u32, &[Observation])) {
-        while self.ring[(self.base as usize) % WINDOW].known != 0 {
-            self.give_up(GiveUp::Deadline, emit);
-            self.advance(emit);
+        let ny = self.ny;
+        let p = &mut self.ring[(j as usize) % WINDOW];
+        for (n, o) in p.obs[..self.nodes].iter_mut().enumerate() {
+            if p.known & (1 << n) == 0 {
+                *o = Observation::dropped(j as u32, n as u8, ny[n], FLAG_IPC_LOST);
+            }
         }
+        p.known = 0;
+        (j as u32, &p.obs[..self.nodes])
     }
 
-    /// When the oldest pending instant's deadline passes (paced mode), if one is pending.
-    pub fn next_expiry(&self) -> Option<u64> {
-        let p = &self.ring[(self.base as usize) % WINDOW];
-        (self.paced && self.limits.instant_deadline_ns > 0 && p.known != 0)
-            .then(|| p.first_ns.saturating_add(self.limits.instant_deadline_ns))
-    }
-
-    /// Hands on every pending instant whose deadline passed by `now` (paced mode only),
-    /// without the slots that have not come.
-    pub fn expire(&mut self, now: u64, emit: &mut impl FnMut(u32, &[Observation])) {
-        while self.next_expiry().is_some_and(|t| now >= t) {
-            self.give_up(GiveUp::Deadline, emit);
-            self.advance(emit);
+    /// Instant `j` outside the window (before the first slot of a stream joined mid-way),
+    /// every node's slot lost.
+    pub(super) fn lost_instant(&mut self, j: u64) -> &[Observation] {
+        for (n, o) in self.spare[..self.nodes].iter_mut().enumerate() {
+            *o = Observation::dropped(j as u32, n as u8, self.ny[n], FLAG_IPC_LOST);
         }
+        &self.spare[..self.nodes]
     }
 }
