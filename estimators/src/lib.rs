@@ -69,3 +69,24 @@ pub use registry::{
     build_all, gate_counts, gate_probability, names_match, BuildOptions, Factory, RunStart,
     FACTORIES,
 };
+
+#[cfg(test)]
+mod tests {
+    /// The crate's rule, which Cargo enforces once it is in the manifest: of the product's
+    /// crates, only the core, the spec and the wire (docs/design.md, "Crates").
+    #[test]
+    fn depends_on_the_core_the_spec_and_the_wire_only() {
+        let manifest = include_str!("../Cargo.toml");
+        let deps = manifest
+            .split("[dependencies]")
+            .nth(1)
+            .and_then(|rest| rest.split("\n[").next())
+            .expect("a [dependencies] table");
+        let ours: Vec<&str> = deps
+            .lines()
+            .filter(|l| l.contains("workspace = true"))
+            .filter_map(|l| l.split_whitespace().next())
+            .collect();
+        assert_eq!(ours, ["estimator-core", "estpipe-spec", "estpipe-wire"]);
+    }
+}

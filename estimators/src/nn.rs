@@ -72,6 +72,21 @@ pub fn initial_measurement(start: &RunStart<'_>) -> Option<SVector<f64, 2>> {
     o.measurement().map(SVector::from_column_slice)
 }
 
+/// What every seed 003 estimator starts from: the prior, the process noise variance and `y₀`
+/// when it was sent.
+#[derive(Clone, Copy)]
+struct Start {
+    x0: SVector<f64, 3>,
+    p0: SMatrix<f64, 3, 3>,
+    w: f64,
+    y0: Option<SVector<f64, 2>>,
+}
+
+/// An estimator-core error as the factory's, naming the estimator.
+fn named(name: &'static str) -> impl Fn(estimator_core::Error) -> anyhow::Error {
+    move |e| anyhow::anyhow!("{name}: {e}")
+}
+
 /// Builds the seed 003 estimators (none for other specs), each initialised with `y₀` when it
 /// was sent.
 pub fn build(
@@ -82,103 +97,94 @@ pub fn build(
     let Model::Seed003 { w_var: w } = spec.model else {
         return Ok(Vec::new());
     };
-    let x0 = SVector::<f64, 3>::from_column_slice(spec.prior.mean.as_slice());
-    let p0 = SMatrix::<f64, 3, 3>::from_fn(|i, j| spec.prior.cov[(i, j)]);
-    let y0 = initial_measurement(start);
-    let named = |name: &'static str| move |e: estimator_core::Error| anyhow::anyhow!("{name}: {e}");
-    let mut nn = NnTbcpEstimator::new(
-        config(w)?,
-        Tanh,
-        x0,
-        Seed003Example::h0(),
-        p0,
-        Seed003Example::p0(),
-    )
-    .map_err(named("nn"))?;
-    if let Some(y0) = y0 {
-        nn = nn.with_initial_measurement(y0).map_err(named("nn"))?;
-    }
-    let base = |name: &'static str, mode| {
-        let kf = CoupledNoiseKf::new(x0, p0, matrix![w], mode).map_err(named(name))?;
-        match y0 {
-            Some(y0) => kf.with_initial_measurement(y0).map_err(named(name)),
-            None => Ok(kf),
-        }
+    let s = Start {
+        x0: SVector::<f64, 3>::from_column_slice(spec.prior.mean.as_slice()),
+        p0: SMatrix::<f64, 3, 3>::from_fn(|i, j| spec.prior.cov[(i, j)]),
+        w,
+        y0: initial_measurement(start),
     };
-    let indep = |name: &'static str, mode| {
-        let kf = IndependentNoiseKf::new(x0, p0, matrix![w], mode).map_err(named(name))?;
-        match y0 {
-            Some(y0) => kf.with_initial_measurement(y0).map_err(named(name)),
-            None => Ok(kf),
-        }
-    };
-    let kf = base("kf", Linearisation::None)?;
-    let mut all: Vec<Box<dyn Estimator>> = vec![
-        Box::new(
-            Adapted::<_, 3>::new(name!("nn"), fixed(OnModel::new(Seed003Example, nn)))
-                .with_diagnostics(nn_diagnostics)
-                .with_covariance_bound(),
-        ),
-        Box::new(
-            Adapted::<_, 3>::new(
-                name!("kf"),
-                fixed(OnModel::new((Seed003Example, NoNonlinearity), kf)),
-            )
-            .with_gate(options.gate)?,
-        ),
-        Box::new(
-            Adapted::<_, 3>::new(
-                name!("ekf"),
-                fixed(OnModel::new(
-                    (Seed003Example, Seed003Example),
-                    base("ekf", Linearisation::PaperJacobian)?,
-                )),
-            )
-            .with_gate(options.gate)?,
-        ),
-        Box::new(
-            Adapted::<_, 3>::new(
-                name!("ekf-std"),
-                fixed(OnModel::new(
-                    (Seed003Example, Seed003Example),
-                    base("ekf-std", Linearisation::Ekf)?,
-                )),
-            )
-            .with_gate(options.gate)?,
-        ),
-        Box::new(
-            Adapted::<_, 3>::new(
-                name!("kf-indep"),
-                fixed(OnModel::new(
-                    (Seed003Example, NoNonlinearity),
-                    indep("kf-indep", IndependentMode::Kf)?,
-                )),
-            )
-            .with_gate(options.gate)?,
-        ),
-        Box::new(
-            Adapted::<_, 3>::new(
-                name!("ekf-indep"),
-                fixed(OnModel::new(
-                    (Seed003Example, Seed003Example),
-                    indep("ekf-indep", IndependentMode::Ekf)?,
-                )),
-            )
-            .with_gate(options.gate)?,
-        ),
-    ];
+    let mut all = vec![nn_estimator(&s)?];
+    all.extend(baselines(&s, options.gate)?);
     if options.particles > 0 {
         all.push(Box::new(pf_coupled::CoupledPf::new(
-            x0,
-            p0,
-            w,
-            y0,
+            s.x0,
+            s.p0,
+            s.w,
+            s.y0,
             options.particles,
             start.seed,
             start.run,
         )?));
     }
     Ok(all)
+}
+
+/// The paper's NN estimator, reporting the covariance bound it propagates.
+fn nn_estimator(s: &Start) -> anyhow::Result<Box<dyn Estimator>> {
+    let mut nn = NnTbcpEstimator::new(
+        config(s.w)?,
+        Tanh,
+        s.x0,
+        Seed003Example::h0(),
+        s.p0,
+        Seed003Example::p0(),
+    )
+    .map_err(named("nn"))?;
+    if let Some(y0) = s.y0 {
+        nn = nn.with_initial_measurement(y0).map_err(named("nn"))?;
+    }
+    Ok(Box::new(
+        Adapted::<_, 3>::new(name!("nn"), fixed(OnModel::new(Seed003Example, nn)))
+            .with_diagnostics(nn_diagnostics)
+            .with_covariance_bound(),
+    ))
+}
+
+/// The baselines a practitioner would run, behind the gate when there is one: the Kalman
+/// filters that know the noise coupling (`kf`, the paper's `ekf`, the textbook `ekf-std`)
+/// and those that take the noises as independent (`kf-indep`, `ekf-indep`).
+fn baselines(s: &Start, gate: Option<f64>) -> anyhow::Result<Vec<Box<dyn Estimator>>> {
+    let coupled = |name: &'static str, mode| {
+        let kf = CoupledNoiseKf::new(s.x0, s.p0, matrix![s.w], mode).map_err(named(name))?;
+        match s.y0 {
+            Some(y0) => kf.with_initial_measurement(y0).map_err(named(name)),
+            None => Ok(kf),
+        }
+    };
+    let indep = |name: &'static str, mode| {
+        let kf = IndependentNoiseKf::new(s.x0, s.p0, matrix![s.w], mode).map_err(named(name))?;
+        match s.y0 {
+            Some(y0) => kf.with_initial_measurement(y0).map_err(named(name)),
+            None => Ok(kf),
+        }
+    };
+    macro_rules! gated {
+        ($name:literal, $system:expr, $filter:expr) => {
+            Box::new(
+                Adapted::<_, 3>::new(name!($name), fixed(OnModel::new($system, $filter)))
+                    .with_gate(gate)?,
+            ) as Box<dyn Estimator>
+        };
+    }
+    let (linear, jacobian) = (
+        (Seed003Example, NoNonlinearity),
+        (Seed003Example, Seed003Example),
+    );
+    Ok(vec![
+        gated!("kf", linear, coupled("kf", Linearisation::None)?),
+        gated!(
+            "ekf",
+            jacobian,
+            coupled("ekf", Linearisation::PaperJacobian)?
+        ),
+        gated!("ekf-std", jacobian, coupled("ekf-std", Linearisation::Ekf)?),
+        gated!("kf-indep", linear, indep("kf-indep", IndependentMode::Kf)?),
+        gated!(
+            "ekf-indep",
+            jacobian,
+            indep("ekf-indep", IndependentMode::Ekf)?
+        ),
+    ])
 }
 
 /// The NN estimator's diagnostics: its bounds' traces and `‖φ(x̂_k)‖` against `φ̄`.

@@ -256,6 +256,89 @@ impl ParticleFilter {
         let w = -(n as f64).ln();
         self.lw.iter_mut().for_each(|v| *v = w);
     }
+
+    /// Particle `p` moved by the model: x' = A x + L_Q ξ (+ B u), into the scratch space.
+    fn propagate(&mut self, p: usize, xi: &[f64; MAX_NX], bu: Option<&[f64]>) {
+        let (nx, a, lq) = (self.nx, &self.model.a, &self.model.lq);
+        let old = &self.x[p * nx..(p + 1) * nx];
+        let new = &mut self.scratch[p * nx..(p + 1) * nx];
+        for i in 0..nx {
+            let mut acc = 0.0;
+            for j in 0..nx {
+                acc += a[(i, j)] * old[j];
+            }
+            for j in 0..=i {
+                acc += lq[(i, j)] * xi[j];
+            }
+            if let Some(bu) = bu {
+                acc += bu[i];
+            }
+            new[i] = acc;
+        }
+    }
+
+    /// The log-likelihood of the instant for the moved particle `p`: none for a slot lost in
+    /// transport, the occlusion (or loss) probability for a dropout, the Gaussian density
+    /// and the probability of being outside every region for a measurement.
+    fn log_likelihood(&self, p: usize, y: Option<&[f64]>, lost: bool) -> f64 {
+        let (nx, ny, c, lr) = (self.nx, self.ny, &self.model.c, &self.model.lr);
+        let new = &self.scratch[p * nx..(p + 1) * nx];
+        let ex: f64 = self.e.iter().zip(new.iter()).map(|(e, x)| e * x).sum();
+        match y {
+            None if lost => 0.0,
+            None => {
+                let occluded = self.ln_prob(&self.regions, ex);
+                match self.ln_loss {
+                    // ln(p + (1 − p) P(occluded | x))
+                    Some((lp, l1p)) => log_sum_exp(&[lp, l1p + occluded]),
+                    None => occluded,
+                }
+            }
+            Some(y) => {
+                // −½‖L⁻¹(y − Cx)‖² by forward substitution.
+                let mut resid = [0.0; MAX_NY];
+                let mut q = 0.0;
+                for i in 0..ny {
+                    let mut r = y[i];
+                    for j in 0..nx {
+                        r -= c[(i, j)] * new[j];
+                    }
+                    for j in 0..i {
+                        r -= lr[(i, j)] * resid[j];
+                    }
+                    resid[i] = r / lr[(i, i)];
+                    q += resid[i] * resid[i];
+                }
+                -0.5 * q + self.ln_prob(&self.gaps, ex)
+            }
+        }
+    }
+
+    /// Normalises the log-weights `lw` by their `total`, takes the moved particles with their
+    /// weighted mean and covariance, and resamples when the effective sample size falls
+    /// below half the particles.
+    fn commit(&mut self, mut lw: Vec<f64>, total: f64) {
+        let nx = self.nx;
+        let mut mean = [0.0; MAX_NX];
+        let mut sum_w2 = 0.0;
+        for p in 0..self.n {
+            lw[p] -= total;
+            let w = lw[p].exp();
+            sum_w2 += w * w;
+            for i in 0..nx {
+                mean[i] += w * self.scratch[p * nx + i];
+            }
+        }
+        let mut cov = [0.0; MAX_NX * MAX_NX];
+        weighted_covariance(&self.scratch, &lw, &mean[..nx], &mut cov[..nx * nx]);
+        std::mem::swap(&mut self.x, &mut self.scratch);
+        self.lw_scratch = std::mem::replace(&mut self.lw, lw);
+        self.mean.copy_from_slice(&mean[..nx]);
+        self.cov.copy_from_slice(&cov[..nx * nx]);
+        if 1.0 / sum_w2 < 0.5 * self.n as f64 {
+            self.resample();
+        }
+    }
 }
 
 impl Estimator for ParticleFilter {
@@ -264,13 +347,11 @@ impl Estimator for ParticleFilter {
     }
 
     fn step(&mut self, k: u32, obs: &[Observation]) -> Result<(), Error> {
-        let m = &self.model;
-        let (a, lq, c, lr) = (&m.a, &m.lq, &m.c, &m.lr);
         let mut u = [0.0; MAX_NX];
         let bu = super::fed::linear(&self.spec)?
             .input_into(k.saturating_sub(1) as usize, &mut u)
             .then_some(&u[..self.nx]);
-        let (nx, ny) = (self.nx, self.ny);
+        let ny = self.ny;
         let mut y_buf = [0.0; MAX_NY];
         // Lost in transport: no likelihood, the particles only move.
         let lost = obs
@@ -291,55 +372,12 @@ impl Estimator for ParticleFilter {
         let mut lw = std::mem::take(&mut self.lw_scratch);
         lw.copy_from_slice(&self.lw);
         let mut xi = [0.0; MAX_NX];
-        let mut resid = [0.0; MAX_NY];
         for p in 0..self.n {
-            for v in xi[..nx].iter_mut() {
+            for v in xi[..self.nx].iter_mut() {
                 *v = self.rng.normal();
             }
-            let old = &self.x[p * nx..(p + 1) * nx];
-            let new = &mut self.scratch[p * nx..(p + 1) * nx];
-            for i in 0..nx {
-                let mut acc = 0.0;
-                for j in 0..nx {
-                    acc += a[(i, j)] * old[j];
-                }
-                for j in 0..=i {
-                    acc += lq[(i, j)] * xi[j];
-                }
-                if let Some(bu) = bu {
-                    acc += bu[i];
-                }
-                new[i] = acc;
-            }
-            let ex: f64 = self.e.iter().zip(new.iter()).map(|(e, x)| e * x).sum();
-            let ll = match y {
-                None if lost => 0.0,
-                None => {
-                    let occluded = self.ln_prob(&self.regions, ex);
-                    match self.ln_loss {
-                        // ln(p + (1 − p) P(occluded | x))
-                        Some((lp, l1p)) => log_sum_exp(&[lp, l1p + occluded]),
-                        None => occluded,
-                    }
-                }
-                Some(y) => {
-                    // −½‖L⁻¹(y − Cx)‖² by forward substitution.
-                    let mut q = 0.0;
-                    for i in 0..ny {
-                        let mut r = y[i];
-                        for j in 0..nx {
-                            r -= c[(i, j)] * new[j];
-                        }
-                        for j in 0..i {
-                            r -= lr[(i, j)] * resid[j];
-                        }
-                        resid[i] = r / lr[(i, i)];
-                        q += resid[i] * resid[i];
-                    }
-                    -0.5 * q + self.ln_prob(&self.gaps, ex)
-                }
-            };
-            lw[p] += ll;
+            self.propagate(p, &xi, bu);
+            lw[p] += self.log_likelihood(p, y, lost);
         }
         let total = log_sum_exp(&lw);
         if !total.is_finite() {
@@ -348,25 +386,7 @@ impl Estimator for ParticleFilter {
                 what: "every particle has zero likelihood",
             });
         }
-        let mut mean = [0.0; MAX_NX];
-        let mut sum_w2 = 0.0;
-        for p in 0..self.n {
-            lw[p] -= total;
-            let w = lw[p].exp();
-            sum_w2 += w * w;
-            for i in 0..nx {
-                mean[i] += w * self.scratch[p * nx + i];
-            }
-        }
-        let mut cov = [0.0; MAX_NX * MAX_NX];
-        weighted_covariance(&self.scratch, &lw, &mean[..nx], &mut cov[..nx * nx]);
-        std::mem::swap(&mut self.x, &mut self.scratch);
-        self.lw_scratch = std::mem::replace(&mut self.lw, lw);
-        self.mean.copy_from_slice(&mean[..nx]);
-        self.cov.copy_from_slice(&cov[..nx * nx]);
-        if 1.0 / sum_w2 < 0.5 * self.n as f64 {
-            self.resample();
-        }
+        self.commit(lw, total);
         Ok(())
     }
 

@@ -89,7 +89,7 @@ pub fn main(name: &str) -> ! {
         Command::Replay(a) => pipeline(crate::replay::main(&a)),
         Command::Bridge(a) => pipeline(crate::bridge::main(&a)),
         Command::StreamHeader(a) => pipeline(crate::stream_header::main(&a)),
-        Command::ChannelSim(a) => pipeline(channel_sim::publisher::run(&a).map(|_| 0)),
+        Command::ChannelSim(a) => pipeline(crate::source::publish(&a)),
     };
     match result {
         Ok(()) => std::process::exit(0),

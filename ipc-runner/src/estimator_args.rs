@@ -27,7 +27,7 @@ pub struct EstimatorArgs {
     /// `kf-io-mix`, `adf-mix` (and `pf-mix`), which read a dropout as "occluded, or lost in
     /// transport with probability P" (docs/occlusion.md, "Losses"). 0 (default): not built.
     #[arg(long, default_value_t = 0.0, value_name = "P",
-          value_parser = crate::eval::cli::loss_probability)]
+          value_parser = estpipe_process::flags::probability_below_one)]
     pub loss_rate: f64,
     /// Innovation gate of probability P (docs/gate.md): every estimator with an innovation
     /// ignores a measurement whose NIS exceeds the χ² quantile of P, and is named

@@ -31,11 +31,11 @@ pub mod view;
 #[doc(hidden)]
 pub use plot::{latency as plot_latency, trace as plot_trace};
 
-/// The exit code of a failed pipeline command: [`estpipe_wire::ContractError::exit_code`]
-/// (2 for a peer outside the wire contract) when that is the cause, 2 for bad input
-/// ([`channel_sim::error::is_bad_input`]: flags, scenario, file content, outputs, memory
-/// budget), the cause's code for a run that failed after it had written its report
-/// ([`run::ExitWith`]), else 1.
+/// The exit code of a failed pipeline command, the product's policy: the cause's
+/// [`estpipe_wire::ContractError::exit_code`] (2 for a peer outside the wire contract), 2 for
+/// bad input ([`limits::BadInput`]: flags, scenario, file content, outputs, memory budget;
+/// what the simulator refuses is marked so where the runner calls it, [`source`]), the cause's
+/// code for a run that failed after it had written its report ([`run::ExitWith`]), else 1.
 pub fn exit_code_of(e: &anyhow::Error) -> i32 {
     if let Some(c) = e.downcast_ref::<estpipe_wire::ContractError>() {
         return c.exit_code();
@@ -43,7 +43,7 @@ pub fn exit_code_of(e: &anyhow::Error) -> i32 {
     if let Some(run::ExitWith(code, _)) = e.downcast_ref::<run::ExitWith>() {
         return *code;
     }
-    if channel_sim::error::is_bad_input(e) {
+    if limits::BadInput::is_in(e) {
         2
     } else {
         1

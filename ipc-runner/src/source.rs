@@ -11,6 +11,7 @@ use estpipe_spec::EstimatorSpec;
 use estpipe_wire::Observation;
 
 use crate::estimators::RunStart;
+use crate::limits::BadInput;
 
 /// The estimators' spec and what a run adds to it.
 #[derive(Clone, Debug)]
@@ -54,8 +55,7 @@ impl Source {
     ) -> anyhow::Result<Self> {
         match estimator_spec {
             Some(path) => {
-                let spec = estpipe_spec::file::load(path)
-                    .map_err(|e| crate::limits::BadInput(e.to_string()))?;
+                let spec = estpipe_spec::file::load(path).map_err(|e| BadInput(e.to_string()))?;
                 // Parameters accepted against their paper's own conditions (λχ ≤ 1 by the
                 // explicit opt-in), as `eval` says them for a scenario.
                 for w in spec.warnings() {
@@ -64,7 +64,7 @@ impl Source {
                 Ok(Self::of_spec(spec))
             }
             None => {
-                let scenario = channel_sim::scenario::resolve(scenario, config)?;
+                let scenario = self::scenario(scenario, config)?;
                 Ok(Self::of_scenario(&*scenario, seed, run))
             }
         }
@@ -78,6 +78,27 @@ impl Source {
             initial: self.initial.as_deref(),
         }
     }
+}
+
+/// The scenario of `--scenario NAME`, or of `--config FILE` when given. One the simulator
+/// cannot build is bad input, marked here, where the runner meets the simulator, in the
+/// product's own terms ([`BadInput`]: exit code 2), so that no exit code is the simulator's
+/// decision.
+pub fn scenario(name: &str, config: Option<&Path>) -> Result<Box<dyn Scenario>, BadInput> {
+    channel_sim::scenario::resolve(name, config).map_err(|e| BadInput(e.to_string()))
+}
+
+/// `ipc-runner channel-sim`: the simulator's publisher, its failures in the product's terms:
+/// what the simulator calls bad input (a flag, a scenario it cannot build) is [`BadInput`],
+/// everything else (a peer outside the wire contract among them) keeps its cause.
+pub fn publish(args: &channel_sim::publisher::PublisherArgs) -> anyhow::Result<i32> {
+    channel_sim::publisher::run(args).map(|_| 0).map_err(|e| {
+        if channel_sim::error::is_bad_input(&e) {
+            BadInput(format!("{e:#}")).into()
+        } else {
+            e
+        }
+    })
 }
 
 /// The spec of preset `name` (tests of the estimator families, which never read a simulator

@@ -30,9 +30,10 @@ impl fmt::Display for BadInput {
 impl std::error::Error for BadInput {}
 
 impl BadInput {
-    /// Whether `e`'s chain holds a [`BadInput`]. A command that builds scenarios asks
-    /// `channel_sim::error::is_bad_input`, which also counts a scenario that could not be
-    /// built.
+    /// Whether `e`'s chain holds a [`BadInput`]: the product's exit policy (code 2). The
+    /// simulator's own binary also counts a scenario it could not build
+    /// (`channel_sim::error::is_bad_input`); the runner marks that as a [`BadInput`] where it
+    /// calls the simulator.
     pub fn is_in(e: &anyhow::Error) -> bool {
         e.chain().any(|c| c.is::<BadInput>())
     }

@@ -175,91 +175,124 @@ impl CoupledPf {
     fn advance(&mut self, y_next: Option<V2>) -> Result<(), Error> {
         let sys = Seed003Example;
         let k = self.k;
-        let a: M3 = sys.a(k);
-        let b: V3 = sys.b(k);
-        let c: SMatrix<f64, 2, 3> = sys.c(k);
-        let d: V2 = sys.d(k);
-        let sd = self.w_var.sqrt();
-        let n = self.n;
+        let step = Move {
+            a: sys.a(k),
+            b: sys.b(k),
+        };
         let total = log_sum_exp(&self.lw);
         if !total.is_finite() {
             return Err(Error::Numerical {
                 what: "pf: every particle has zero weight",
             });
         }
-        let g = |x: &V3, w: f64| a * x + sys.eval(x) + b * w;
         let mut ess = self.ess;
         match self.y {
             None => {
                 // Withheld: nothing learnt; w_k from its prior.
+                let sd = self.w_var.sqrt();
                 self.lw_next.copy_from_slice(&self.lw);
                 for (x, out) in self.x.iter().zip(self.next.iter_mut()) {
-                    *out = g(x, sd * self.rng.normal());
+                    *out = step.apply(x, sd * self.rng.normal());
                 }
             }
             Some(y) => {
-                // The kernel: weighted mean and covariance of the cloud.
-                let mut m = V3::zeros();
-                for (x, &l) in self.x.iter().zip(&self.lw) {
-                    m += x * (l - total).exp();
-                }
-                let mut cov = M3::zeros();
-                for (x, &l) in self.x.iter().zip(&self.lw) {
-                    let e = x - m;
-                    cov += (e * e.transpose()) * (l - total).exp();
-                }
-                let hk = (cov + cov.transpose()) * (0.5 * self.h2);
-                let (lam, u) = symmetric_eigen(&hk, "pf kernel covariance")?;
-                let lk = u * M3::from_diagonal(&lam.map(|l| l.max(0.0).sqrt()));
-                let r =
-                    d * d.transpose() * self.w_var + SMatrix::<f64, 2, 2>::identity() * self.eps;
-                let s = c * hk * c.transpose() + r;
-                let s_inv =
-                    cholesky(&((s + s.transpose()) * 0.5), "pf innovation covariance")?.inverse();
-                let kx = hk * c.transpose() * s_inv;
-                let kw = d.transpose() * s_inv * self.w_var;
-                // Kernel locations and their predictive likelihoods N(y; C m_i, S).
-                let shrink = (1.0 - self.h2).sqrt();
-                for i in 0..n {
-                    let li = m + (self.x[i] - m) * shrink;
-                    let res = y - c * li;
-                    self.loc[i] = li;
-                    self.lw_next[i] = self.lw[i] - 0.5 * (res.transpose() * s_inv * res)[0];
-                }
-                let t = log_sum_exp(&self.lw_next);
-                if !t.is_finite() {
-                    return Err(Error::Numerical {
-                        what: "pf: every kernel has zero likelihood",
-                    });
-                }
-                let mut sum_w2 = 0.0;
-                for l in self.lw_next.iter_mut() {
-                    *l -= t;
-                    sum_w2 += (2.0 * *l).exp();
-                }
-                ess = 1.0 / (sum_w2 * n as f64);
-                if 1.0 / sum_w2 < 0.5 * n as f64 {
-                    systematic_resample(&self.lw_next, &self.loc, &mut self.next, &mut self.rng);
-                    std::mem::swap(&mut self.loc, &mut self.next);
-                    self.lw_next.fill(-(n as f64).ln());
-                }
-                // Each particle: (x̃, w̃) from its kernel's conditional given y (Matheron's
-                // rule), then the move with the same w̃.
-                let se = self.eps.sqrt();
-                for (li, out) in self.loc.iter().zip(self.next.iter_mut()) {
-                    let xi = V3::new(self.rng.normal(), self.rng.normal(), self.rng.normal());
-                    let xs = li + lk * xi;
-                    let ws = sd * self.rng.normal();
-                    let mut ys = c * xs + d * ws;
-                    if se > 0.0 {
-                        ys += V2::new(self.rng.normal(), self.rng.normal()) * se;
-                    }
-                    let inn = y - ys;
-                    *out = g(&(xs + kx * inn), ws + (kw * inn)[0]);
-                }
+                let kernel = self.kernel(total)?;
+                ess = self.weigh_kernels(y, &kernel)?;
+                self.draw_conditional(y, &kernel, &step);
             }
         }
-        // The prediction x̂_{k+1}: the weighted mean.
+        self.commit(ess, y_next)
+    }
+
+    /// The kernel of the cloud for the update with `y_k`: the weighted mean and covariance of
+    /// the particles (weights `lw − total`), the kernel covariance `h²` times it, and the gains
+    /// of x and w on the innovation.
+    fn kernel(&self, total: f64) -> Result<Kernel, Error> {
+        let sys = Seed003Example;
+        let k = self.k;
+        let c: SMatrix<f64, 2, 3> = sys.c(k);
+        let d: V2 = sys.d(k);
+        let mut m = V3::zeros();
+        for (x, &l) in self.x.iter().zip(&self.lw) {
+            m += x * (l - total).exp();
+        }
+        let mut cov = M3::zeros();
+        for (x, &l) in self.x.iter().zip(&self.lw) {
+            let e = x - m;
+            cov += (e * e.transpose()) * (l - total).exp();
+        }
+        let hk = (cov + cov.transpose()) * (0.5 * self.h2);
+        let (lam, u) = symmetric_eigen(&hk, "pf kernel covariance")?;
+        let lk = u * M3::from_diagonal(&lam.map(|l| l.max(0.0).sqrt()));
+        let r = d * d.transpose() * self.w_var + SMatrix::<f64, 2, 2>::identity() * self.eps;
+        let s = c * hk * c.transpose() + r;
+        let s_inv = cholesky(&((s + s.transpose()) * 0.5), "pf innovation covariance")?.inverse();
+        let kx = hk * c.transpose() * s_inv;
+        let kw = d.transpose() * s_inv * self.w_var;
+        Ok(Kernel {
+            m,
+            lk,
+            s_inv,
+            kx,
+            kw,
+            c,
+            d,
+        })
+    }
+
+    /// The kernel locations (shrunk towards the mean) weighted by their predictive
+    /// likelihoods N(y; C m_i, S), normalised, resampled when the effective sample size falls
+    /// below half the particles; returns the effective sample size as a fraction.
+    fn weigh_kernels(&mut self, y: V2, kernel: &Kernel) -> Result<f64, Error> {
+        let n = self.n;
+        let shrink = (1.0 - self.h2).sqrt();
+        for i in 0..n {
+            let li = kernel.m + (self.x[i] - kernel.m) * shrink;
+            let res = y - kernel.c * li;
+            self.loc[i] = li;
+            self.lw_next[i] = self.lw[i] - 0.5 * (res.transpose() * kernel.s_inv * res)[0];
+        }
+        let t = log_sum_exp(&self.lw_next);
+        if !t.is_finite() {
+            return Err(Error::Numerical {
+                what: "pf: every kernel has zero likelihood",
+            });
+        }
+        let mut sum_w2 = 0.0;
+        for l in self.lw_next.iter_mut() {
+            *l -= t;
+            sum_w2 += (2.0 * *l).exp();
+        }
+        if 1.0 / sum_w2 < 0.5 * n as f64 {
+            systematic_resample(&self.lw_next, &self.loc, &mut self.next, &mut self.rng);
+            std::mem::swap(&mut self.loc, &mut self.next);
+            self.lw_next.fill(-(n as f64).ln());
+        }
+        Ok(1.0 / (sum_w2 * n as f64))
+    }
+
+    /// Each particle: (x̃, w̃) from its kernel's conditional given y (Matheron's rule), then
+    /// the move with the same w̃.
+    fn draw_conditional(&mut self, y: V2, kernel: &Kernel, step: &Move) {
+        let (sd, se) = (self.w_var.sqrt(), self.eps.sqrt());
+        let (c, d) = (kernel.c, kernel.d);
+        for (li, out) in self.loc.iter().zip(self.next.iter_mut()) {
+            let xi = V3::new(self.rng.normal(), self.rng.normal(), self.rng.normal());
+            let xs = li + kernel.lk * xi;
+            let ws = sd * self.rng.normal();
+            let mut ys = c * xs + d * ws;
+            if se > 0.0 {
+                ys += V2::new(self.rng.normal(), self.rng.normal()) * se;
+            }
+            let inn = y - ys;
+            *out = step.apply(&(xs + kernel.kx * inn), ws + (kernel.kw * inn)[0]);
+        }
+    }
+
+    /// The prediction x̂_{k+1} (the weighted mean) and its covariance Σ w (x − x̂)(x − x̂)ᵀ
+    /// (each term exactly symmetric) from the moved particles, then the commit: the scratch
+    /// space becomes the cloud, `y_next` the stored measurement.
+    fn commit(&mut self, ess: f64, y_next: Option<V2>) -> Result<(), Error> {
         let t = log_sum_exp(&self.lw_next);
         let mut mean = V3::zeros();
         for (x, &l) in self.next.iter().zip(&self.lw_next) {
@@ -270,22 +303,43 @@ impl CoupledPf {
                 what: "pf: predicted particles",
             });
         }
-        // Its covariance: Σ w (x − x̂)(x − x̂)ᵀ (each term exactly symmetric).
         let mut cov = M3::zeros();
         for (x, &l) in self.next.iter().zip(&self.lw_next) {
             let d = x - mean;
             cov += d * d.transpose() * (l - t).exp();
         }
-        // Commit.
         std::mem::swap(&mut self.x, &mut self.next);
         std::mem::swap(&mut self.lw, &mut self.lw_next);
         self.mean = mean;
         self.cov = cov;
         self.ess = ess;
         self.y = y_next;
-        self.k = k + 1;
+        self.k += 1;
         Ok(())
     }
+}
+
+/// The plant's move at instant k: x' = A x + g(x) + B w.
+struct Move {
+    a: M3,
+    b: V3,
+}
+
+impl Move {
+    fn apply(&self, x: &V3, w: f64) -> V3 {
+        self.a * x + Seed003Example.eval(x) + self.b * w
+    }
+}
+
+/// The update's kernel ([`CoupledPf::kernel`]).
+struct Kernel {
+    m: V3,
+    lk: M3,
+    s_inv: SMatrix<f64, 2, 2>,
+    kx: SMatrix<f64, 3, 2>,
+    kw: SMatrix<f64, 1, 2>,
+    c: SMatrix<f64, 2, 3>,
+    d: V2,
 }
 
 impl std::fmt::Debug for CoupledPf {

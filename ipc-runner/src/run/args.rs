@@ -269,7 +269,7 @@ impl RunArgs {
             .saturating_add(mcap);
         let pf = product(&[
             particles as u64,
-            crate::eval::pf_bytes_per_particle(nx as usize),
+            crate::estimators::pf_bytes_per_particle(nx as usize),
         ]);
         // The estimate publisher's data segment: iceoryx2 sizes it by the QoS of whoever
         // created `<prefix>/estimates`, accepted up to `QOS_LIMIT` (docs/wire.md).
