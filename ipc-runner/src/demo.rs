@@ -356,60 +356,148 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
     }
     // SIGINT/SIGTERM/SIGHUP set a flag from here on (the loop ends, the child is told).
     estpipe_process::signal::install();
-    let (scenario_name, scenario) = demo_scenario(args)?;
-    // Without --steps, the default horizon of `channel-sim` and `eval`.
-    let steps = args.steps.unwrap_or(DEFAULT_STEPS);
-    let particles = args.estimator.particle_count();
-    args.check_outputs(scenario.nx(), particles)?;
-    let source = std::sync::Arc::new(Source::of_scenario(&*scenario, args.seed, args.run));
-    let spec = std::sync::Arc::clone(&source.spec);
-    let make = select::estimators_with(
-        source,
-        &args.estimator,
-        select::Experiment {
-            seed: args.seed,
-            run: args.run,
-            horizon: steps,
-        },
-    )
-    .map_err(|e| crate::limits::BadInput(format!("{e:#}")))?;
-    args.check_memory(spec.nx(), spec.nodes(), make()?.len(), particles)?;
-    let prefix = args.prefix.clone();
-    refuse_busy_prefix(&prefix)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output directory {:?}", args.out))?;
-
-    // With --via zenoh the publisher writes to its own prefix and two bridges carry its slots
-    // to the runner's (the estimator side first: it waits for the runner, the sensor side
-    // for it, and the publisher starts when the sensor side subscribes).
-    let (pub_prefix, mut bridges) = match args.via {
-        Via::Shm => (prefix.clone(), Vec::new()),
-        Via::Zenoh => start_bridges(&prefix, &args.out)?,
-    };
-    let mut nodes = match args.sensor_node {
-        Some(SensorNodes::Qemu) => Some(crate::sensor_nodes::QemuNodes::start(
-            &args.node_firmware,
-            spec.nodes(),
-            &args.out,
-        )?),
-        None => None,
-    };
-    let mut cmd = publisher_args(args, &scenario_name, steps, &pub_prefix, nodes.as_ref())?;
-    let child = cmd
-        .spawn()
-        .with_context(|| format!("cannot start the publisher {cmd:?}"))?;
-    let child_pid = child.id();
-    let mut guard = ChildGuard(Some(child));
-    let publisher = match &args.channel_sim {
-        Some(p) => format!("the publisher {}", p.display()),
-        None => "the publisher (ipc-runner channel-sim)".to_string(),
-    };
-    let mut rargs = runner_args(args, &scenario_name, &prefix, steps);
+    let setup = Setup::check(args)?;
+    let mut children = Children::start(args, &setup)?;
+    let mut rargs = runner_args(args, &setup.scenario_name, &setup.prefix, setup.steps);
     let view = crate::view::View::start(&args.view)?;
     rargs.view_tap = view.tap();
-    announce(args, &scenario_name, steps, child_pid, nodes.as_ref());
+    announce(
+        args,
+        &setup.scenario_name,
+        setup.steps,
+        children.child_pid,
+        children.nodes.as_ref(),
+    );
+    let Some((report, traj)) = stream(args, &rargs, &setup, &mut children)? else {
+        return Ok(2);
+    };
+    // The loop's subscriber is gone: a child that completed its stream leaves by itself; one
+    // that is still running after a stop or a loss is told (SIGTERM), and killed if it must.
+    let completed = matches!(
+        report.ending,
+        run::Ending::Completed | run::Ending::PublisherStopped
+    );
+    end_children(
+        &mut children.guard,
+        &children.publisher,
+        children.nodes.as_mut(),
+        &mut children.bridges,
+        completed,
+    )?;
+    run::finish(&rargs, &report, &traj, setup.spec.ny())?;
+    write_outputs(args, &setup, &report, &traj);
+    view.end();
+    Ok(run::exit_code(&report))
+}
 
-    let bar = progress_bar(args.quiet, steps);
+/// What the demo runs, once its flags, memory and prefix are checked and its output
+/// directory made.
+struct Setup {
+    scenario_name: String,
+    scenario: Box<dyn channel_sim::Scenario>,
+    steps: u32,
+    spec: std::sync::Arc<estpipe_spec::EstimatorSpec>,
+    make: select::EstimatorFactory,
+    prefix: String,
+}
+
+impl Setup {
+    fn check(args: &DemoArgs) -> Result<Self> {
+        let (scenario_name, scenario) = demo_scenario(args)?;
+        // Without --steps, the default horizon of `channel-sim` and `eval`.
+        let steps = args.steps.unwrap_or(DEFAULT_STEPS);
+        let particles = args.estimator.particle_count();
+        args.check_outputs(scenario.nx(), particles)?;
+        let source = std::sync::Arc::new(Source::of_scenario(&*scenario, args.seed, args.run));
+        let spec = std::sync::Arc::clone(&source.spec);
+        let make = select::estimators_with(
+            source,
+            &args.estimator,
+            select::Experiment {
+                seed: args.seed,
+                run: args.run,
+                horizon: steps,
+            },
+        )
+        .map_err(|e| crate::limits::BadInput(format!("{e:#}")))?;
+        args.check_memory(spec.nx(), spec.nodes(), make()?.len(), particles)?;
+        let prefix = args.prefix.clone();
+        refuse_busy_prefix(&prefix)?;
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("cannot create output directory {:?}", args.out))?;
+        Ok(Self {
+            scenario_name,
+            scenario,
+            steps,
+            spec,
+            make,
+            prefix,
+        })
+    }
+}
+
+/// The demo's children. Dropped in field order, as they were when they were locals of
+/// `main`: the publisher first, then the sensor nodes, then the bridges.
+struct Children {
+    guard: ChildGuard,
+    nodes: Option<crate::sensor_nodes::QemuNodes>,
+    bridges: Vec<(&'static str, ChildGuard)>,
+    child_pid: u32,
+    /// The publisher as the messages name it.
+    publisher: String,
+}
+
+impl Children {
+    fn start(args: &DemoArgs, setup: &Setup) -> Result<Self> {
+        // With --via zenoh the publisher writes to its own prefix and two bridges carry its
+        // slots to the runner's (the estimator side first: it waits for the runner, the
+        // sensor side for it, and the publisher starts when the sensor side subscribes).
+        let (pub_prefix, bridges) = match args.via {
+            Via::Shm => (setup.prefix.clone(), Vec::new()),
+            Via::Zenoh => start_bridges(&setup.prefix, &args.out)?,
+        };
+        let nodes = match args.sensor_node {
+            Some(SensorNodes::Qemu) => Some(crate::sensor_nodes::QemuNodes::start(
+                &args.node_firmware,
+                setup.spec.nodes(),
+                &args.out,
+            )?),
+            None => None,
+        };
+        let mut cmd = publisher_args(
+            args,
+            &setup.scenario_name,
+            setup.steps,
+            &pub_prefix,
+            nodes.as_ref(),
+        )?;
+        let child = cmd
+            .spawn()
+            .with_context(|| format!("cannot start the publisher {cmd:?}"))?;
+        let child_pid = child.id();
+        let publisher = match &args.channel_sim {
+            Some(p) => format!("the publisher {}", p.display()),
+            None => "the publisher (ipc-runner channel-sim)".to_string(),
+        };
+        Ok(Self {
+            guard: ChildGuard(Some(child)),
+            nodes,
+            bridges,
+            child_pid,
+            publisher,
+        })
+    }
+}
+
+/// The runner's loop over the publisher's stream, with the progress bar; `None` when the
+/// publisher ended before its first slot (the error is printed: exit code 2).
+fn stream(
+    args: &DemoArgs,
+    rargs: &RunArgs,
+    setup: &Setup,
+    children: &mut Children,
+) -> Result<Option<(run::RunReport, run::Trajectories)>> {
+    let bar = progress_bar(args.quiet, setup.steps);
     let mut progress = |k: u32, c: &run::assemble::Counts| {
         bar.set_position(u64::from(k));
         bar.set_message(format!(
@@ -418,6 +506,7 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         ));
     };
     let mut exited: Option<ExitStatus> = None;
+    let (guard, publisher) = (&mut children.guard, &children.publisher);
     let mut peer = || -> Option<String> {
         let s = guard.0.as_mut()?.try_wait().ok()??;
         exited = Some(s);
@@ -428,37 +517,32 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         peer: Some(&mut peer),
         ..Hooks::default()
     };
-    let result = run::run_loop(&rargs, &spec, &make, hooks);
+    let result = run::run_loop(rargs, &setup.spec, &setup.make, hooks);
     bar.finish_and_clear();
-    let (report, traj) = match result {
-        Ok(r) => r,
+    match result {
+        Ok(r) => Ok(Some(r)),
         // The publisher ended before its first slot: a `--channel-sim` that is no publisher,
         // or one that refused its arguments or its environment (its own error came first).
         Err(e) if exited.is_some() => {
             estpipe_process::errln!("demo: error: {e:#}");
-            return Ok(2);
+            Ok(None)
         }
-        Err(e) => return Err(e),
-    };
-    // The loop's subscriber is gone: a child that completed its stream leaves by itself; one
-    // that is still running after a stop or a loss is told (SIGTERM), and killed if it must.
-    let completed = matches!(
-        report.ending,
-        run::Ending::Completed | run::Ending::PublisherStopped
-    );
-    end_children(
-        &mut guard,
-        &publisher,
-        nodes.as_mut(),
-        &mut bridges,
-        completed,
-    )?;
-    run::finish(&rargs, &report, &traj, spec.ny())?;
+        Err(e) => Err(e),
+    }
+}
+
+/// The plots and the summary, after `run::finish` wrote the CSVs and the report.
+fn write_outputs(
+    args: &DemoArgs,
+    setup: &Setup,
+    report: &run::RunReport,
+    traj: &run::Trajectories,
+) {
     let plot = args.plot_path();
-    if let Err(e) = crate::plot::trajectories::plot(&traj, &plot, scenario.name()) {
+    if let Err(e) = crate::plot::trajectories::plot(traj, &plot, setup.scenario.name()) {
         estpipe_process::errln!("demo: no plot ({e:#})");
     }
-    latency_plots(args, &scenario_name, &report, &traj);
+    latency_plots(args, &setup.scenario_name, report, traj);
     estpipe_process::outln!("{}", report.summary());
     if args.via == Via::Zenoh {
         estpipe_process::outln!("{}", bridge_summary(&args.out));
@@ -469,8 +553,6 @@ pub fn main(args: &DemoArgs) -> Result<i32> {
         plot.display(),
         args.out.display()
     );
-    view.end();
-    Ok(run::exit_code(&report))
 }
 
 /// The scenario by `--scenario`, `--config`, or the default (its fallback where this build

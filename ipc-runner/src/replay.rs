@@ -131,18 +131,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     // SIGINT/SIGTERM/SIGHUP set a flag from here on: a replay stops between rows or instants
     // and writes whole rows of what it computed (issue #39: it was killed mid-row).
     estpipe_process::signal::install();
-    let outputs = given(&[
-        ("--output", args.output.as_deref()),
-        ("--mcap", args.mcap.as_deref()),
-    ]);
-    if !outputs.is_empty() {
-        let inputs = given(&[
-            ("--input", Some(args.input.as_path())),
-            ("--config", args.config.as_deref()),
-            ("--estimator-spec", args.estimator_spec.as_deref()),
-        ]);
-        check_outputs(&outputs, &inputs)?;
-    }
+    check_replay_outputs(args)?;
     let source = std::sync::Arc::new(Source::resolve(
         &args.scenario,
         args.config.as_deref(),
@@ -152,13 +141,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     )?);
     let spec = &source.spec;
     let (nx, ny, nodes) = (spec.nx(), spec.ny(), spec.nodes());
-    let particles = args.estimator.particle_count();
-    let budget = Budget::mib(args.max_memory);
-    let pf = product(&[
-        particles as u64,
-        crate::eval::pf_bytes_per_particle_for(spec),
-    ]);
-    budget.check(&format!("--particles {}", particles), pf)?;
+    let particles = ParticleBudget::check(args, spec)?;
     let factory = |horizon: u32| {
         select::estimators_with(
             source.clone(),
@@ -173,42 +156,22 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
     };
     // The estimators' count, for the bytes per instant (the log gives the horizon).
     let n_est = factory(1)?()?.len() as u64;
-    // The instants' vector is held while it grows (the old and the new block at once: at
-    // most 1.5 times its final size, `slot_log::read_slots_within`), then the estimates.
-    let mut per_instant =
-        size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
-    if args.mcap.is_some() {
-        per_instant = per_instant.saturating_add(product(&[n_est, 8 * (nx * nx) as u64 + 4]));
-    }
-    // The particles must leave room for at least one instant, or the log's first row would
-    // be refused as "beyond the row limit" without a word about the particles.
-    budget.check(
-        &format!("--particles {} and one instant", particles),
-        pf.saturating_add(per_instant),
-    )?;
-    let max_instants = budget.bytes.saturating_sub(pf) / per_instant;
-    let log = match read_slots_within(&args.input, nodes, ny, max_instants) {
-        Err(e) if e.downcast_ref::<Interrupted>().is_some() => {
-            estpipe_process::errln!(
-                "ipc-runner: replay stopped by {} ({e}); nothing stepped, nothing written",
-                estpipe_process::signal::termination_signal().unwrap_or("a signal")
-            );
-            return Ok(EXIT_INTERRUPTED);
-        }
-        r => r?,
+    let max_instants = particles.instants(args, nx, n_est)?;
+    let Some(log) = read_log(args, nodes, ny, max_instants)? else {
+        return Ok(EXIT_INTERRUPTED);
     };
-    let instants = &log.instants;
-    let make = factory(u32::try_from(instants.len()).unwrap_or(u32::MAX))?;
+    let make = factory(u32::try_from(log.instants.len()).unwrap_or(u32::MAX))?;
     let mut estimators = make()?;
     let mut cov = args.mcap.as_ref().map(|_| Covariances::default());
-    let (est, rejected) = run_estimators(&mut estimators, instants, &log.late, nx, cov.as_mut());
+    let (est, rejected) =
+        run_estimators(&mut estimators, &log.instants, &log.late, nx, cov.as_mut());
     let stepped = if estimators.is_empty() || nx == 0 {
-        instants.len()
+        log.instants.len()
     } else {
         est.len() / (nx * estimators.len())
     };
-    let interrupted = stepped < instants.len();
-    let instants = &instants[..stepped];
+    let interrupted = stepped < log.instants.len();
+    let instants = &log.instants[..stepped];
     if interrupted {
         estpipe_process::errln!(
             "ipc-runner: replay stopped by {} after {stepped} instants; the estimates so far \
@@ -216,6 +179,131 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             estpipe_process::signal::termination_signal().unwrap_or("a signal")
         );
     }
+    print_slot_counts(args, nodes, instants, &log.late);
+    print_final_estimates(&estimators, &rejected, nx, instants.is_empty());
+    if let Some(p) = &args.output {
+        write_estimates(p, &estimators, nx, instants, &est)?;
+        estpipe_process::outln!("estimates written to {p:?}");
+    }
+    if let (Some(p), Some(cov)) = (&args.mcap, &cov) {
+        let names: Vec<String> = estimators.iter().map(|e| e.name().to_string()).collect();
+        let scenario = args
+            .estimator_spec
+            .as_ref()
+            .map_or_else(|| spec_name(args), |p| p.display().to_string());
+        write_mcap(p, &scenario, nx, &names, instants, &est, cov)?;
+        estpipe_process::outln!("MCAP written to {p:?}");
+    }
+    Ok(exit_code(interrupted, instants.len()))
+}
+
+/// The log, or `None` when a signal stopped the reading (said on stderr).
+fn read_log(
+    args: &ReplayArgs,
+    nodes: usize,
+    ny: usize,
+    max_instants: u64,
+) -> Result<Option<crate::slot_log::SlotLog>> {
+    match read_slots_within(&args.input, nodes, ny, max_instants) {
+        Err(e) if e.downcast_ref::<Interrupted>().is_some() => {
+            estpipe_process::errln!(
+                "ipc-runner: replay stopped by {} ({e}); nothing stepped, nothing written",
+                estpipe_process::signal::termination_signal().unwrap_or("a signal")
+            );
+            Ok(None)
+        }
+        r => r.map(Some),
+    }
+}
+
+/// 130 when a signal came, whether it cut the stepping short (`interrupted`) or came after
+/// all `stepped` instants; else 0.
+fn exit_code(interrupted: bool, stepped: usize) -> i32 {
+    if !interrupted && estpipe_process::signal::termination_requested() {
+        // The signal came after the last instant was stepped: nothing was left out, but the
+        // user asked to stop and a script must see it (exit 130, as when stepping stopped).
+        estpipe_process::errln!(
+            "ipc-runner: replay stopped by {} after all {} instants were stepped; every \
+             estimate was written",
+            estpipe_process::signal::termination_signal().unwrap_or("a signal"),
+            stepped
+        );
+        return EXIT_INTERRUPTED;
+    }
+    if interrupted {
+        EXIT_INTERRUPTED
+    } else {
+        0
+    }
+}
+
+/// `--output` and `--mcap` must not overwrite an input or each other.
+fn check_replay_outputs(args: &ReplayArgs) -> Result<()> {
+    let outputs = given(&[
+        ("--output", args.output.as_deref()),
+        ("--mcap", args.mcap.as_deref()),
+    ]);
+    if !outputs.is_empty() {
+        let inputs = given(&[
+            ("--input", Some(args.input.as_path())),
+            ("--config", args.config.as_deref()),
+            ("--estimator-spec", args.estimator_spec.as_deref()),
+        ]);
+        check_outputs(&outputs, &inputs)?;
+    }
+    Ok(())
+}
+
+/// `--max-memory` and the particles' share of it, checked before the log is read.
+struct ParticleBudget {
+    budget: Budget,
+    particles: usize,
+    /// The particle filters' bytes.
+    pf: u64,
+}
+
+impl ParticleBudget {
+    fn check(args: &ReplayArgs, spec: &estpipe_spec::EstimatorSpec) -> Result<Self> {
+        let particles = args.estimator.particle_count();
+        let budget = Budget::mib(args.max_memory);
+        let pf = product(&[
+            particles as u64,
+            crate::eval::pf_bytes_per_particle_for(spec),
+        ]);
+        budget.check(&format!("--particles {}", particles), pf)?;
+        Ok(Self {
+            budget,
+            particles,
+            pf,
+        })
+    }
+
+    /// The instants the log may span in what the particles of `n_est` estimators leave.
+    fn instants(&self, args: &ReplayArgs, nx: usize, n_est: u64) -> Result<u64> {
+        // The instants' vector is held while it grows (the old and the new block at once: at
+        // most 1.5 times its final size, `slot_log::read_slots_within`), then the estimates.
+        let mut per_instant =
+            size_of::<LoggedInstant>() as u64 * 3 / 2 + product(&[8, n_est, nx as u64]);
+        if args.mcap.is_some() {
+            per_instant = per_instant.saturating_add(product(&[n_est, 8 * (nx * nx) as u64 + 4]));
+        }
+        // The particles must leave room for at least one instant, or the log's first row
+        // would be refused as "beyond the row limit" without a word about the particles.
+        self.budget.check(
+            &format!("--particles {} and one instant", self.particles),
+            self.pf.saturating_add(per_instant),
+        )?;
+        Ok(self.budget.bytes.saturating_sub(self.pf) / per_instant)
+    }
+}
+
+/// The slots replayed, by what became of them, and the late ones.
+fn print_slot_counts(
+    args: &ReplayArgs,
+    nodes: usize,
+    instants: &[LoggedInstant],
+    late: &[(u32, Observation)],
+) {
     let count = |f: &dyn Fn(&Observation) -> bool| -> usize {
         instants
             .iter()
@@ -236,10 +324,10 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
         args.input,
         instants.len() * nodes - delivered - ipc_lost - net_lost
     );
-    if !log.late.is_empty() {
+    if !late.is_empty() {
         estpipe_process::outln!(
             "{} slot(s) arrived late: {}",
-            log.late.len(),
+            late.len(),
             if args.estimator.lag > 0 {
                 format!(
                     "folded in where at most --lag {} instants late, lost otherwise",
@@ -250,7 +338,15 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             }
         );
     }
-    let ne = estimators.len();
+}
+
+/// Each estimator's rejections, final estimate and gate counts.
+fn print_final_estimates(
+    estimators: &[Box<dyn Estimator>],
+    rejected: &[u64],
+    nx: usize,
+    none_stepped: bool,
+) {
     for (e, est_e) in estimators.iter().enumerate() {
         // After the last instant and every late slot folded in after it.
         let mut last = [0.0; MAX_NX];
@@ -259,11 +355,7 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             "{:<12} rejected {:>5}   final estimate {:?}",
             est_e.name(),
             rejected[e],
-            if instants.is_empty() {
-                &[][..]
-            } else {
-                &last[..nx]
-            }
+            if none_stepped { &[][..] } else { &last[..nx] }
         );
         if let Some((tested, rejected)) = crate::estimators::gate_counts(&**est_e) {
             estpipe_process::outln!(
@@ -272,50 +364,38 @@ pub fn main(args: &ReplayArgs) -> Result<i32> {
             );
         }
     }
-    if let Some(p) = &args.output {
-        let mut w = std::io::BufWriter::new(
-            std::fs::File::create(p).with_context(|| format!("cannot create {p:?}"))?,
-        );
-        write!(w, "k").with_context(|| format!("cannot write {p:?}"))?;
-        for e in &estimators {
-            for j in 0..nx {
-                write!(w, ",{}_{j}", e.name()).with_context(|| format!("cannot write {p:?}"))?;
-            }
+}
+
+/// Writes `k,<est>_0..` rows of the instants stepped to `p`.
+fn write_estimates(
+    p: &std::path::Path,
+    estimators: &[Box<dyn Estimator>],
+    nx: usize,
+    instants: &[LoggedInstant],
+    est: &[f64],
+) -> Result<()> {
+    let ne = estimators.len();
+    let mut w = std::io::BufWriter::new(
+        std::fs::File::create(p).with_context(|| format!("cannot create {p:?}"))?,
+    );
+    write!(w, "k").with_context(|| format!("cannot write {p:?}"))?;
+    for e in estimators {
+        for j in 0..nx {
+            write!(w, ",{}_{j}", e.name()).with_context(|| format!("cannot write {p:?}"))?;
+        }
+    }
+    writeln!(w).with_context(|| format!("cannot write {p:?}"))?;
+    for (i, (k, _)) in instants.iter().enumerate() {
+        // Whole rows only; after the signal the rows computed are still written.
+        write!(w, "{k}").with_context(|| format!("cannot write {p:?}"))?;
+        for v in &est[i * nx * ne..(i + 1) * nx * ne] {
+            write!(w, ",{v:e}").with_context(|| format!("cannot write {p:?}"))?;
         }
         writeln!(w).with_context(|| format!("cannot write {p:?}"))?;
-        for (i, (k, _)) in instants.iter().enumerate() {
-            // Whole rows only; after the signal the rows computed are still written.
-            write!(w, "{k}").with_context(|| format!("cannot write {p:?}"))?;
-            for v in &est[i * nx * ne..(i + 1) * nx * ne] {
-                write!(w, ",{v:e}").with_context(|| format!("cannot write {p:?}"))?;
-            }
-            writeln!(w).with_context(|| format!("cannot write {p:?}"))?;
-        }
-        // Dropping a BufWriter loses its last error: a full disk must fail the command.
-        w.flush().with_context(|| format!("cannot write {p:?}"))?;
-        estpipe_process::outln!("estimates written to {p:?}");
     }
-    if let (Some(p), Some(cov)) = (&args.mcap, &cov) {
-        let names: Vec<String> = estimators.iter().map(|e| e.name().to_string()).collect();
-        let scenario = args
-            .estimator_spec
-            .as_ref()
-            .map_or_else(|| spec_name(args), |p| p.display().to_string());
-        write_mcap(p, &scenario, nx, &names, instants, &est, cov)?;
-        estpipe_process::outln!("MCAP written to {p:?}");
-    }
-    if !interrupted && estpipe_process::signal::termination_requested() {
-        // The signal came after the last instant was stepped: nothing was left out, but the
-        // user asked to stop and a script must see it (exit 130, as when stepping stopped).
-        estpipe_process::errln!(
-            "ipc-runner: replay stopped by {} after all {} instants were stepped; every \
-             estimate was written",
-            estpipe_process::signal::termination_signal().unwrap_or("a signal"),
-            instants.len()
-        );
-        return Ok(EXIT_INTERRUPTED);
-    }
-    Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
+    // Dropping a BufWriter loses its last error: a full disk must fail the command.
+    w.flush().with_context(|| format!("cannot write {p:?}"))?;
+    Ok(())
 }
 
 /// The scenario's name for the MCAP metadata: the preset, or the TOML file.

@@ -151,7 +151,6 @@ pub fn read_slots_within(
     if ny > MAX_NY || nodes > MAX_NODES {
         bail!("scenario dimensions exceed the wire limits");
     }
-    let bad = |m: String| anyhow::Error::new(BadInput(m));
     let name = path.display();
     let f = std::fs::File::open(path).map_err(|e| bad(format!("{name}: cannot open ({e})")))?;
     let max_lines =
@@ -162,49 +161,9 @@ pub fn read_slots_within(
         .ok_or_else(|| bad(format!("{name}: empty slot log (no header line)")))?
         .1
         .to_string();
-    let cols: Vec<&str> = header.split(',').map(str::trim).collect();
-    // A column the reader uses must be there once: with two `k` columns, which one is the
-    // instant is a guess.
-    let find = |c: &str| -> Result<Option<usize>> {
-        let mut at = cols
-            .iter()
-            .enumerate()
-            .filter(|(_, h)| **h == c)
-            .map(|(i, _)| i);
-        match (at.next(), at.next()) {
-            (Some(i), Some(j)) => Err(bad(format!(
-                "{name} line 1: column {c:?} appears twice (columns {} and {})",
-                i + 1,
-                j + 1
-            ))),
-            (first, _) => Ok(first),
-        }
-    };
-    let idx = |c: &str| -> Result<usize> {
-        find(c)?.ok_or_else(|| {
-            bad(format!(
-                "{name} line 1: header lacks column {c:?} (have {:?})",
-                cols.iter().take(24).collect::<Vec<_>>()
-            ))
-        })
-    };
-    let (ck, cn, cd, cf) = (idx("k")?, idx("node")?, idx("delivered")?, find("flags")?);
-    let ct = find("tokens")?;
-    let cl = find("late_after")?;
+    let cols = Columns::parse(&header, path, ny)?;
     let mut late: Vec<(u32, Observation)> = Vec::new();
-    let cy: Vec<usize> = (0..ny)
-        .map(|j| idx(&format!("y_{j}")))
-        .collect::<Result<_>>()?;
-    let mut out: Vec<LoggedInstant> = Vec::new();
-    let blank = |k: u32| {
-        let mut v = heapless::Vec::new();
-        for n in 0..nodes {
-            let _ = v.push(Observation::dropped(k, n as u8, ny as u8, FLAG_IPC_LOST));
-        }
-        v
-    };
-    // The line of each node's row in the current instant (0: none yet).
-    let mut seen = [0u64; MAX_NODES];
+    let mut instants = Instants::new(nodes, ny, max_instants);
     while let Some((ln, line)) = lines.next_line()? {
         // SIGINT/SIGTERM while a long log is read (`replay` installs the flag).
         if ln % 65_536 == 0 && estpipe_process::signal::termination_requested() {
@@ -213,65 +172,247 @@ pub fn read_slots_within(
         if line.trim().is_empty() {
             continue;
         }
-        let at = |field: &str, why: String| bad(format!("{name} line {ln}: {field}: {why}"));
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
-        let get = |c: usize| f.get(c).copied().unwrap_or("");
-        let k: u32 = get(ck)
+        let row = Row::split(path, ln, line);
+        let fields = row.fields(&cols, nodes)?;
+        instants.place(&row, &fields)?;
+        let o = Observation {
+            k: fields.k,
+            node: fields.node as u8,
+            delivered: fields.delivered,
+            ny: ny as u8,
+            y: row.y(&cols, fields.delivered)?,
+            flags: fields.flags,
+            tokens: fields.tokens,
+        };
+        if fields.late_after > 0 {
+            // Lost at its instant; held until the instant it came after (one per row, so
+            // bounded like the rows).
+            late.push((fields.late_after, o));
+        } else {
+            instants.out.last_mut().expect("pushed above").1[fields.node] = o;
+        }
+    }
+    Ok(SlotLog {
+        instants: instants.out,
+        late,
+    })
+}
+
+fn bad(m: String) -> anyhow::Error {
+    anyhow::Error::new(BadInput(m))
+}
+
+/// Where in a row each column the reader uses is.
+struct Columns {
+    k: usize,
+    node: usize,
+    delivered: usize,
+    flags: Option<usize>,
+    tokens: Option<usize>,
+    late_after: Option<usize>,
+    y: Vec<usize>,
+}
+
+impl Columns {
+    fn parse(header: &str, path: &Path, ny: usize) -> Result<Self> {
+        let name = path.display();
+        let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+        // A column the reader uses must be there once: with two `k` columns, which one is
+        // the instant is a guess.
+        let find = |c: &str| -> Result<Option<usize>> {
+            let mut at = cols
+                .iter()
+                .enumerate()
+                .filter(|(_, h)| **h == c)
+                .map(|(i, _)| i);
+            match (at.next(), at.next()) {
+                (Some(i), Some(j)) => Err(bad(format!(
+                    "{name} line 1: column {c:?} appears twice (columns {} and {})",
+                    i + 1,
+                    j + 1
+                ))),
+                (first, _) => Ok(first),
+            }
+        };
+        let idx = |c: &str| -> Result<usize> {
+            find(c)?.ok_or_else(|| {
+                bad(format!(
+                    "{name} line 1: header lacks column {c:?} (have {:?})",
+                    cols.iter().take(24).collect::<Vec<_>>()
+                ))
+            })
+        };
+        let (k, node, delivered, flags) =
+            (idx("k")?, idx("node")?, idx("delivered")?, find("flags")?);
+        let tokens = find("tokens")?;
+        let late_after = find("late_after")?;
+        let y = (0..ny)
+            .map(|j| idx(&format!("y_{j}")))
+            .collect::<Result<_>>()?;
+        Ok(Self {
+            k,
+            node,
+            delivered,
+            flags,
+            tokens,
+            late_after,
+            y,
+        })
+    }
+}
+
+/// One line of the log, split into its fields; its errors name the file, line and field.
+struct Row<'a> {
+    path: &'a Path,
+    ln: u64,
+    f: Vec<&'a str>,
+}
+
+/// A row's fields but the measurement, checked on their own (not against other rows).
+struct Fields {
+    k: u32,
+    node: usize,
+    delivered: bool,
+    flags: u32,
+    tokens: Option<u32>,
+    late_after: u32,
+}
+
+impl<'a> Row<'a> {
+    fn split(path: &'a Path, ln: u64, line: &'a str) -> Self {
+        Self {
+            path,
+            ln,
+            f: line.split(',').map(str::trim).collect(),
+        }
+    }
+
+    fn at(&self, field: &str, why: String) -> anyhow::Error {
+        bad(format!(
+            "{} line {}: {field}: {why}",
+            self.path.display(),
+            self.ln
+        ))
+    }
+
+    fn get(&self, c: usize) -> &'a str {
+        self.f.get(c).copied().unwrap_or("")
+    }
+
+    /// An optional column's value: absent or empty is `None`.
+    fn optional<T: std::str::FromStr>(&self, c: Option<usize>, field: &str) -> Result<Option<T>>
+    where
+        T::Err: std::fmt::Display,
+    {
+        match c {
+            Some(c) if !self.get(c).is_empty() => {
+                Ok(Some(self.get(c).parse().map_err(|e| {
+                    self.at(field, format!("{:?} ({e})", self.get(c)))
+                })?))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    fn fields(&self, cols: &Columns, nodes: usize) -> Result<Fields> {
+        let (ck, cn) = (cols.k, cols.node);
+        let k: u32 = self
+            .get(ck)
             .parse()
-            .map_err(|e| at("k", format!("{:?} is not an instant ({e})", get(ck))))?;
-        let node: usize = get(cn)
+            .map_err(|e| self.at("k", format!("{:?} is not an instant ({e})", self.get(ck))))?;
+        let node: usize = self
+            .get(cn)
             .parse()
-            .map_err(|e| at("node", format!("{:?} is not a node ({e})", get(cn))))?;
-        let delivered = match get(cd) {
+            .map_err(|e| self.at("node", format!("{:?} is not a node ({e})", self.get(cn))))?;
+        let delivered = match self.get(cols.delivered) {
             "1" | "true" => true,
             "0" | "false" => false,
-            v => return Err(at("delivered", format!("must be 0 or 1, got {v:?}"))),
+            v => return Err(self.at("delivered", format!("must be 0 or 1, got {v:?}"))),
         };
-        let flags: u32 = match cf {
-            Some(c) if !get(c).is_empty() => get(c)
-                .parse()
-                .map_err(|e| at("flags", format!("{:?} ({e})", get(c))))?,
-            _ => 0,
-        };
-        let tokens: Option<u32> = match ct {
-            Some(c) if delivered && !get(c).is_empty() => Some(
-                get(c)
-                    .parse()
-                    .map_err(|e| at("tokens", format!("{:?} ({e})", get(c))))?,
-            ),
-            _ => None,
+        let flags: u32 = self.optional(cols.flags, "flags")?.unwrap_or(0);
+        // Tokens are read from delivered slots only: a dropped slot's field is not checked.
+        let tokens: Option<u32> = if delivered {
+            self.optional(cols.tokens, "tokens")?
+        } else {
+            None
         };
         if k == 0 {
-            return Err(at("k", "k must be ≥ 1 (k = 0 is the prior)".into()));
+            return Err(self.at("k", "k must be ≥ 1 (k = 0 is the prior)".into()));
         }
-        let late_after: u32 = match cl {
-            Some(c) if !get(c).is_empty() => get(c)
-                .parse()
-                .map_err(|e| at("late_after", format!("{:?} ({e})", get(c))))?,
-            _ => 0,
-        };
+        let late_after: u32 = self.optional(cols.late_after, "late_after")?.unwrap_or(0);
         if late_after != 0 && late_after < k {
-            return Err(at(
+            return Err(self.at(
                 "late_after",
                 format!("{late_after} is before the slot's own instant k = {k}"),
             ));
         }
         if node >= nodes {
-            return Err(at(
+            return Err(self.at(
                 "node",
                 format!("node {node} but the scenario has {nodes} node(s)"),
             ));
         }
-        let last = out.last().map_or(0, |(lk, _)| *lk);
+        Ok(Fields {
+            k,
+            node,
+            delivered,
+            flags,
+            tokens,
+            late_after,
+        })
+    }
+
+    /// The measurement; zeros for a dropped slot, whose y fields are not read.
+    fn y(&self, cols: &Columns, delivered: bool) -> Result<[f64; MAX_NY]> {
+        let mut y = [0.0; MAX_NY];
+        if delivered {
+            for (j, &c) in cols.y.iter().enumerate() {
+                y[j] = self
+                    .get(c)
+                    .parse()
+                    .map_err(|e| self.at(&format!("y_{j}"), format!("{:?} ({e})", self.get(c))))?;
+            }
+        }
+        Ok(y)
+    }
+}
+
+/// The instants read so far, every k from 1 to the last row's, and which nodes the last
+/// instant has rows for.
+struct Instants {
+    out: Vec<LoggedInstant>,
+    /// The line of each node's row in the current instant (0: none yet).
+    seen: [u64; MAX_NODES],
+    nodes: usize,
+    ny: usize,
+    max_instants: u64,
+}
+
+impl Instants {
+    fn new(nodes: usize, ny: usize, max_instants: u64) -> Self {
+        Self {
+            out: Vec::new(),
+            seen: [0; MAX_NODES],
+            nodes,
+            ny,
+            max_instants,
+        }
+    }
+
+    /// Checks the row against the rows before it and the budget, and fills the instants up
+    /// to its k (the gap as lost).
+    fn place(&mut self, row: &Row<'_>, fields: &Fields) -> Result<()> {
+        let (k, node, max_instants) = (fields.k, fields.node, self.max_instants);
+        let last = self.out.last().map_or(0, |(lk, _)| *lk);
         if k < last {
-            return Err(at(
+            return Err(row.at(
                 "k",
                 format!("k = {k} after k = {last}; rows must be in increasing k"),
             ));
         }
         if u64::from(k) > max_instants {
             let per = size_of::<LoggedInstant>() as u64;
-            return Err(at(
+            return Err(row.at(
                 "k",
                 format!(
                     "k = {k} means replaying {k} instants (every k from 1, gaps as lost), \
@@ -282,28 +423,40 @@ pub fn read_slots_within(
             ));
         }
         if k > last {
-            seen = [0; MAX_NODES];
+            self.seen = [0; MAX_NODES];
         }
-        if seen[node] != 0 {
-            return Err(at(
+        if self.seen[node] != 0 {
+            return Err(row.at(
                 "node",
                 format!(
                     "(k = {k}, node {node}) again; line {} has it already (one row per slot)",
-                    seen[node]
+                    self.seen[node]
                 ),
             ));
         }
-        seen[node] = ln;
-        // Grown by doubling, but never past the budget's instants, and fallibly: a plain
-        // push doubled a 5-million-instant log to 8.4 million (3.36 GB) and aborted.
+        self.seen[node] = row.ln;
+        self.grow_to(k, row)?;
+        while self.out.last().map_or(0, |(lk, _)| *lk) < k {
+            let next = self.out.last().map_or(1, |(lk, _)| lk + 1);
+            let lost = self.lost(next);
+            self.out.push((next, lost));
+        }
+        Ok(())
+    }
+
+    /// Room for k instants. Grown by doubling, but never past the budget's instants, and
+    /// fallibly: a plain push doubled a 5-million-instant log to 8.4 million (3.36 GB) and
+    /// aborted.
+    fn grow_to(&mut self, k: u32, row: &Row<'_>) -> Result<()> {
+        let out = &mut self.out;
         let need = k as usize;
         if out.capacity() < need {
             let want = need
                 .max(out.capacity().saturating_mul(2))
-                .min(usize::try_from(max_instants).unwrap_or(usize::MAX))
+                .min(usize::try_from(self.max_instants).unwrap_or(usize::MAX))
                 .max(need);
             out.try_reserve_exact(want - out.len()).map_err(|e| {
-                at(
+                row.at(
                     "k",
                     format!(
                         "k = {k}: cannot allocate {want} instants ({e}); --max-memory MIB \
@@ -312,39 +465,22 @@ pub fn read_slots_within(
                 )
             })?;
         }
-        while out.last().map_or(0, |(lk, _)| *lk) < k {
-            let next = out.last().map_or(1, |(lk, _)| lk + 1);
-            out.push((next, blank(next)));
-        }
-        let mut y = [0.0; MAX_NY];
-        if delivered {
-            for (j, &c) in cy.iter().enumerate() {
-                y[j] = get(c)
-                    .parse()
-                    .map_err(|e| at(&format!("y_{j}"), format!("{:?} ({e})", get(c))))?;
-            }
-        }
-        let o = Observation {
-            k,
-            node: node as u8,
-            delivered,
-            ny: ny as u8,
-            y,
-            flags,
-            tokens,
-        };
-        if late_after > 0 {
-            // Lost at its instant; held until the instant it came after (one per row, so
-            // bounded like the rows).
-            late.push((late_after, o));
-        } else {
-            out.last_mut().expect("pushed above").1[node] = o;
-        }
+        Ok(())
     }
-    Ok(SlotLog {
-        instants: out,
-        late,
-    })
+
+    /// Instant k with every node's slot lost, until a row says otherwise.
+    fn lost(&self, k: u32) -> heapless::Vec<Observation, MAX_NODES> {
+        let mut v = heapless::Vec::new();
+        for n in 0..self.nodes {
+            let _ = v.push(Observation::dropped(
+                k,
+                n as u8,
+                self.ny as u8,
+                FLAG_IPC_LOST,
+            ));
+        }
+        v
+    }
 }
 
 #[cfg(test)]

@@ -172,6 +172,51 @@ impl CommandError {
 /// done, the summary, JSON and CSV are written whatever ends the evaluation (a signal: exit
 /// code 130; a failed run: 1), with the ending in both.
 pub fn run(args: EvalArgs) -> Result<(), CommandError> {
+    check_output_flags(&args)?;
+    // clap lets through one of the two, never both; neither is the default preset.
+    let scenario = scenario::resolve(
+        args.scenario
+            .as_deref()
+            .unwrap_or(crate::demo::DEFAULT_SCENARIO),
+        args.config.as_deref(),
+    )
+    .map_err(CommandError::usage)?;
+    let (threads, budget) = threads_and_budget(&args, &*scenario)?;
+    let options = options(&args, &*scenario)?;
+    let run_config = RunConfig {
+        // Always a count: rayon would read RAYON_NUM_THREADS again, unchecked.
+        threads: Some(threads),
+        progress: !args.quiet,
+    };
+    // The first call installs the handler (iceoryx2's, as `run` uses): from here on SIGINT
+    // and SIGTERM stop the evaluation after the runs in progress instead of killing it.
+    let _ = estpipe_process::signal::termination_requested();
+    let stop = estpipe_process::signal::termination_requested;
+    let control = Control {
+        budget,
+        progress_every: args.progress_every(),
+        stop: Some(&stop),
+    };
+    let mut result = evaluate_with(&*scenario, &options, FACTORIES, &run_config, &control)
+        .map_err(|e| {
+            if channel_sim::error::is_bad_input(&e) {
+                CommandError::usage(format!("{e:#}"))
+            } else {
+                CommandError::failure(format!("{e:#}"))
+            }
+        })?;
+    if let Some(c) = scenario
+        .as_any()
+        .downcast_ref::<scenario::ComposedScenario>()
+    {
+        result.warnings = c.warnings();
+    }
+    let failures = write_results(&args, &mut result, &*scenario, &options);
+    ending(&result, &options, failures)
+}
+
+/// `--plot`'s extension, and no output over an input or another output.
+fn check_output_flags(args: &EvalArgs) -> Result<(), CommandError> {
     if let Some(plot) = &args.plot {
         crate::plot::check_extension(plot).map_err(CommandError::usage)?;
     }
@@ -181,15 +226,14 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         ("--plot", args.plot.as_deref()),
     ]);
     let inputs = given(&[("--config", args.config.as_deref())]);
-    check_outputs(&outputs, &inputs).map_err(CommandError::usage)?;
-    // clap lets through one of the two, never both; neither is the default preset.
-    let scenario = scenario::resolve(
-        args.scenario
-            .as_deref()
-            .unwrap_or(crate::demo::DEFAULT_SCENARIO),
-        args.config.as_deref(),
-    )
-    .map_err(CommandError::usage)?;
+    check_outputs(&outputs, &inputs).map_err(CommandError::usage)
+}
+
+/// The worker threads, and the memory budget once the particles of every thread fit in it.
+fn threads_and_budget(
+    args: &EvalArgs,
+    scenario: &dyn channel_sim::Scenario,
+) -> Result<(usize, Budget), CommandError> {
     let threads = match args.threads {
         Some(t) => t as usize,
         None => default_threads(std::env::var_os("RAYON_NUM_THREADS").as_deref())
@@ -211,6 +255,14 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
             ]),
         )
         .map_err(CommandError::usage)?;
+    Ok((threads, budget))
+}
+
+/// The evaluation's options, with the estimators selected among those that build.
+fn options(
+    args: &EvalArgs,
+    scenario: &dyn channel_sim::Scenario,
+) -> Result<EvalOptions, CommandError> {
     let mut options = EvalOptions {
         runs: args.runs,
         horizon: args.horizon,
@@ -252,44 +304,26 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
             )));
         }
     }
-    let run_config = RunConfig {
-        // Always a count: rayon would read RAYON_NUM_THREADS again, unchecked.
-        threads: Some(threads),
-        progress: !args.quiet,
-    };
-    // The first call installs the handler (iceoryx2's, as `run` uses): from here on SIGINT
-    // and SIGTERM stop the evaluation after the runs in progress instead of killing it.
-    let _ = estpipe_process::signal::termination_requested();
-    let stop = estpipe_process::signal::termination_requested;
-    let control = Control {
-        budget,
-        progress_every: args.progress_every(),
-        stop: Some(&stop),
-    };
-    let mut result = evaluate_with(&*scenario, &options, FACTORIES, &run_config, &control)
-        .map_err(|e| {
-            if channel_sim::error::is_bad_input(&e) {
-                CommandError::usage(format!("{e:#}"))
-            } else {
-                CommandError::failure(format!("{e:#}"))
-            }
-        })?;
-    if let Some(c) = scenario
-        .as_any()
-        .downcast_ref::<scenario::ComposedScenario>()
-    {
-        result.warnings = c.warnings();
-    }
+    Ok(options)
+}
+
+/// Prints the summary and writes every output asked for; returns what failed.
+fn write_results(
+    args: &EvalArgs,
+    result: &mut super::EvalResult,
+    scenario: &dyn channel_sim::Scenario,
+    options: &EvalOptions,
+) -> Vec<String> {
     // What the runs computed goes out first, each output on its own: one that fails does
     // not keep the others from being written.
     let mut failures = Vec::new();
-    let bound = super::nn_bound::after_eval(&mut result, &*scenario, args.plot.as_deref());
+    let bound = super::nn_bound::after_eval(result, scenario, args.plot.as_deref());
     if let Err(e) = bound {
         failures.push(format!("{e:#}"));
     }
     estpipe_process::out!("{}", result.summary());
     if let Some(reference) = &args.paired {
-        estpipe_process::out!("{}", super::paired::table(&result, reference));
+        estpipe_process::out!("{}", super::paired::table(result, reference));
     }
     let mut wrote = Vec::new();
     if let Some(path) = &args.json {
@@ -305,12 +339,12 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
         }
     }
     if let Some(path) = &args.plot {
-        match crate::plot::plot(&result, path) {
+        match crate::plot::plot(result, path) {
             Ok(()) => wrote.push(path.clone()),
             Err(e) => failures.push(format!("{}: {e:#}", path.display())),
         }
         // Scenarios with a shared token bucket (seed 004): Fig. 2 beside the plot.
-        match crate::plot::tokens::plot_for(&*scenario, options.seed, options.horizon, path) {
+        match crate::plot::tokens::plot_for(scenario, options.seed, options.horizon, path) {
             Ok(Some(p)) => wrote.push(p),
             Ok(None) => {}
             Err(e) => failures.push(format!("token plot: {e:#}")),
@@ -319,6 +353,15 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     for path in &wrote {
         estpipe_process::outln!("wrote {}", path.display());
     }
+    failures
+}
+
+/// The command's outcome from how the evaluation ended and what failed to be written.
+fn ending(
+    result: &super::EvalResult,
+    options: &EvalOptions,
+    mut failures: Vec<String>,
+) -> Result<(), CommandError> {
     match result.ending {
         EvalEnding::Interrupted => {
             return Err(CommandError {

@@ -53,13 +53,15 @@ pub mod delay;
 pub mod nn_bound;
 mod options;
 pub mod paired;
+mod plan;
 pub mod report;
+mod scoring;
+mod transport;
 
 use anyhow::Context as _;
 use channel_sim::sim::{FLAG_CENSORED, FLAG_OCCLUDED, FLAG_RANDOM_LOSS, FLAG_TOKEN_BLOCKED};
-use channel_sim::sim::{FLAG_TRIGGERED, MAX_NODES, MAX_NX};
+use channel_sim::sim::{FLAG_TRIGGERED, MAX_NX};
 use channel_sim::{Observation, Scenario};
-use estpipe_wire::FLAG_IPC_LOST;
 use rayon::prelude::*;
 
 use crate::estimators::role::Role;
@@ -175,57 +177,12 @@ pub fn evaluate_with(
     config: &RunConfig,
     control: &Control<'_>,
 ) -> anyhow::Result<EvalResult> {
-    anyhow::ensure!(options.runs >= 1, "--runs must be at least 1");
-    anyhow::ensure!(options.horizon >= 1, "--steps must be at least 1");
-    // Not rayon's global pool, which panics when RAYON_NUM_THREADS asks for more threads
-    // than can start: the count is ours, and the pool built below is given it.
-    let threads = config
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    // Before anything is built: the particle filters allocate their particles at once.
-    let spec = scenario.estimator_spec();
-    let pf = product(&[
-        options.particles as u64,
-        pf_bytes_per_particle_for(&spec),
-        threads as u64 + 1,
-    ]);
-    control.budget.check(
-        &format!("--particles {} on {threads} thread(s)", options.particles),
-        pf,
-    )?;
-    let probe = RunStart {
-        seed: options.seed,
-        run: 0,
-        initial: None,
-    };
-    let (names, roles): (Vec<&'static str>, Vec<Role>) =
-        build_all(factories, &spec, options, &probe)?
-            .iter()
-            .map(|e| (e.name(), Role::of_estimator(e.name(), e.full_information())))
-            .unzip();
-    anyhow::ensure!(
-        !names.is_empty(),
-        "no estimator applies to scenario '{}'",
-        scenario.name()
-    );
-    let (fixed, per_run) = memory_need(scenario.nx(), names.len(), options.horizon, options.runs);
-    let held = fixed.saturating_add(pf);
-    // Each thread computes one run, and a chunk holds at least one run per thread.
-    let minimum = held.saturating_add(product(&[2, threads as u64, per_run]));
-    control.budget.check(
-        &format!(
-            "--runs {} --steps {} ({} estimators × {} states, {threads} thread(s))",
-            options.runs,
-            options.horizon,
-            names.len(),
-            scenario.nx()
-        ),
-        minimum,
-    )?;
-    let chunk = ((control.budget.bytes - held) / per_run.max(1))
-        .saturating_sub(threads as u64)
-        .clamp(threads as u64, CHUNK);
-
+    let plan::Plan {
+        threads,
+        names,
+        roles,
+        chunk,
+    } = plan::Plan::check(scenario, options, factories, config, control)?;
     let progress = Progress::new(
         format!("eval {}", scenario.name()),
         "runs",
@@ -382,144 +339,21 @@ pub fn run_one(
         built == names,
         "run {run} built estimators {built:?}, run 0 built {names:?}"
     );
-
-    let mut records: Vec<RunEstimator> = estimators
-        .iter()
-        .map(|_| RunEstimator {
-            sq_err: Some(vec![0.0; (horizon + 1) * nx]),
-            ..Default::default()
-        })
-        .collect();
-    let mut channel: Vec<NodeCounts> = (0..scenario.nodes()).map(NodeCounts::new).collect();
-    let mut trajectory = (run == 0).then(|| Trajectory::new(names, nx, horizon));
-    let mut xhat = [0.0; MAX_NX];
-
-    // k = 0: the prior against x_0.
-    let truth0 = sim.initial_truth();
-    let scored = truth0[..nx].iter().all(|v| v.is_finite());
-    let mut truth_nonfinite = u64::from(!scored);
-    for ((e, rec), j) in estimators.iter().zip(&mut records).zip(0..) {
-        let t = &truth0[..nx];
-        record_estimate(&**e, rec, 0, t, scored, &mut xhat, &mut trajectory, j);
-    }
-    if let Some(t) = &mut trajectory {
-        t.truth[..nx].copy_from_slice(&truth0[..nx]);
-    }
-
-    let transport = options.transport_loss > 0.0 || options.transport_delay.is_some();
-    let mut after_transport: heapless::Vec<Observation, MAX_NODES> = heapless::Vec::new();
-    // Late slots in flight: (the instant after whose step it arrives, the slot).
-    let mut in_flight: Vec<(u32, Observation)> = Vec::new();
     let nodes = scenario.nodes();
+    let mut records = scoring::Records::new(run, names, nx, horizon, nodes);
+    records.score_prior(&estimators, &sim.initial_truth()[..nx]);
+    let mut transport = transport::Transport::new(options, run);
     for k in 1..=options.horizon {
         let instant = sim.next_instant();
-        let truth = &instant.truth[..nx];
-        let scored = truth.iter().all(|v| v.is_finite());
-        truth_nonfinite += u64::from(!scored);
-        for (o, counts) in instant.obs.iter().zip(&mut channel) {
+        for (o, counts) in instant.obs.iter().zip(&mut records.channel) {
             counts.count(o);
         }
-        // The transport after the channel (module docs): what the estimators receive.
-        let received: &[Observation] = if !transport {
-            &instant.obs
-        } else {
-            after_transport.clear();
-            let nodes = instant.obs.len() as u64;
-            for (o, counts) in instant.obs.iter().zip(&mut channel) {
-                let seq = u64::from(o.k - 1) * nodes + u64::from(o.node);
-                let mut o = *o;
-                if options.transport_loss > 0.0
-                    && transport_lost(options.seed, run, seq, options.transport_loss)
-                {
-                    counts.transport_lost += 1;
-                    let flags = if options.transport_loss_unmarked {
-                        0
-                    } else {
-                        FLAG_IPC_LOST
-                    };
-                    o = Observation::dropped(o.k, o.node, o.ny, flags);
-                } else if let Some(delay) = &options.transport_delay {
-                    let d = delay.of(options.seed, run, seq);
-                    if d > 0 {
-                        counts.transport_late += 1;
-                        counts.transport_too_old += u64::from(d > options.lag);
-                        in_flight.push((k + d - 1, o));
-                        o = Observation::dropped(o.k, o.node, o.ny, FLAG_IPC_LOST);
-                    }
-                }
-                let _ = after_transport.push(o);
-            }
-            &after_transport
-        };
-        if let Some(t) = &mut trajectory {
-            t.truth[k as usize * nx..][..nx].copy_from_slice(truth);
-        }
-        for ((e, rec), j) in estimators.iter_mut().zip(&mut records).zip(0..) {
-            if rec.sq_err.is_none() {
-                continue;
-            }
-            let obs: &[Observation] = if e.full_information() {
-                match sim.raw_observations() {
-                    Some(raw) => raw,
-                    None => {
-                        rec.error = Some("needs the pre-channel observations".into());
-                        rec.sq_err = None;
-                        continue;
-                    }
-                }
-            } else {
-                received
-            };
-            match e.step(k, obs) {
-                Ok(()) => {
-                    let k = k as usize;
-                    record_estimate(&**e, rec, k, truth, scored, &mut xhat, &mut trajectory, j)
-                }
-                Err(err) => {
-                    rec.error = Some(format!("k = {k}: {err}"));
-                    rec.sq_err = None;
-                }
-            }
-        }
-        // The late slots arriving now, after instant k was stepped and scored (delay module
-        // docs): folded in by estimators with a history, the improvement seen from k + 1 on.
-        if !in_flight.is_empty() && options.lag > 0 {
-            fold_arrivals(k, nodes, &mut in_flight, &mut estimators, &records);
-        }
-        in_flight.retain(|(at, _)| *at > k);
+        let received = transport.pass(&instant.obs, k, &mut records.channel);
+        let raw = sim.raw_observations();
+        records.step(k, &mut estimators, received, raw, &instant.truth[..nx]);
+        transport.deliver(k, nodes, &mut estimators, &records.estimators);
     }
-    Ok(RunOutput {
-        run,
-        estimators: records,
-        channel,
-        trajectory,
-        truth_nonfinite,
-    })
-}
-
-/// Hands every slot of `in_flight` arriving after instant `k` to the estimators still running
-/// (each slot with the other nodes of its instant lost, [`crate::Estimator::fold_late`]).
-fn fold_arrivals(
-    k: u32,
-    nodes: usize,
-    in_flight: &mut [(u32, Observation)],
-    estimators: &mut [Box<dyn crate::Estimator>],
-    records: &[RunEstimator],
-) {
-    // Oldest instant first, as a receiver would order what it holds.
-    in_flight.sort_by_key(|(at, o)| (*at, o.k, o.node));
-    for (_, o) in in_flight.iter().filter(|(at, _)| *at == k) {
-        let mut obs: heapless::Vec<Observation, MAX_NODES> = heapless::Vec::new();
-        for n in 0..nodes {
-            let lost = Observation::dropped(o.k, n as u8, o.ny, FLAG_IPC_LOST);
-            let _ = obs.push(if n == usize::from(o.node) { *o } else { lost });
-        }
-        for (e, rec) in estimators.iter_mut().zip(records) {
-            if rec.sq_err.is_some() && !e.full_information() {
-                e.fold_late(o.k, &obs);
-            }
-        }
-    }
+    Ok(records.output(run))
 }
 
 /// Whether `eval`'s transport stage loses slot `seq` (`(k − 1)·nodes + node`) of run `run`:

@@ -32,12 +32,18 @@
 use std::fmt::Write as _;
 
 use channel_sim::Scenario;
-use serde::ser::{SerializeMap, Serializer};
 use serde::Serialize;
 
 use super::RunOutput;
-use crate::estimators::role::{figure, Role};
+use crate::estimators::role::Role;
 use crate::estimators::EvalOptions;
+use reduce::EstimatorAcc;
+
+mod channel;
+mod consistency;
+mod json;
+mod reduce;
+mod summary;
 
 /// Everything an evaluation produced.
 #[derive(Debug, Serialize)]
@@ -62,7 +68,7 @@ pub struct EvalResult {
     /// (run, k) instants whose truth was not finite, left out of every MSE.
     pub truth_nonfinite: u64,
     /// `--transport-loss` (not written when 0).
-    #[serde(skip_serializing_if = "is_zero_f64")]
+    #[serde(skip_serializing_if = "json::is_zero_f64")]
     pub transport_loss: f64,
     /// `--transport-loss-unmarked` (not written when false).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
@@ -70,20 +76,20 @@ pub struct EvalResult {
     /// `--transport-delay` (not written when every slot is on time).
     #[serde(
         skip_serializing_if = "Option::is_none",
-        serialize_with = "display_opt"
+        serialize_with = "json::display_opt"
     )]
     pub transport_delay: Option<super::delay::Delay>,
     /// `--lag` (not written when 0).
-    #[serde(skip_serializing_if = "is_zero_u32")]
+    #[serde(skip_serializing_if = "json::is_zero_u32")]
     pub lag: u32,
     /// `--loss-rate` of the `-mix` estimators (not written when 0).
-    #[serde(skip_serializing_if = "is_zero_f64")]
+    #[serde(skip_serializing_if = "json::is_zero_f64")]
     pub loss_rate: f64,
     /// `--gate P`, the innovation gate's probability (not written when off; docs/gate.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gate: Option<f64>,
     /// Per estimator, in registry order.
-    #[serde(serialize_with = "ordered_map")]
+    #[serde(serialize_with = "json::ordered_map")]
     pub estimators: Vec<(String, EstimatorResult)>,
     /// Channel statistics over all runs.
     pub channel: ChannelSummary,
@@ -100,7 +106,7 @@ pub struct EvalResult {
 pub struct EstimatorResult {
     /// Whose it is: "paper", "product", "baseline", "reference" or "oracle" (README.md's
     /// role legend), in the table and the JSON.
-    #[serde(serialize_with = "role_str")]
+    #[serde(serialize_with = "json::role_str")]
     pub role: Role,
     /// MSE(k), k = 0..=T.
     pub mse: Vec<f64>,
@@ -122,7 +128,7 @@ pub struct EstimatorResult {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gate: Option<GateTotals>,
     /// Named diagnostics, mean over valid runs per k.
-    #[serde(flatten, serialize_with = "ordered_map")]
+    #[serde(flatten, serialize_with = "json::ordered_map")]
     pub diagnostics: Vec<(String, Vec<f64>)>,
     /// Every valid run's index and its mean squared error over k = 1..=T, in run order (not
     /// written: for paired comparisons of evaluations with the same seed).
@@ -194,14 +200,14 @@ pub struct NodeCounts {
     pub occluded: u64,
     /// Slots lost by `eval`'s transport stage after the channel (`--transport-loss`; not
     /// written when 0). The counts above are the channel's, before that stage.
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(skip_serializing_if = "json::is_zero")]
     pub transport_lost: u64,
     /// Slots `eval`'s delaying transport made late (`--transport-delay`; not written when 0):
     /// missing at their instant, then folded in by the estimators with `--lag`.
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(skip_serializing_if = "json::is_zero")]
     pub transport_late: u64,
     /// Of those, the ones later than `--lag`: lost for good (not written when 0).
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(skip_serializing_if = "json::is_zero")]
     pub transport_too_old: u64,
     /// delivered / instants.
     pub delivery_rate: f64,
@@ -232,40 +238,6 @@ impl Trajectory {
     }
 }
 
-fn is_zero(v: &u64) -> bool {
-    *v == 0
-}
-
-fn is_zero_f64(v: &f64) -> bool {
-    *v == 0.0
-}
-
-fn is_zero_u32(v: &u32) -> bool {
-    *v == 0
-}
-
-/// An option written as its `Display` string (the form its flag takes).
-fn display_opt<S: Serializer, D: std::fmt::Display>(
-    v: &Option<D>,
-    s: S,
-) -> Result<S::Ok, S::Error> {
-    match v {
-        Some(d) => s.collect_str(d),
-        None => s.serialize_none(),
-    }
-}
-
-fn ordered_map<S: Serializer, V: Serialize>(
-    entries: &[(String, V)],
-    s: S,
-) -> Result<S::Ok, S::Error> {
-    let mut map = s.serialize_map(Some(entries.len()))?;
-    for (k, v) in entries {
-        map.serialize_entry(k, v)?;
-    }
-    map.end()
-}
-
 /// Sums over runs, fed in run order.
 pub(super) struct Accumulator {
     scenario: String,
@@ -278,20 +250,6 @@ pub(super) struct Accumulator {
     trajectory: Option<Trajectory>,
     next_run: u64,
     truth_nonfinite: u64,
-}
-
-#[derive(Default)]
-struct EstimatorAcc {
-    sum_sq: Vec<f64>,
-    /// Runs in `sum_sq` per k (those whose truth at k was finite).
-    n_k: Vec<u64>,
-    valid: u64,
-    run_avgs: Vec<f64>,
-    /// The run index of each of `run_avgs`.
-    run_ids: Vec<u64>,
-    diverged: u64,
-    first_error: Option<String>,
-    diag: Vec<(&'static str, Vec<f64>, Vec<u64>)>,
 }
 
 impl Accumulator {
@@ -311,11 +269,7 @@ impl Accumulator {
             roles: roles.to_vec(),
             estimators: names
                 .iter()
-                .map(|_| EstimatorAcc {
-                    sum_sq: vec![0.0; len],
-                    n_k: vec![0; options.horizon as usize + 1],
-                    ..Default::default()
-                })
+                .map(|_| EstimatorAcc::new(len, options.horizon as usize))
                 .collect(),
             channel: (0..scenario.nodes())
                 .map(|node| NodeCounts {
@@ -335,80 +289,10 @@ impl Accumulator {
         self.truth_nonfinite += out.truth_nonfinite;
         let (nx, t) = (self.nx, self.options.horizon as usize);
         for (acc, rec) in self.estimators.iter_mut().zip(out.estimators) {
-            let Some(sq) = rec.sq_err else {
-                acc.diverged += 1;
-                if acc.first_error.is_none() {
-                    acc.first_error = Some(format!(
-                        "run {}: {}",
-                        out.run,
-                        rec.error.unwrap_or_default()
-                    ));
-                }
-                continue;
-            };
-            acc.valid += 1;
-            // NaN marks an instant without a sample (non-finite truth, `record_estimate`).
-            let (mut run_sum, mut run_n) = (0.0, 0u64);
-            let per_k = acc
-                .sum_sq
-                .chunks_exact_mut(nx)
-                .zip(sq.chunks_exact(nx))
-                .zip(&mut acc.n_k)
-                .take(t + 1);
-            for (k, ((sums, sq_k), n)) in per_k.enumerate() {
-                if sq_k[0].is_nan() {
-                    continue;
-                }
-                for (s, v) in sums.iter_mut().zip(sq_k) {
-                    *s += v;
-                }
-                *n += 1;
-                if k > 0 {
-                    // Element by element: the same sum, bit for bit, as over the whole run.
-                    for v in sq_k {
-                        run_sum += v;
-                    }
-                    run_n += 1;
-                }
-            }
-            if run_n > 0 {
-                acc.run_avgs.push(run_sum / run_n as f64);
-                acc.run_ids.push(out.run);
-            }
-            for (j, (name, values)) in rec.diagnostics.into_iter().enumerate() {
-                // The same names in the same order run after run: index j first.
-                let slot = match acc.diag.get(j) {
-                    Some((n, _, _)) if *n == name => j,
-                    _ => match acc.diag.iter().position(|(n, _, _)| *n == name) {
-                        Some(i) => i,
-                        None => {
-                            acc.diag.push((name, vec![0.0; t + 1], vec![0; t + 1]));
-                            acc.diag.len() - 1
-                        }
-                    },
-                };
-                let (_, sums, counts) = &mut acc.diag[slot];
-                for ((s, c), v) in sums.iter_mut().zip(counts.iter_mut()).zip(&values) {
-                    if v.is_finite() {
-                        *s += v;
-                        *c += 1;
-                    }
-                }
-            }
+            acc.absorb(rec, out.run, nx, t);
         }
         for (total, c) in self.channel.iter_mut().zip(out.channel) {
-            total.instants += c.instants;
-            total.delivered += c.delivered;
-            total.dropped += c.dropped;
-            total.sent += c.sent;
-            total.triggered += c.triggered;
-            total.blocked += c.blocked;
-            total.censored += c.censored;
-            total.random_loss += c.random_loss;
-            total.occluded += c.occluded;
-            total.transport_lost += c.transport_lost;
-            total.transport_late += c.transport_late;
-            total.transport_too_old += c.transport_too_old;
+            total.absorb(&c);
         }
         if out.trajectory.is_some() {
             self.trajectory = out.trajectory;
@@ -422,68 +306,7 @@ impl Accumulator {
             .iter()
             .zip(self.roles)
             .zip(self.estimators)
-            .map(|((name, role), acc)| {
-                let n = acc.run_avgs.len() as f64;
-                let mean_k = |k: usize, v: f64| {
-                    if acc.n_k[k] == 0 {
-                        f64::NAN
-                    } else {
-                        v / acc.n_k[k] as f64
-                    }
-                };
-                let per_state: Vec<Vec<f64>> = (0..nx)
-                    .map(|i| (0..=t).map(|k| mean_k(k, acc.sum_sq[k * nx + i])).collect())
-                    .collect();
-                let mse: Vec<f64> = (0..=t)
-                    .map(|k| mean_k(k, acc.sum_sq[k * nx..][..nx].iter().sum::<f64>()))
-                    .collect();
-                let sampled: Vec<f64> = (1..=t)
-                    .filter(|&k| acc.n_k[k] > 0)
-                    .map(|k| mse[k])
-                    .collect();
-                let avg_mse = sampled.iter().sum::<f64>() / sampled.len() as f64;
-                let mean_run = acc.run_avgs.iter().sum::<f64>() / n;
-                let var = acc
-                    .run_avgs
-                    .iter()
-                    .map(|r| (r - mean_run).powi(2))
-                    .sum::<f64>()
-                    / (n - 1.0);
-                let diagnostics: Vec<(String, Vec<f64>)> = acc
-                    .diag
-                    .into_iter()
-                    .map(|(name, sums, counts)| {
-                        let mean = sums
-                            .iter()
-                            .zip(&counts)
-                            .map(|(s, &c)| if c == 0 { f64::NAN } else { s / c as f64 })
-                            .collect();
-                        (name.to_owned(), mean)
-                    })
-                    .collect();
-                let gate = GateTotals::of(&diagnostics, n as u64);
-                let run_averages = acc
-                    .run_ids
-                    .iter()
-                    .copied()
-                    .zip(acc.run_avgs.clone())
-                    .collect();
-                let result = EstimatorResult {
-                    role,
-                    run_averages,
-                    mse,
-                    avg_mse,
-                    avg_mse_se: (var / n).sqrt(),
-                    median_run_avg: median(acc.run_avgs),
-                    diverged_runs: acc.diverged,
-                    valid_runs: acc.valid,
-                    first_error: acc.first_error,
-                    mse_per_state: per_state,
-                    gate,
-                    diagnostics,
-                };
-                ((*name).to_owned(), result)
-            })
+            .map(|((name, role), acc)| ((*name).to_owned(), acc.result(role, nx, t)))
             .collect();
         let mut channel = self.channel;
         for c in &mut channel {
@@ -518,19 +341,6 @@ impl Accumulator {
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        (v[m - 1] + v[m]) / 2.0
-    }
-}
-
 impl EvalResult {
     /// The JSON document (pretty-printed, trailing newline).
     pub fn to_json(&self) -> String {
@@ -559,152 +369,15 @@ impl EvalResult {
     /// The human-readable summary table.
     pub fn summary(&self) -> String {
         let mut s = String::new();
-        let runs = match self.runs_requested {
-            Some(asked) => format!("{} of {asked} runs", self.runs),
-            None => format!("{} runs", self.runs),
-        };
-        let _ = writeln!(
-            s,
-            "scenario {}: {runs}, horizon {}, seed {}",
-            self.scenario, self.horizon, self.seed
-        );
-        match (self.ending, &self.error) {
-            (super::EvalEnding::Completed, _) => {}
-            (super::EvalEnding::Interrupted, _) => {
-                let _ = writeln!(s, "ended: interrupted (the runs done before the signal)");
-            }
-            (super::EvalEnding::Failed, e) => {
-                let _ = writeln!(
-                    s,
-                    "ended: failed ({}); the runs before it",
-                    e.as_deref().unwrap_or("?")
-                );
-            }
-        }
-        if self.truth_nonfinite > 0 {
-            let _ = writeln!(
-                s,
-                "truth not finite at {} (run, k) instant(s): left out of every MSE",
-                self.truth_nonfinite
-            );
-        }
-        // The name column fits the longest name (`fused-predict+gate`), 12 at least.
-        let w = (self.estimators.iter())
-            .map(|(n, _)| n.chars().count())
-            .fold(12, usize::max);
-        let _ = writeln!(
-            s,
-            "{:<w$} {:<9} {:>12} {:>12} {:>14} {:>9}",
-            "estimator", "role", "avg_mse", "± s.e.", "median_run_avg", "diverged"
-        );
-        for (name, r) in &self.estimators {
-            let _ = writeln!(
-                s,
-                "{:<w$} {:<9} {} {} {} {:>9}",
-                name,
-                r.role,
-                figure(r.avg_mse, 12),
-                figure(r.avg_mse_se, 12),
-                figure(r.median_run_avg, 14),
-                r.diverged_runs
-            );
-        }
-        if !self.estimators.is_empty() {
-            s.push_str(crate::estimators::role::MSE_NOTE);
-        }
-        // Consistency of an estimator's own covariance (diagnostics `inside_95`, `trace_p`).
-        for (name, r) in &self.estimators {
-            let get = |n: &str| r.diagnostics.iter().find(|(d, _)| d == n).map(|(_, v)| v);
-            if let (Some(inside), Some(tr)) = (get("inside_95"), get("trace_p")) {
-                let t = self.horizon as usize;
-                let avg = |v: &[f64]| v[1..].iter().sum::<f64>() / t as f64;
-                let worst = inside[1..].iter().copied().fold(f64::INFINITY, f64::min);
-                let above = (1..=t).filter(|&k| r.mse[k] > tr[k]).count();
-                let anees = get("nees").map_or(String::new(), |v| {
-                    format!("; ANEES {:.3} (n_x = {})", avg(v), r.mse_per_state.len())
-                });
-                let _ = writeln!(
-                    s,
-                    "{name}: error inside its 95 % ellipse in {:.2} % of run-instants (worst k: \
-                     {:.1} %); avg MSE {:.4} vs avg tr P {:.4}; MSE(k) > tr P(k) at {above} of \
-                     {t} instants{anees}",
-                    100.0 * avg(inside),
-                    100.0 * worst,
-                    r.avg_mse,
-                    avg(tr)
-                );
-            }
-        }
-        for (name, r) in &self.estimators {
-            if let (Some(g), Some(p)) = (r.gate, self.gate) {
-                let _ = writeln!(
-                    s,
-                    "{name}: innovation gate P = {p} rejected {} of {} measurements ({:.3} %; \
-                     1 − P = {:.3} %)",
-                    g.rejected,
-                    g.tested,
-                    100.0 * g.rejection_rate,
-                    100.0 * (1.0 - p)
-                );
-            }
-        }
+        summary::heading(self, &mut s);
+        summary::table(self, &mut s);
+        consistency::covariance_lines(self, &mut s);
+        consistency::gate_lines(self, &mut s);
         for w in &self.warnings {
             let _ = writeln!(s, "WARNING: {w}");
         }
-        if self.transport_loss > 0.0 {
-            let lost: u64 = self.channel.nodes.iter().map(|c| c.transport_lost).sum();
-            let slots: u64 = self.channel.nodes.iter().map(|c| c.instants).sum();
-            let _ = writeln!(
-                s,
-                "transport after the channel: {lost} of {slots} slots lost (p = {}), {}",
-                self.transport_loss,
-                if self.transport_loss_unmarked {
-                    "unmarked (the estimators see a dropout)"
-                } else {
-                    "marked lost (the estimators see a loss)"
-                }
-            );
-        }
-        if let Some(d) = self.transport_delay {
-            let late: u64 = self.channel.nodes.iter().map(|c| c.transport_late).sum();
-            let old: u64 = self.channel.nodes.iter().map(|c| c.transport_too_old).sum();
-            let slots: u64 = self.channel.nodes.iter().map(|c| c.instants).sum();
-            let _ = writeln!(
-                s,
-                "transport delay {d}: {late} of {slots} slots late; with --lag {} the estimators \
-                 folded in {} and {old} were too old (lost)",
-                self.lag,
-                late - old
-            );
-        }
-        if self.loss_rate > 0.0 {
-            let _ = writeln!(
-                s,
-                "the -mix estimators read a dropout as occluded or lost with p_loss = {}",
-                self.loss_rate
-            );
-        }
-        for c in &self.channel.nodes {
-            let _ = writeln!(
-                s,
-                "node {}: delivered {:.1} % ({} of {}), random loss {}, occluded {}, blocked {}, \
-                 triggered {}, censored {}",
-                c.node,
-                100.0 * c.delivery_rate,
-                c.delivered,
-                c.instants,
-                c.random_loss,
-                c.occluded,
-                c.blocked,
-                c.triggered,
-                c.censored
-            );
-        }
+        channel::transport_lines(self, &mut s);
+        channel::node_lines(self, &mut s);
         s
     }
-}
-
-/// A role as its word in the tables.
-fn role_str<S: Serializer>(role: &Role, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_str(role.as_str())
 }

@@ -302,31 +302,8 @@ where
     };
     let truth = series(&tr.truth);
     let estimates: Vec<Vec<(f64, f64)>> = tr.estimates.iter().map(|e| series(e)).collect();
-    let span = |pts: &[(f64, f64)]| {
-        pts.iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(p.1), hi.max(p.1))
-            })
-    };
-    // The axis fits the truth and every estimate that stays near it; one that leaves (a
-    // diverging EKF) is drawn where it is inside and named so, not allowed to flatten the rest.
-    let (t_lo, t_hi) = span(&truth);
-    let reach = 3.0 * (t_hi - t_lo).max(1e-9);
-    let near = |pts: &[(f64, f64)]| {
-        let (lo, hi) = span(pts);
-        !t_lo.is_finite() || (lo >= t_lo - reach && hi <= t_hi + reach)
-    };
-    let (lo, hi) = estimates
-        .iter()
-        .filter(|e| near(e))
-        .map(|e| span(e))
-        .fold((t_lo, t_hi), |(l, h), (a, b)| (l.min(a), h.max(b)));
-    let (lo, hi) = if lo.is_finite() && hi > lo {
-        let pad = 0.08 * (hi - lo);
-        (lo - pad, hi + pad)
-    } else {
-        (-1.0, 1.0)
-    };
+    let axis = StateAxis::fit(&truth, &estimates);
+    let (lo, hi) = (axis.lo, axis.hi);
     let mut chart = ChartBuilder::on(area)
         .caption(
             format!("run 0: state x{} — truth and estimates", i + 1),
@@ -348,7 +325,7 @@ where
     let mut entries = vec![("truth".to_owned(), BLACK, 2)];
     for (j, (points, name)) in estimates.into_iter().zip(&tr.names).enumerate() {
         let c = color(j);
-        let label = if near(&points) {
+        let label = if axis.near(&points) {
             (*name).to_owned()
         } else {
             format!("{name} (partly off scale)")
@@ -368,6 +345,59 @@ where
         entries.push((label, c, 1));
     }
     Ok(entries)
+}
+
+/// The y axis of a state's panel: it fits the truth and every estimate that stays near it;
+/// one that leaves (a diverging EKF) is drawn where it is inside and named so, not allowed to
+/// flatten the rest.
+struct StateAxis {
+    /// The truth's range.
+    t_lo: f64,
+    t_hi: f64,
+    /// How far beyond the truth's range an estimate may go and still be near.
+    reach: f64,
+    lo: f64,
+    hi: f64,
+}
+
+impl StateAxis {
+    fn fit(truth: &[(f64, f64)], estimates: &[Vec<(f64, f64)>]) -> Self {
+        let (t_lo, t_hi) = span(truth);
+        let reach = 3.0 * (t_hi - t_lo).max(1e-9);
+        let mut axis = Self {
+            t_lo,
+            t_hi,
+            reach,
+            lo: f64::NAN,
+            hi: f64::NAN,
+        };
+        let (lo, hi) = estimates
+            .iter()
+            .filter(|e| axis.near(e))
+            .map(|e| span(e))
+            .fold((t_lo, t_hi), |(l, h), (a, b)| (l.min(a), h.max(b)));
+        (axis.lo, axis.hi) = if lo.is_finite() && hi > lo {
+            let pad = 0.08 * (hi - lo);
+            (lo - pad, hi + pad)
+        } else {
+            (-1.0, 1.0)
+        };
+        axis
+    }
+
+    /// Whether the series stays within reach of the truth (or there is no truth to reach).
+    fn near(&self, pts: &[(f64, f64)]) -> bool {
+        let (lo, hi) = span(pts);
+        !self.t_lo.is_finite() || (lo >= self.t_lo - self.reach && hi <= self.t_hi + self.reach)
+    }
+}
+
+/// The least and greatest y of `pts` (∞, −∞ when there are none).
+fn span(pts: &[(f64, f64)]) -> (f64, f64) {
+    pts.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.1), hi.max(p.1))
+        })
 }
 
 #[cfg(test)]

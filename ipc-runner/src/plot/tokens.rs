@@ -167,8 +167,22 @@ where
     root.fill(&WHITE)?;
     let horizon = t.level.len().saturating_sub(1) as u32;
     let (top, bottom) = root.split_vertically(380);
+    draw_levels(t, &top, title, horizon)?;
+    draw_triggers(t, &bottom, horizon)
+}
 
-    let mut c = ChartBuilder::on(&top)
+/// The upper panel: the bucket's level over k against its capacity and the level that
+/// grants every node.
+fn draw_levels<DB: DrawingBackend>(
+    t: &TokenTrace,
+    top: &DrawingArea<DB, Shift>,
+    title: &str,
+    horizon: u32,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let mut c = ChartBuilder::on(top)
         .caption(
             format!("Tokens ξ_k of the shared bucket — {title}"),
             (FONT, 20),
@@ -204,9 +218,20 @@ where
         .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], col));
     }
     crate::plot::draw_legend(&mut c, SeriesLabelPosition::UpperRight, 14)?;
+    Ok(())
+}
 
+/// The lower panel: each node's row of sent and blocked trigger instants.
+fn draw_triggers<DB: DrawingBackend>(
+    t: &TokenTrace,
+    bottom: &DrawingArea<DB, Shift>,
+    horizon: u32,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let l = t.sent.len() as u32;
-    let mut c = ChartBuilder::on(&bottom)
+    let mut c = ChartBuilder::on(bottom)
         .caption(
             "Trigger instants (filled: sent, small grey: blocked by the bucket)",
             (FONT, 16),

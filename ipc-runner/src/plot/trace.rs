@@ -113,18 +113,7 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE)?;
-    let positive = |v: f64| v.is_finite() && v > 0.0;
-    let vals = b
-        .iter()
-        .flat_map(|r| [r.median, r.max, r.max_after_receipt])
-        .chain([p99])
-        .filter(|v| positive(*v));
-    let (lo, hi) = vals.fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
-    anyhow::ensure!(hi > 0.0, "no positive latency to plot");
-    let (lo, hi) = (
-        10f64.powf(lo.log10().floor()),
-        10f64.powf(hi.log10().ceil().max(lo.log10().floor() + 1.0)),
-    );
+    let (lo, hi) = decades(b, p99)?;
     let t_end = b.last().map_or(1.0, |r| r.t).max(1e-6);
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FONT, 22))
@@ -170,6 +159,44 @@ where
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(3)));
     }
+    draw_peaks(&mut chart, b, p99, t_end)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 14)
+}
+
+fn positive(v: f64) -> bool {
+    v.is_finite() && v > 0.0
+}
+
+/// The log axis's range: whole decades around every positive latency drawn, one at least.
+fn decades(b: &[Bin], p99: f64) -> anyhow::Result<(f64, f64)> {
+    let vals = b
+        .iter()
+        .flat_map(|r| [r.median, r.max, r.max_after_receipt])
+        .chain([p99])
+        .filter(|v| positive(*v));
+    let (lo, hi) = vals.fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
+    anyhow::ensure!(hi > 0.0, "no positive latency to plot");
+    Ok((
+        10f64.powf(lo.log10().floor()),
+        10f64.powf(hi.log10().ceil().max(lo.log10().floor() + 1.0)),
+    ))
+}
+
+/// The run's largest latency and its p99, over the bins' lines.
+fn draw_peaks<'a, DB>(
+    chart: &mut ChartContext<
+        'a,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, LogCoord<f64>>,
+    >,
+    b: &[Bin],
+    p99: f64,
+    t_end: f64,
+) -> anyhow::Result<()>
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+{
     // The run's largest latency, marked and named: a single spike is one bin wide.
     if let Some(top) = b
         .iter()
@@ -194,7 +221,7 @@ where
             .label(format!("end to end p99 of the run ({p99:.1} µs)"))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2)));
     }
-    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 14)
+    Ok(())
 }
 
 #[cfg(test)]
