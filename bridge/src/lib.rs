@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! host A: channel-sim ─► [A/slots, A/truth] ─► bridge --side sensor ──┐
-//!                                                                     │ zenoh <key>/slots, <key>/truth
+//!                                                                     │ zenoh <key>/slots (slots and truth; markers echoed on <key>/acks)
 //! host B: ipc-runner run ◄─ [B/slots, B/truth] ◄─ bridge --side estimator ◄┘
 //!         ipc-runner run ─► [B/estimates] ─► bridge --side estimator ─► zenoh <key>/estimates ─► bridge --side sensor ─► [A/estimates]
 //! ```
