@@ -355,7 +355,8 @@ fn tobit_vectors_follow_the_protocol() {
 fn host_f32_tobit_matches_f64_fusion_from_the_preset() {
     use channel_sim::scenario::ComposedScenario;
     use channel_sim::Observation;
-    use ipc_runner::estimators::{tobit, EvalOptions};
+    use ipc_runner::estimators::tobit;
+    use ipc_runner::eval::EvalOptions;
 
     let scenario = channel_sim::scenario::preset("tobit-fusion").unwrap();
     let plant = scenario
@@ -483,7 +484,8 @@ const TOL_TOBIT: f64 = 1e-4;
 #[test]
 fn host_f32_tobit_cmm_matches_f64_from_the_preset() {
     use channel_sim::Observation;
-    use ipc_runner::estimators::{tobit_central, EvalOptions};
+    use ipc_runner::estimators::tobit_central;
+    use ipc_runner::eval::EvalOptions;
 
     let scenario = channel_sim::scenario::preset("tobit-fusion").unwrap();
     let mut views = ipc_runner::source::build_for_scenario(

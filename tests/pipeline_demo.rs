@@ -6,7 +6,8 @@
 mod common;
 
 use common::{csv, report, scratch, Proc};
-use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::estimators::FACTORIES;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::eval::{evaluate, RunConfig};
 
 const SEED: u64 = 7;

@@ -10,8 +10,10 @@
 
 use std::collections::BTreeMap;
 
-use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::estimators::FACTORIES;
+
 use ipc_runner::eval::delay::Delay;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::eval::{evaluate, EstimatorResult, EvalResult, RunConfig};
 
 /// Mean and standard error of the paired differences `x_r − y_r` over the runs valid in both.

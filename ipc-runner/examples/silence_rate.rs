@@ -13,8 +13,9 @@
 use std::path::{Path, PathBuf};
 
 use channel_sim::scenario::resolve;
-use ipc_runner::estimators::{ikf, kf, silence_kf, EvalOptions, Factory};
+use ipc_runner::estimators::{ikf, kf, silence_kf, Factory};
 use ipc_runner::eval::run_one;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::plot::rate::plot_rate;
 
 const SIGMAS: [f64; 7] = [0.05, 0.15, 0.3, 0.5, 0.75, 1.0, 1.5];

@@ -19,10 +19,10 @@
 
 use crate::estimator_args::EstimatorArgs;
 use crate::run::{self, select, Hooks, RunArgs, WaitMode};
+use crate::source::scenario as resolve;
 use crate::source::Source;
 use anyhow::{anyhow, bail, Context, Result};
 use channel_sim::publisher::DEFAULT_STEPS;
-use crate::source::scenario as resolve;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};

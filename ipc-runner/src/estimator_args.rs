@@ -3,7 +3,9 @@
 //! select from the estimators built for a scenario: the commands can never disagree about
 //! what a name means.
 
-use crate::estimators::{names_match, EvalOptions};
+use crate::estimators::names_match;
+
+use crate::eval::EvalOptions;
 use crate::limits::BadInput;
 use crate::Estimator;
 

@@ -6,11 +6,8 @@ pub mod bridge;
 pub mod cli;
 pub mod demo;
 pub mod estimator_args;
-/// The estimators crate ([`estpipe_estimators`]) under the path the commands use.
-pub mod estimators {
-    pub use crate::eval::EvalOptions;
-    pub use estpipe_estimators::*;
-}
+/// The estimators crate under the path the commands use.
+pub use estpipe_estimators as estimators;
 pub mod eval;
 pub mod latency;
 pub mod limits;

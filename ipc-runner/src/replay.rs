@@ -268,7 +268,7 @@ impl ParticleBudget {
         let budget = Budget::mib(args.max_memory);
         let pf = product(&[
             particles as u64,
-            crate::eval::pf_bytes_per_particle_for(spec),
+            crate::estimators::pf_bytes_per_particle_for(spec),
         ]);
         budget.check(&format!("--particles {}", particles), pf)?;
         Ok(Self {

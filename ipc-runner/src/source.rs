@@ -115,7 +115,7 @@ pub(crate) fn preset_spec(name: &str) -> Arc<EstimatorSpec> {
 pub fn build_for_scenario(
     factories: &[crate::estimators::Factory],
     scenario: &dyn Scenario,
-    options: &crate::estimators::EvalOptions,
+    options: &crate::eval::EvalOptions,
     seed: u64,
     run: u64,
 ) -> anyhow::Result<Vec<Box<dyn crate::Estimator>>> {

@@ -9,7 +9,8 @@ use channel_sim::scenario::ComposedScenario;
 use channel_sim::sim::FLAG_OCCLUDED;
 use channel_sim::{Observation, Scenario};
 use estpipe_wire::FLAG_IPC_LOST;
-use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::estimators::FACTORIES;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::source::build_for_scenario;
 
 fn scenarios() -> std::path::PathBuf {

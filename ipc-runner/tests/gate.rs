@@ -22,7 +22,8 @@
 use channel_sim::scenario::preset;
 use channel_sim::Scenario;
 use estpipe_wire::FLAG_IPC_LOST;
-use ipc_runner::estimators::{gate_counts, EvalOptions, FACTORIES};
+use ipc_runner::estimators::{gate_counts, FACTORIES};
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::source::build_for_scenario;
 use rayon::prelude::*;
 

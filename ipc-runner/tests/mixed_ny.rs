@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use channel_sim::Scenario;
-use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::estimators::FACTORIES;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::source::build_for_scenario;
 use nalgebra::{DMatrix, DVector};
 

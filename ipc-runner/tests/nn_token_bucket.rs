@@ -10,9 +10,10 @@ use channel_sim::scenario;
 use estimator_core::filter::nn::NnBoundConfig;
 use estimator_core::papers::{Seed003Example, Seed003Nn};
 use estimator_core::{OnModel, Packet};
-use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::estimators::FACTORIES;
 use ipc_runner::eval::nn_bound::add_empirical_trace;
 use ipc_runner::eval::nn_bound::verdict;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::eval::{evaluate, RunConfig};
 use ipc_runner::source::build_for_scenario;
 

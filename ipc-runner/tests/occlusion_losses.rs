@@ -21,8 +21,9 @@
 //! not tuned to a passing seed.
 
 use channel_sim::scenario::preset;
-use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::estimators::FACTORIES;
 use ipc_runner::eval::run_one;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::source::build_for_scenario;
 use rayon::prelude::*;
 

@@ -10,7 +10,8 @@
 //! asserted here.
 
 use channel_sim::scenario::preset;
-use ipc_runner::estimators::{EvalOptions, FACTORIES};
+use ipc_runner::estimators::FACTORIES;
+use ipc_runner::eval::EvalOptions;
 use ipc_runner::source::build_for_scenario;
 
 const RUNS: u64 = 1500;

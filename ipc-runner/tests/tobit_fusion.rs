@@ -24,8 +24,9 @@ use std::path::Path;
 
 use channel_sim::scenario::{preset, resolve};
 use channel_sim::Scenario;
-use ipc_runner::estimators::{tobit, tobit_central, EvalOptions};
+use ipc_runner::estimators::{tobit, tobit_central};
 use ipc_runner::eval::run_one;
+use ipc_runner::eval::EvalOptions;
 
 /// Runs (override with `TOBIT_RUNS=2000` for the documented numbers).
 fn runs() -> u64 {

@@ -31,8 +31,9 @@ use estimator_core::filter::silence::Arrival;
 use estimator_core::filter::tobit::Silence;
 use estimator_core::protocol::bucket_mirror::{BucketMirror, Sent};
 use estimator_core::protocol::shared_token_bucket::SharedTokenBucket;
-use ipc_runner::estimators::{tobit, EvalOptions};
+use ipc_runner::estimators::tobit;
 use ipc_runner::eval::run_one;
+use ipc_runner::eval::EvalOptions;
 use nalgebra::{SMatrix, SVector};
 
 /// Runs (override with `SILENCE_RUNS=2000` for the documented numbers).

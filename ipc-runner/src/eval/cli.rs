@@ -6,7 +6,8 @@ use channel_sim::scenario;
 
 use super::{evaluate_with, Control, EvalEnding, RunConfig};
 use crate::estimator_args::{EstimatorArgs, Feed};
-use crate::estimators::{EvalOptions, FACTORIES};
+use crate::estimators::FACTORIES;
+use crate::eval::EvalOptions;
 use crate::limits::{check_outputs, given, Budget};
 
 /// Arguments of `ipc-runner eval`.
@@ -199,7 +200,7 @@ pub fn run(args: EvalArgs) -> Result<(), CommandError> {
     };
     let mut result = evaluate_with(&*scenario, &options, FACTORIES, &run_config, &control)
         .map_err(|e| {
-            if channel_sim::error::is_bad_input(&e) {
+            if crate::limits::BadInput::is_in(&e) {
                 CommandError::usage(format!("{e:#}"))
             } else {
                 CommandError::failure(format!("{e:#}"))
@@ -250,7 +251,7 @@ fn threads_and_budget(
             &format!("--particles {particles} on {threads} thread(s)"),
             crate::limits::product(&[
                 particles as u64,
-                super::pf_bytes_per_particle_for(&scenario.estimator_spec()),
+                crate::estimators::pf_bytes_per_particle_for(&scenario.estimator_spec()),
                 threads as u64 + 1,
             ]),
         )

@@ -36,7 +36,8 @@
 //! slots the transport lost.
 //!
 //! ```
-//! use ipc_runner::estimators::{EvalOptions, FACTORIES};
+//! use ipc_runner::estimators::FACTORIES;
+//! use ipc_runner::eval::EvalOptions;
 //! use ipc_runner::eval::{evaluate, RunConfig};
 //!
 //! let scenario = channel_sim::scenario::preset("linear")?;
@@ -119,8 +120,6 @@ pub const DIAGNOSTICS_ALLOWANCE: u64 = 8;
 
 /// Most runs finished but not yet reduced: the results of a chunk are reduced in run order.
 const CHUNK: u64 = 256;
-
-pub use crate::estimators::{pf_bytes_per_particle, pf_bytes_per_particle_for};
 
 /// What an evaluation holds in memory, in bytes: `(fixed, per_run)`. `fixed` are the
 /// reductions (per-k sums and counts of every estimator, the per-run averages the median

@@ -4,7 +4,8 @@
 use channel_sim::Scenario;
 
 use super::{build_all, product, Factory, Role, RunStart};
-use super::{memory_need, pf_bytes_per_particle_for, Control, EvalOptions, RunConfig, CHUNK};
+use super::{memory_need, Control, EvalOptions, RunConfig, CHUNK};
+use crate::estimators::pf_bytes_per_particle_for;
 
 /// An evaluation's shape, once it fits the budget.
 pub(super) struct Plan {

@@ -36,7 +36,7 @@ use serde::Serialize;
 
 use super::RunOutput;
 use crate::estimators::role::Role;
-use crate::estimators::EvalOptions;
+use crate::eval::EvalOptions;
 use reduce::EstimatorAcc;
 
 mod channel;

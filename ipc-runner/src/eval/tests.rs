@@ -4,7 +4,8 @@ use nalgebra::{dmatrix, DMatrix};
 
 use super::*;
 use crate::estimators::RunStart;
-use crate::estimators::{EvalOptions, FACTORIES};
+use crate::estimators::FACTORIES;
+use crate::eval::EvalOptions;
 use crate::Estimator;
 
 fn options(runs: u64, horizon: u32, seed: u64) -> EvalOptions {

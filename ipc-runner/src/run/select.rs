@@ -3,7 +3,8 @@
 //! estimators' [`Source`] (a spec, from a scenario or a spec file) alone.
 
 use crate::estimator_args::{EstimatorArgs, Feed};
-use crate::estimators::{build_all, EvalOptions, FACTORIES};
+use crate::estimators::{build_all, FACTORIES};
+use crate::eval::EvalOptions;
 use crate::source::Source;
 use crate::Estimator;
 use anyhow::Result;
