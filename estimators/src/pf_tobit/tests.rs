@@ -346,7 +346,7 @@ fn pf_is_better_than_fused_predict_on_the_preset() {
 /// held-silence draws K; K = 0 reads a held silence as no information) on the same runs of
 /// the preset, their means and the paired differences against the first variant.
 /// `PF_TOBIT_VARIANTS=5000:8,10000:8 PF_TOBIT_RUNS=2000 PF_TOBIT_SEED=2026 cargo test -p
-/// ipc-runner --release --lib pf_tobit::tests::variants -- --ignored --nocapture`.
+/// estpipe-estimators --release --lib pf_tobit::tests::variants -- --ignored --nocapture`.
 #[test]
 #[ignore = "an experiment: minutes to hours"]
 fn variants() {
