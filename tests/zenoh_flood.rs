@@ -12,7 +12,7 @@
 //! the bridge must give, on stdout.
 //!
 //! `--on acks` floods `<key>/acks`, where the sensor side takes the estimator side's echoes of
-//! its END/ABORT markers (bridge/src/markers.rs). Like any peer of an unauthenticated link it
+//! its END/ABORT markers (bridge/src/link/markers.rs). Like any peer of an unauthenticated link it
 //! first reads `<key>/slots` until the first data slot of the real stream (stream id, header,
 //! node count), stops reading, and then forges, per `--each` N: N empty messages and N
 //! truncated acks (`length`), N of random bytes of an ack's length (`magic`), N acks of

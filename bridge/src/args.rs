@@ -47,8 +47,9 @@ pub struct BridgeArgs {
     /// iceoryx2 service prefix on this host.
     #[arg(long, default_value = estpipe_wire::DEFAULT_PREFIX)]
     pub prefix: String,
-    /// zenoh key prefix both bridges use (`<key>/slots`, `<key>/truth`, `<key>/estimates`);
-    /// default `estpipe/<prefix>` of the sensor side, so give it when the prefixes differ.
+    /// zenoh key prefix both bridges use (`<key>/slots`, which carries the truth too,
+    /// `<key>/estimates`, `<key>/acks`); default `estpipe/<prefix>` of the sensor side, so give
+    /// it when the prefixes differ.
     #[arg(long)]
     pub key: Option<String>,
     /// zenoh configuration (zenoh's own JSON5: mode, endpoints, TLS, access control), passed

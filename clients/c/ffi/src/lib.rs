@@ -338,26 +338,7 @@ pub unsafe extern "C" fn estpipe_publisher_open(
             .default_event_id(wire::READY_EVENT)
             .create()
             .map_err(|e| Fail::ipc(format!("cannot notify on {prefix}/slots-ready: {e:?}")))?;
-        let n_subs = || service.dynamic_config().number_of_subscribers();
-        let timeout_s = f64::from(timeout_ms) / 1000.0;
-        match wait_for_subscriber(&node, &gate, n_subs, timeout_s) {
-            Ok(true) => {}
-            Ok(false) => {
-                return Err(Fail(
-                    ESTPIPE_TIMEOUT,
-                    format!(
-                        "no subscriber on {prefix}/slots within {timeout_s} s (start `ipc-runner \
-                         run --prefix {prefix}` first)"
-                    ),
-                ))
-            }
-            Err(Stop::Signal) => {
-                return Err(Fail(
-                    ESTPIPE_STOPPED,
-                    "stopped by signal while waiting for a subscriber".into(),
-                ))
-            }
-        }
+        await_subscriber(&node, &gate, &service, prefix, timeout_ms)?;
         let sender = SlotSender::new(
             publisher,
             header,
@@ -375,6 +356,33 @@ pub unsafe extern "C" fn estpipe_publisher_open(
         }));
         Ok(ESTPIPE_OK)
     })
+}
+
+/// Waits up to `timeout_ms` (0: for ever) for a subscriber on `<prefix>/slots`: the runner,
+/// without which the publisher's slots would be lost.
+fn await_subscriber(
+    node: &Node<ipc::Service>,
+    gate: &Gate,
+    service: &SlotService,
+    prefix: &str,
+    timeout_ms: u32,
+) -> Result<(), Fail> {
+    let n_subs = || service.dynamic_config().number_of_subscribers();
+    let timeout_s = f64::from(timeout_ms) / 1000.0;
+    match wait_for_subscriber(node, gate, n_subs, timeout_s) {
+        Ok(true) => Ok(()),
+        Ok(false) => Err(Fail(
+            ESTPIPE_TIMEOUT,
+            format!(
+                "no subscriber on {prefix}/slots within {timeout_s} s (start `ipc-runner \
+                 run --prefix {prefix}` first)"
+            ),
+        )),
+        Err(Stop::Signal) => Err(Fail(
+            ESTPIPE_STOPPED,
+            "stopped by signal while waiting for a subscriber".into(),
+        )),
+    }
 }
 
 /// Sends `*slot` with the publisher's stream header until every subscriber has it
