@@ -240,3 +240,141 @@ fn the_python_structures_have_the_rust_layouts() {
     );
     assert_eq!(String::from_utf8_lossy(&consts.stdout).trim(), want);
 }
+
+/// The flags by name, as the docs quote them.
+fn flags() -> Vec<(&'static str, u32)> {
+    use estpipe_wire::*;
+    vec![
+        ("FLAG_TRIGGERED", FLAG_TRIGGERED),
+        ("FLAG_TOKEN_BLOCKED", FLAG_TOKEN_BLOCKED),
+        ("FLAG_CENSORED", FLAG_CENSORED),
+        ("FLAG_RANDOM_LOSS", FLAG_RANDOM_LOSS),
+        ("FLAG_OCCLUDED", FLAG_OCCLUDED),
+        ("FLAG_TOKENS", FLAG_TOKENS),
+        ("FLAG_NET_LOST", FLAG_NET_LOST),
+        ("FLAG_IPC_LOST", FLAG_IPC_LOST),
+    ]
+}
+
+/// A value as the docs write it: decimal, or a power of two `2³⁰`.
+fn doc_value(s: &str) -> Option<u64> {
+    let s = s.trim();
+    if let Some(exp) = s.strip_prefix('2') {
+        if !exp.is_empty() && exp.chars().all(|c| "⁰¹²³⁴⁵⁶⁷⁸⁹".contains(c)) {
+            let digits: String = exp
+                .chars()
+                .map(|c| {
+                    char::from(b'0' + "⁰¹²³⁴⁵⁶⁷⁸⁹".chars().position(|d| d == c).unwrap() as u8)
+                })
+                .collect();
+            return Some(1u64 << digits.parse::<u32>().ok()?);
+        }
+    }
+    s.parse().ok()
+}
+
+/// Every docs/*.md page and the README, with its name.
+fn pages() -> Vec<(String, String)> {
+    let mut pages = vec![("README.md".to_string(), repo().join("README.md"))];
+    for e in std::fs::read_dir(repo().join("docs")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "md") {
+            pages.push((
+                format!("docs/{}", p.file_name().unwrap().to_string_lossy()),
+                p,
+            ));
+        }
+    }
+    pages
+        .into_iter()
+        .map(|(n, p)| (n, std::fs::read_to_string(p).unwrap()))
+        .collect()
+}
+
+/// What the docs quote of the wire's constants is what `estpipe_wire` says: every flag in a
+/// table row (`| \`FLAG_…\` | value |`) and every flag written as `value (\`FLAG_…\``; every
+/// `2³⁰ = n`; the version of every JSON header (`"wire_version":n`) and of every refusal quoted
+/// from the code (`wire version n requires`, `needs`); the array sizes.
+#[test]
+fn the_docs_quote_the_wires_constants() {
+    let flags = flags();
+    let mut checked = 0;
+    for (page, md) in pages() {
+        for (i, line) in md.lines().enumerate() {
+            let at = format!("{page}:{}", i + 1);
+            // Table rows naming one flag.
+            if let Some(rest) = line.strip_prefix("| `FLAG_") {
+                let name = format!("FLAG_{}", rest.split('`').next().unwrap());
+                let value = rest.split('|').nth(1).and_then(doc_value);
+                let want = flags.iter().find(|f| f.0 == name);
+                assert!(want.is_some(), "{at}: {name} is no flag of estpipe_wire");
+                assert_eq!(value, Some(u64::from(want.unwrap().1)), "{at}: {name}");
+                checked += 1;
+            }
+            // `value (`FLAG_…`` inline.
+            for (name, v) in &flags {
+                let tag = format!(" (`{name}`");
+                let mut from = 0;
+                while let Some(pos) = line[from..].find(&tag) {
+                    let before = &line[..from + pos];
+                    let mut words = before.rsplit([' ', '(']);
+                    let word = words.next().unwrap_or("");
+                    // `bit 31 (`FLAG_IPC_LOST`` names the bit, not the value.
+                    let bit = words.next() == Some("bit");
+                    let value = doc_value(word).map(|n| if bit { 1 << n } else { n });
+                    if let Some(n) = value {
+                        assert_eq!(n, u64::from(*v), "{at}: {name} quoted as {word}");
+                        checked += 1;
+                    }
+                    from += pos + tag.len();
+                }
+            }
+            // `2³⁰ = 1073741824`.
+            for (pow, n) in [("2³⁰ = ", 1u64 << 30), ("2³¹ = ", 1u64 << 31)] {
+                if let Some(pos) = line.find(pow) {
+                    let digits: String = line[pos + pow.len()..]
+                        .chars()
+                        .take_while(char::is_ascii_digit)
+                        .collect();
+                    assert_eq!(digits.parse::<u64>().ok(), Some(n), "{at}: {pow}");
+                    checked += 1;
+                }
+            }
+            // The version of a header's JSON and of a refusal quoted from the code.
+            for tag in ["\"wire_version\":", "wire version "] {
+                let mut from = 0;
+                while let Some(pos) = line[from..].find(tag) {
+                    let after = &line[from + pos + tag.len()..];
+                    let digits: String = after.chars().take_while(char::is_ascii_digit).collect();
+                    let quoted = tag.starts_with('"')
+                        || after[digits.len()..].starts_with(" requires")
+                        || after[digits.len()..].starts_with(" needs");
+                    if quoted {
+                        assert_eq!(
+                            digits.parse::<u32>().ok(),
+                            Some(estpipe_wire::WIRE_VERSION),
+                            "{at}: {tag}{digits}"
+                        );
+                        checked += 1;
+                    }
+                    from += pos + tag.len();
+                }
+            }
+        }
+    }
+    let md = std::fs::read_to_string(repo().join("docs/wire.md")).unwrap();
+    let sizes = format!(
+        "| `MAX_NX`, `MAX_NY`, `MAX_NODES` | {}, {}, {} |",
+        estpipe_wire::MAX_NX,
+        estpipe_wire::MAX_NY,
+        estpipe_wire::MAX_NODES
+    );
+    assert!(md.contains(&sizes), "docs/wire.md does not say {sizes}");
+    let cov = format!("| `COV_LEN` | {} |", estpipe_wire::COV_LEN);
+    assert!(md.contains(&cov), "docs/wire.md does not say {cov}");
+    // The constants table alone has eight flags; the rest are quotes elsewhere.
+    assert!(
+        checked >= 12,
+        "only {checked} quotes found: the patterns no longer match the docs"
+    );
+}
