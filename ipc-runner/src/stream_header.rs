@@ -47,10 +47,46 @@ pub fn main(args: &StreamHeaderArgs) -> Result<i32> {
         0,
         0,
     )?;
-    let line = to_json(&source.spec.stream_header());
+    let header = source.spec.stream_header();
+    if let Some(w) = name_cut(&source.spec.name, &header) {
+        estpipe_process::errln!("ipc-runner: warning: {w}");
+    }
+    let line = to_json(&header);
     let mut out = std::io::stdout().lock();
     writeln!(out, "{line}")
         .and_then(|()| out.flush())
         .context("cannot write the stream header to stdout")?;
     Ok(0)
+}
+
+/// Says so when the header carries less of the spec's `name` than the whole: the field holds
+/// 32 bytes (docs/wire.md, StreamHeader); the name is informational, so the stream still
+/// works, but a user should not find a different name without a word.
+fn name_cut(name: &str, header: &StreamHeader) -> Option<String> {
+    let kept = header.scenario_name();
+    (kept != name).then(|| {
+        format!(
+            "the name {name:?} has {} bytes; the stream header carries its first {} ({kept:?})",
+            name.len(),
+            kept.len()
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_name_longer_than_the_field_is_said_cut() {
+        let long = "a-scenario-name-longer-than-thirty-two-bytes";
+        let h = StreamHeader::new(long, 1, 2, &[1], 0);
+        let w = name_cut(long, &h).expect("a warning");
+        assert!(
+            w.contains("has 44 bytes") && w.contains(h.scenario_name()),
+            "{w}"
+        );
+        let short = StreamHeader::new("linear", 1, 2, &[1], 0);
+        assert_eq!(name_cut("linear", &short), None);
+    }
 }
