@@ -69,7 +69,7 @@ int estpipe_publisher_open(const char *prefix, const estpipe_StreamHeader *heade
 
 /* Sends *slot until every subscriber has it (a full queue blocks; a subscriber not yet
  * connected gets it again; one that does not read for 2 s is no longer waited for). The slot
- * is first checked against the header (version, node, seq = k - 1, ny, finite y, ...):
+ * is first checked against the header (version, node, seq = k - 1, ny, finite y, y 0 past ny, ...):
  * ESTPIPE_ERR_ARG names the fault and nothing is sent. timeout_ms bounds the send (0: none for
  * a data slot, 5 s for an END/ABORT marker, which is sent even after a stop signal and gets
  * its send_ns here). ESTPIPE_OK, ESTPIPE_GAVE_UP, ESTPIPE_STOPPED or an error. */

@@ -393,7 +393,8 @@ fn await_subscriber(
 /// (give one), and gets its `send_ns` here.
 ///
 /// The slot is checked first against the header (`Slot::fault`: version, node, seq = k − 1,
-/// ny, a finite measurement, …): `ESTPIPE_ERR_ARG` names what is wrong and nothing is sent.
+/// ny, a finite measurement, …, a delivered `y` 0 past `ny`): `ESTPIPE_ERR_ARG` names what is
+/// wrong and nothing is sent.
 /// Returns `ESTPIPE_OK`, `ESTPIPE_GAVE_UP`, `ESTPIPE_STOPPED` (a data slot not sent) or a
 /// negative code.
 ///
@@ -411,10 +412,9 @@ pub unsafe extern "C" fn estpipe_publish(
         let p = unsafe { arg_mut(publisher, "publisher") }?;
         // SAFETY: the caller's promise above.
         let slot = *unsafe { arg(slot, "slot") }?;
-        let nodes = p.header.nodes;
-        if let Some(f) = slot.fault(nodes, &p.header.ny[..usize::from(nodes)]) {
+        if let Some(why) = refusal(&slot, &p.header) {
             return Err(Fail::arg(format!(
-                "slot k = {} of node {}: {f} (docs/wire.md, What the runner does with a bad slot)",
+                "slot k = {} of node {}: {why}",
                 slot.k, slot.node
             )));
         }
@@ -434,6 +434,27 @@ pub unsafe extern "C" fn estpipe_publish(
             channel_sim::publisher::Sent::GaveUp => ESTPIPE_GAVE_UP,
             channel_sim::publisher::Sent::Stopped => ESTPIPE_STOPPED,
         })
+    })
+}
+
+/// Why `slot` breaks the contract for a stream of `header`, if it does: what the runner would
+/// refuse (`Slot::fault`), and a delivered measurement not 0 past its `ny` (docs/wire.md,
+/// Slot: "entries ≥ `ny` are 0"), which the runner would ignore but a C caller should hear of.
+fn refusal(slot: &Slot, header: &StreamHeader) -> Option<String> {
+    let nodes = header.nodes;
+    if let Some(f) = slot.fault(nodes, &header.ny[..usize::from(nodes)]) {
+        return Some(format!(
+            "{f} (docs/wire.md, What the runner does with a bad slot)"
+        ));
+    }
+    let ny = usize::from(slot.ny).min(wire::MAX_NY);
+    let past = slot.y[ny..].iter().position(|v| *v != 0.0)?;
+    (slot.kind == SLOT_DATA && slot.delivered == 1).then(|| {
+        format!(
+            "y[{}] = {} past ny = {ny} must be 0 (docs/wire.md, Slot)",
+            ny + past,
+            slot.y[ny + past]
+        )
     })
 }
 
@@ -631,6 +652,29 @@ mod tests {
         ] {
             assert!(header_from_json(bad).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn a_delivered_measurement_not_zero_past_ny_is_refused() {
+        let h = StreamHeader::new("linear", 1, 2, &[1], 0);
+        let mut obs = wire::Observation::dropped(1, 0, 1, 0);
+        (obs.delivered, obs.y[0]) = (true, 0.5);
+        let ok = wire::observation::slot_of(&obs, 1, 7, 0, 0, 0);
+        assert_eq!(refusal(&ok, &h), None);
+        obs.y[2] = 1.0;
+        let bad = wire::observation::slot_of(&obs, 1, 7, 0, 0, 0);
+        let why = refusal(&bad, &h).expect("refused");
+        assert!(why.contains("y[2] = 1 past ny = 1 must be 0"), "{why}");
+        // A dropped slot's y is not read: no refusal.
+        obs.delivered = false;
+        assert_eq!(
+            refusal(&wire::observation::slot_of(&obs, 1, 7, 0, 0, 0), &h),
+            None
+        );
+        // What the runner refuses comes first.
+        let mut wrong_node = ok;
+        wrong_node.node = 3;
+        assert!(refusal(&wrong_node, &h).unwrap().contains("bad slot"));
     }
 
     #[test]
