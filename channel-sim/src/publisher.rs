@@ -211,6 +211,27 @@ impl Source {
     }
 }
 
+/// The ports of this process (node 0's publishes the truth), or `None` when a stop signal
+/// cut their creation short (iceoryx2's `Interrupt`): the clean stop of a publisher that has
+/// sent nothing, as before a subscriber came.
+fn open_ports(
+    args: &PublisherArgs,
+    scenario: &dyn Scenario,
+    say: &dyn Fn(&str),
+) -> Result<Option<Ports>> {
+    match Ports::open(args, scenario, args.node.is_none_or(|n| n == 0)) {
+        Ok(ports) => Ok(Some(ports)),
+        Err(_) if estpipe_process::signal::termination_requested() => {
+            let signal = estpipe_process::signal::termination_signal().unwrap_or("?");
+            say(&format!(
+                "stopped by signal ({signal}) while opening the services"
+            ));
+            Ok(None)
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// Runs the publisher on the scenario `--scenario`/`--config` name ([`scenario::resolve`]):
 /// checks, ports, the source, the wait for a subscriber, the stream, its end.
 pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
@@ -227,7 +248,12 @@ pub fn run(args: &PublisherArgs) -> Result<PublisherReport> {
     // Before anything can wait: SIGINT/SIGTERM/SIGHUP set a flag from here on, nothing else stops.
     estpipe_process::signal::install();
     // The process that publishes node 0 publishes the truth.
-    let ports = Ports::open(args, &*scenario, args.node.is_none_or(|n| n == 0))?;
+    let Some(ports) = open_ports(args, &*scenario, &say)? else {
+        return Ok(PublisherReport {
+            interrupted: true,
+            ..PublisherReport::default()
+        });
+    };
     // Sensor nodes are connected and configured before the wait for a subscriber, so that a
     // node that is not there is said at once.
     let mut source = start_source(args, &*scenario, &endpoints, &ports.gate, &say)?;
