@@ -65,20 +65,34 @@ async fn asset(uri: Uri) -> Response {
 }
 
 async fn ws(State(hub): State<Arc<Hub>>, up: WebSocketUpgrade) -> Response {
-    if hub.clients.load(Ordering::Relaxed) >= MAX_CLIENTS {
+    // The seat is taken before the upgrade, so that requests sent back to back cannot all
+    // pass the count before any of them is connected; a failed upgrade drops it.
+    let Some(seat) = Connected::reserve(&hub) else {
         return (StatusCode::SERVICE_UNAVAILABLE, "too many viewers\n").into_response();
-    }
+    };
     up.max_message_size(4096)
         .max_frame_size(4096)
-        .on_upgrade(move |s| client(s, hub))
+        .on_upgrade(move |s| client(s, seat))
 }
 
-/// Counts a connected page while it lives.
+/// Counts a page from its upgrade request for as long as it lives.
 struct Connected(Arc<Hub>);
+
+impl Connected {
+    /// One of the [`MAX_CLIENTS`] seats, or `None` when all are taken.
+    fn reserve(hub: &Arc<Hub>) -> Option<Self> {
+        hub.clients
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < MAX_CLIENTS).then_some(n + 1)
+            })
+            .ok()?;
+        Some(Self(Arc::clone(hub)))
+    }
+}
 
 impl Drop for Connected {
     fn drop(&mut self) {
-        self.0.clients.fetch_sub(1, Ordering::Relaxed);
+        self.0.clients.fetch_sub(1, Ordering::AcqRel);
     }
 }
 
@@ -100,9 +114,8 @@ async fn send(socket: &mut WebSocket, frame: &str) -> Sent {
     }
 }
 
-async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
-    hub.clients.fetch_add(1, Ordering::Relaxed);
-    let _connected = Connected(Arc::clone(&hub));
+async fn client(mut socket: WebSocket, seat: Connected) {
+    let hub = Arc::clone(&seat.0);
     let (past, mut rx) = hub.subscribe();
     let mut sent = send(&mut socket, r#"{"reset":true}"#).await;
     for f in past {
@@ -138,5 +151,31 @@ async fn client(mut socket: WebSocket, hub: Arc<Hub>) {
                 Some(Ok(_)) => Sent::Taken,
             },
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The 17th page is refused however close together the requests come: a seat is
+    /// counted from the request, and given back when the page (or its failed upgrade) ends.
+    #[test]
+    fn a_seat_is_taken_at_the_request_and_given_back_at_the_end() {
+        let hub = Arc::new(Hub::default());
+        let seats: Vec<_> = (0..MAX_CLIENTS)
+            .map(|i| Connected::reserve(&hub).unwrap_or_else(|| panic!("seat {i}")))
+            .collect();
+        assert!(Connected::reserve(&hub).is_none());
+        drop(seats);
+        assert_eq!(hub.clients.load(Ordering::Acquire), 0);
+        let threads: Vec<_> = (0..64)
+            .map(|_| {
+                let hub = Arc::clone(&hub);
+                std::thread::spawn(move || Connected::reserve(&hub))
+            })
+            .collect();
+        let got: Vec<_> = threads.into_iter().map(|t| t.join().unwrap()).collect();
+        assert_eq!(got.iter().filter(|s| s.is_some()).count(), MAX_CLIENTS);
     }
 }
