@@ -35,9 +35,9 @@
 //! measurements `slots`', of the spec's model into fixed-size matrices `snapshot`'s. `pf` is
 //! the application's own particle filter and implements [`Estimator`] directly.
 //!
-//! Every family reads only the [`EstimatorSpec`] (the model, the prior, what is known of the
-//! channel) and the run's [`RunStart`]: never a simulator. A simulated scenario produces its
-//! spec; a user writes one (`run --estimator-spec FILE`).
+//! Every family reads only the [`EstimatorSpec`](estpipe_spec::EstimatorSpec) (the model, the
+//! prior, what is known of the channel) and the run's [`RunStart`]: never a simulator. A
+//! simulated scenario produces its spec; a user writes one (`run --estimator-spec FILE`).
 
 mod estimator;
 mod memory;

@@ -133,7 +133,7 @@ fn tap_per_instant(o: &Opts) -> Result<(u64, Vec<(&'static str, f64)>)> {
     Ok((n, per))
 }
 
-/// [view off/on][function] → the per-instant figures of the runs.
+/// `[view off/on][function]` → the per-instant figures of the runs.
 type PerInstant = Vec<Vec<Vec<f64>>>;
 
 /// The loop, instant by instant, with and without a page: the demo's main thread under
